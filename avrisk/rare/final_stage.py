@@ -1,0 +1,79 @@
+"""Turn the final stage's samples into per-threshold estimates."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from avrisk.rare.families.base import FloatArray
+from avrisk.rare.intervals import clopper_pearson, normal_interval, wilson
+from avrisk.rare.results import GammaEstimate
+from avrisk.rare.weights import kish_ess, weighted_mean_and_stderr
+
+CONFIDENCE = 0.95
+
+BINOMIAL_INTERVALS = {"clopper-pearson": clopper_pearson, "wilson": wilson}
+
+
+class ZeroHitsWarning(UserWarning):
+    """The importance-sampling stage saw no event: its interval is only ``(0, 1)``."""
+
+
+def binomial_estimates(
+    values: FloatArray, thresholds: tuple[float, ...], interval: str = "clopper-pearson"
+) -> dict[float, GammaEstimate]:
+    """Naive Monte Carlo: hit fraction, binomial standard error and interval."""
+    n = values.size
+    out = {}
+    for g in thresholds:
+        k = int(np.count_nonzero(values <= g))
+        p = k / n
+        out[g] = GammaEstimate(
+            gamma=g,
+            p=p,
+            stderr=float(np.sqrt(p * (1 - p) / n)),
+            ci=BINOMIAL_INTERVALS[interval](k, n, CONFIDENCE),
+            n_hits=k,
+            ess=float(k),
+            n_samples=n,
+            confidence=CONFIDENCE,
+        )
+    return out
+
+
+def importance_estimates(
+    values: FloatArray, log_w: FloatArray, thresholds: tuple[float, ...]
+) -> dict[float, GammaEstimate]:
+    """Importance sampling: ``mean(w 1{f <= g})``, its standard error, a normal CI.
+
+    With zero hits the data bound nothing better than ``p <= 1`` (the weights of
+    unseen events are unknown), so that is the interval reported, with a warning.
+    """
+    out = {}
+    for g in thresholds:
+        hits = values <= g
+        k = int(np.count_nonzero(hits))
+        p, se = weighted_mean_and_stderr(log_w, hits)
+        if k == 0:
+            warnings.warn(
+                f"no sample of the final stage reached f <= {g:g}; the estimate is 0 "
+                "with the uninformative interval (0, 1): raise n_final or the "
+                "search budget",
+                ZeroHitsWarning,
+                stacklevel=3,
+            )
+            ci = (0.0, 1.0)
+        else:
+            ci = normal_interval(p, se, CONFIDENCE)
+        out[g] = GammaEstimate(
+            gamma=g,
+            p=p,
+            stderr=se,
+            ci=ci,
+            n_hits=k,
+            ess=kish_ess(log_w[hits]),
+            n_samples=values.size,
+            confidence=CONFIDENCE,
+        )
+    return out

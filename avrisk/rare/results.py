@@ -1,0 +1,229 @@
+"""Result objects of the estimators: frozen, JSON-serialisable."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+from avrisk.rare.families.base import ExponentialFamily
+
+
+@dataclass(frozen=True)
+class GammaEstimate:
+    """Estimate of ``p = P0(f(X) <= gamma)`` for one threshold.
+
+    Attributes
+    ----------
+    gamma : float
+        Threshold, in the unit of ``f``.
+    p : float
+        Estimate of the probability.
+    stderr : float
+        Standard error of ``p`` (from the sample variance of the weighted
+        indicators; binomial for naive Monte Carlo).
+    ci : tuple of float
+        Confidence interval ``(low, high)`` at level ``confidence``. With zero
+        hits it is still an interval with a positive upper end.
+    n_hits : int
+        Samples of the final stage with ``f <= gamma``.
+    ess : float
+        Kish effective sample size of the weighted indicators ``w_i 1{f_i <=
+        gamma}``: the number of equally weighted hits that would carry the same
+        information (equals ``n_hits`` for naive Monte Carlo).
+    n_samples : int
+        Size of the final stage.
+    confidence : float
+        Level of ``ci``.
+    """
+
+    gamma: float
+    p: float
+    stderr: float
+    ci: tuple[float, float]
+    n_hits: int
+    ess: float
+    n_samples: int
+    confidence: float = 0.95
+
+    @property
+    def rel_error(self) -> float:
+        """Coefficient of variation ``stderr / p`` (``inf`` when ``p = 0``)."""
+        return self.stderr / self.p if self.p > 0 else math.inf
+
+    @property
+    def variance_reduction(self) -> float:
+        """Variance of naive MC at the same n over this variance.
+
+        ``p (1 - p) / n / stderr^2``: how many times more samples naive Monte
+        Carlo would need for the same standard error.
+        """
+        if self.stderr <= 0 or self.p <= 0:
+            return math.nan
+        return self.p * (1 - self.p) / self.n_samples / self.stderr**2
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (non-finite floats become ``None``)."""
+        return _jsonable(
+            {
+                "gamma": self.gamma,
+                "p": self.p,
+                "stderr": self.stderr,
+                "ci": list(self.ci),
+                "confidence": self.confidence,
+                "n_hits": self.n_hits,
+                "ess": self.ess,
+                "n_samples": self.n_samples,
+                "rel_error": self.rel_error,
+                "variance_reduction": self.variance_reduction,
+            }
+        )
+
+
+class CEInfo(NamedTuple):
+    """Diagnostics of one cross-entropy iteration (not needed by the next one).
+
+    Attributes
+    ----------
+    iteration : int
+        Index ``k`` of the iteration, from 0.
+    gamma_k : float
+        Level used for the update, ``max(gamma, quantile)``.
+    quantile : float
+        ``rho``-quantile of ``f`` under the proposal of this iteration.
+    ess : float
+        Kish effective sample size of the elite weights (the samples with
+        ``f <= gamma_k``) that formed the target moment.
+    n_elite : int
+        Samples with ``f <= gamma_k``.
+    n_hits : int
+        Samples with ``f <= gamma``.
+    n_evals : int
+        Calls of ``f`` so far, this iteration included.
+    """
+
+    iteration: int
+    gamma_k: float
+    quantile: float
+    ess: float
+    n_elite: int
+    n_hits: int
+    n_evals: int
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary."""
+        return _jsonable(self._asdict())
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Result of a rare-event estimator.
+
+    The headline fields (``p``, ``stderr``, ``ci``, ``n_hits``, ``ess``) are those
+    of the main threshold ``gamma``; ``by_gamma`` holds the same for ``gamma`` and
+    every test threshold, keyed by the threshold as given.
+
+    Attributes
+    ----------
+    method : str
+        ``"naive_mc"`` or ``"cross_entropy"``.
+    gamma : float
+        Main threshold.
+    by_gamma : dict of float to GammaEstimate
+        Estimates for ``gamma`` and each ``gamma_test``.
+    n_evals : int
+        Every call of ``f``, search stages included.
+    proposal : ExponentialFamily or None
+        Proposal of the final stage (``None`` for naive Monte Carlo).
+    history : tuple of CEInfo
+        One entry per cross-entropy iteration (empty for naive Monte Carlo).
+    best_iteration : int or None
+        Iteration whose proposal was chosen (lowest ``rho``-quantile).
+    wall_time_s : float
+        Wall-clock time of the whole estimate [s].
+    """
+
+    method: str
+    gamma: float
+    by_gamma: dict[float, GammaEstimate]
+    n_evals: int
+    proposal: ExponentialFamily | None = None
+    history: tuple[CEInfo, ...] = field(default_factory=tuple)
+    best_iteration: int | None = None
+    wall_time_s: float = 0.0
+
+    @property
+    def main(self) -> GammaEstimate:
+        """The estimate for the main threshold ``gamma``."""
+        return self.by_gamma[self.gamma]
+
+    @property
+    def p(self) -> float:
+        """Estimate of ``P0(f <= gamma)``."""
+        return self.main.p
+
+    @property
+    def stderr(self) -> float:
+        """Standard error of ``p``."""
+        return self.main.stderr
+
+    @property
+    def ci(self) -> tuple[float, float]:
+        """Confidence interval of ``p``."""
+        return self.main.ci
+
+    @property
+    def n_hits(self) -> int:
+        """Final-stage samples with ``f <= gamma``."""
+        return self.main.n_hits
+
+    @property
+    def ess(self) -> float:
+        """Effective number of hits of the final stage (see GammaEstimate)."""
+        return self.main.ess
+
+    @property
+    def n_samples(self) -> int:
+        """Size of the final stage."""
+        return self.main.n_samples
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable dictionary of everything above."""
+        return _jsonable(
+            {
+                "method": self.method,
+                "gamma": self.gamma,
+                "p": self.p,
+                "stderr": self.stderr,
+                "ci": list(self.ci),
+                "n_hits": self.n_hits,
+                "ess": self.ess,
+                "n_samples": self.n_samples,
+                "n_evals": self.n_evals,
+                "wall_time_s": self.wall_time_s,
+                "by_gamma": [g.to_dict() for g in self.by_gamma.values()],
+                "proposal": None if self.proposal is None else self.proposal.to_dict(),
+                "best_iteration": self.best_iteration,
+                "history": [h.to_dict() for h in self.history],
+            }
+        )
+
+    def __str__(self) -> str:
+        lo, hi = self.ci
+        return (
+            f"{self.method}: P(f <= {self.gamma:g}) = {self.p:.4g} "
+            f"+- {self.stderr:.2g} "
+            f"({self.main.confidence:.0%} CI [{lo:.3g}, {hi:.3g}], "
+            f"{self.n_hits} hits, ESS {self.ess:.1f}, {self.n_evals} calls of f)"
+        )
+
+
+def _jsonable(value: Any) -> Any:
+    """Replace non-finite floats by ``None`` and tuples by lists, recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    return value

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Create .venv (or $AVRISK_VENV) and install avrisk with the given extras.
+#   scripts/setup.sh            -> runtime only
+#   scripts/setup.sh dev        -> with test tools
+#   scripts/setup.sh dev,bench  -> with the benchmark comparators too
+# Uses uv when it can be installed (about ten times faster than pip), else pip.
+# Honours a local wheel folder configured for pip (`pip config list`, find-links),
+# which is where a CPU-only torch wheel may live.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+extras="${1:-}"
+venv="${AVRISK_VENV:-.venv}"
+python="${PYTHON:-python3}"
+
+[ -x "$venv/bin/python" ] || "$python" -m venv "$venv"
+spec="."
+[ -n "$extras" ] && spec=".[$extras]"
+
+find_links=()
+for dir in $("$venv/bin/python" -m pip config list 2>/dev/null \
+             | sed -n "s/^[^=]*find-links='\(.*\)'$/\1/p"); do
+    [ -d "$dir" ] && find_links+=(--find-links "$dir")
+done
+
+if "$venv/bin/python" -m pip install -q uv >/dev/null 2>&1; then
+    "$venv/bin/python" -m uv pip install -q --python "$venv/bin/python" \
+        "${find_links[@]}" -c constraints.txt -e "$spec"
+else
+    "$venv/bin/python" -m pip install -q "${find_links[@]}" -c constraints.txt -e "$spec"
+fi
+echo "avrisk installed in $venv ($("$venv/bin/python" -c 'import avrisk; print(avrisk.__version__)'))"

@@ -1,0 +1,240 @@
+import json
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from avrisk.rare import (
+    FixedCovNormal,
+    RareEventProblem,
+    ScaledBeta,
+    ZeroHitsWarning,
+    ce_init,
+    ce_step,
+    cross_entropy,
+)
+from avrisk.testing import (
+    beta_sum_cdf,
+    beta_sum_problem,
+    check_estimator,
+    gaussian_linear_problem,
+    mixed_problem,
+)
+
+SMALL = dict(rho=0.1, n_per_iter=2000, n_iter=8, n_final=20_000)
+
+
+def ce(problem, seed, **settings):
+    return cross_entropy(
+        problem.f, problem.base, problem.gamma, seed=seed, **{**SMALL, **settings}
+    )
+
+
+@pytest.mark.parametrize(
+    "problem",
+    [
+        gaussian_linear_problem(2, p=1e-6),
+        gaussian_linear_problem(100, p=1e-6),
+        beta_sum_problem(6, p=1e-5),
+        mixed_problem(1e-2, 1e-3),
+    ],
+    ids=lambda p: p.name,
+)
+@pytest.mark.parametrize("seed", [0, 1])
+def test_cross_entropy_agrees_with_the_exact_probability_within_its_standard_error(
+    problem, seed
+):
+    settings = dict(n_per_iter=4000) if problem.base.dim == 100 else {}
+    est = check_estimator(lambda pr, s: ce(pr, s, **settings), problem, seed=seed)
+    assert est.n_hits > 100  # importance sampling actually visits the rare event
+    assert est.by_gamma[problem.gamma].variance_reduction > 100
+
+
+def test_beta_sum_closed_form_agrees_with_numerical_convolution():
+    from scipy import integrate
+
+    t = 0.7
+    f2 = integrate.quad(
+        lambda u: stats.beta(2, 2).cdf(t - u) * stats.beta(2, 2).pdf(u), 0, t
+    )[0]
+    assert beta_sum_cdf(t, 2) == pytest.approx(f2, rel=1e-10)
+    assert beta_sum_cdf(0.5, 1) == pytest.approx(0.5)  # symmetric Beta(2,2)
+    with pytest.raises(ValueError, match="0 <= t <= 1"):
+        beta_sum_cdf(1.5, 3)
+
+
+def test_gamma_k_is_the_larger_of_gamma_and_the_rho_quantile():
+    problem = gaussian_linear_problem(2, p=1e-6)
+    est = ce(problem, 0)
+    for info in est.history:
+        assert info.gamma_k == max(problem.gamma, info.quantile)
+        assert info.n_elite >= SMALL["rho"] * SMALL["n_per_iter"]
+    assert (
+        est.history[0].gamma_k > problem.gamma
+    )  # the first levels are intermediate ones
+    assert est.history[-1].gamma_k == problem.gamma  # and the search reaches gamma
+
+
+def test_the_final_proposal_is_the_iterate_with_the_lowest_rho_quantile():
+    problem = gaussian_linear_problem(2, p=1e-6)
+    base, seen = problem.base, []
+    state = ce_init(base)
+    rp = RareEventProblem(base, problem.f, problem.gamma)
+    for _ in range(6):
+        seen.append(state.proposal)
+        state, info = ce_step(state, rp, seed=4, rho=0.1, alpha=0.8, n_per_iter=1000)
+    est = cross_entropy(
+        problem.f,
+        base,
+        problem.gamma,
+        rho=0.1,
+        n_per_iter=1000,
+        n_iter=6,
+        n_final=100,
+        seed=4,
+    )
+    quantiles = [h.quantile for h in est.history]
+    best = int(np.argmin(quantiles))
+    assert est.best_iteration == best
+    np.testing.assert_array_equal(est.proposal.mean, seen[best].mean)
+
+
+def test_update_is_smoothed_moment_matching_of_the_weighted_elite():
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    rp = RareEventProblem(base, lambda x: x[:, 0], gamma=-10.0)
+    state, info = ce_step(
+        ce_init(base), rp, seed=0, rho=0.2, alpha=0.5, n_per_iter=5000
+    )
+    # the elite of N(0,1) below its 20% quantile q has mean -pdf(q)/cdf(q) = -1.40
+    q = stats.norm.ppf(0.2)
+    elite_mean = -stats.norm.pdf(q) / 0.2
+    assert info.quantile == pytest.approx(q, abs=0.05)
+    assert state.proposal.mean[0] == pytest.approx(0.5 * elite_mean, abs=0.05)
+
+
+def test_estimate_counts_every_call_of_f_and_serialises_to_json():
+    calls = []
+
+    def f(x):
+        calls.append(len(x))
+        return 3.0 - x[:, 0]
+
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    est = cross_entropy(
+        f,
+        base,
+        0.0,
+        rho=0.1,
+        n_per_iter=500,
+        n_iter=3,
+        n_final=1000,
+        batch_size=128,
+        gamma_test=[0.5, -0.5],
+    )
+    assert est.n_evals == sum(calls) == 3 * 500 + 1000
+    assert max(calls) <= 128
+    out = json.loads(json.dumps(est.to_dict()))
+    assert [g["gamma"] for g in out["by_gamma"]] == [0.0, 0.5, -0.5]
+    assert len(out["history"]) == 3 and out["proposal"]["family"] == "FixedCovNormal"
+
+
+def test_same_seed_gives_the_same_estimate_whatever_the_batch_size():
+    problem = beta_sum_problem(6, p=1e-5)
+    runs = [
+        ce(problem, 5, n_iter=3, n_final=3001, batch_size=b) for b in (None, 1000, 333)
+    ]
+    assert len({r.p for r in runs}) == 1 and len({r.stderr for r in runs}) == 1
+
+
+def test_seeded_functions_get_per_sample_seeds_independent_of_batching():
+    class NoisyLimitState:
+        needs_seeds = True
+
+        def __call__(self, x, seeds):
+            noise = np.array([np.random.default_rng(s).normal() for s in seeds])
+            return 4.0 - x[:, 0] + 0.3 * noise
+
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    runs = [
+        cross_entropy(
+            NoisyLimitState(),
+            base,
+            0.0,
+            rho=0.1,
+            n_per_iter=500,
+            n_iter=4,
+            n_final=2000,
+            batch_size=b,
+        )
+        for b in (None, 7)
+    ]
+    assert runs[0].p == runs[1].p
+    p_true = stats.norm.sf(4.0 / np.sqrt(1 + 0.3**2))
+    assert abs(runs[0].p - p_true) < 5 * runs[0].stderr
+
+
+def test_zero_final_hits_warn_and_report_an_uninformative_interval():
+    base = ScaledBeta(2.0, 2.0)
+    with pytest.warns(ZeroHitsWarning, match="no sample of the final stage"):
+        est = cross_entropy(lambda x: x[:, 0], base, -1.0, n_iter=0, n_final=100)
+    assert est.p == 0.0 and est.ci == (0.0, 1.0)
+
+
+def test_zero_iterations_is_plain_monte_carlo_with_unit_weights():
+    base = ScaledBeta(2.0, 2.0)
+    est = cross_entropy(lambda x: x[:, 0], base, 0.3, n_iter=0, n_final=10_000, seed=1)
+    assert est.ess == pytest.approx(est.n_hits, rel=1e-12)  # all weights are one
+    assert abs(est.p - stats.beta(2, 2).cdf(0.3)) < 5 * est.stderr
+
+
+@pytest.mark.parametrize(
+    "kwargs,match",
+    [
+        (dict(rho=0.0), "rho must be in \\(0, 1\\)"),
+        (dict(rho=1.5), "rho must be in \\(0, 1\\); got 1.5"),
+        (dict(alpha=0.0), "alpha must be in \\(0, 1\\]"),
+        (dict(n_per_iter=0), "n_per_iter must be an integer >= 1"),
+        (dict(n_iter=-1), "n_iter must be an integer >= 0"),
+        (dict(n_final=2.5), "n_final"),
+        (dict(gamma_test=[np.nan]), "gamma_test"),
+    ],
+)
+def test_bad_settings_are_rejected_by_name(kwargs, match):
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    with pytest.raises(ValueError, match=match):
+        cross_entropy(lambda x: x[:, 0], base, 0.0, **kwargs)
+
+
+def test_a_nan_threshold_is_rejected():
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    with pytest.raises(ValueError, match="gamma must be a finite number"):
+        cross_entropy(lambda x: x[:, 0], base, float("nan"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "problem",
+    [gaussian_linear_problem(2, p=1e-6), beta_sum_problem(6, p=1e-5)],
+    ids=lambda p: p.name,
+)
+def test_cross_entropy_intervals_cover_the_truth_over_repeated_seeds(problem):
+    reps = 200
+    covered = 0
+    for seed in range(reps):
+        est = ce(problem, 1000 + seed, n_per_iter=1000, n_iter=8, n_final=5000)
+        covered += est.ci[0] <= problem.p_exact <= est.ci[1]
+    # nominal 95%; fail 4 binomial standard deviations under it (~1e-4 false failures)
+    assert covered / reps >= 0.95 - 4 * np.sqrt(0.95 * 0.05 / reps)
+
+
+@pytest.mark.slow
+def test_cross_entropy_is_unbiased_over_repeated_seeds_in_dimension_100():
+    problem = gaussian_linear_problem(100, p=1e-6)
+    ests = np.array(
+        [
+            ce(problem, 2000 + s, n_per_iter=3000, n_iter=8, n_final=10_000).p
+            for s in range(30)
+        ]
+    )
+    se_of_mean = ests.std(ddof=1) / np.sqrt(len(ests))
+    assert abs(ests.mean() - problem.p_exact) < 4 * se_of_mean

@@ -1,0 +1,63 @@
+import numpy as np
+import pytest
+from scipy import stats
+
+from avrisk.rare.intervals import clopper_pearson, normal_interval, wilson
+from avrisk.rare.weights import kish_ess, normalized_weights, weighted_mean_and_stderr
+
+
+def test_weighted_mean_is_exact_for_weights_spanning_1e_minus_300_to_1e300():
+    log_w = np.log(np.array([1e-300, 1e300, 1e300, 1.0]))
+    hits = np.array([True, True, False, True])
+    p, se = weighted_mean_and_stderr(log_w, hits)
+    assert p == pytest.approx((1e-300 + 1e300 + 1.0) / 4, rel=1e-12)
+    scaled_terms = np.array([1e-600, 1.0, 0.0, 1e-300])  # terms / 1e300, no overflow
+    assert se == pytest.approx(1e300 * scaled_terms.std(ddof=1) / 2, rel=1e-12)
+
+
+def test_weighted_mean_of_tiny_weights_does_not_underflow_to_zero():
+    log_w = np.full(10, -720.0)  # exp(-720) underflows a plain float64 sum of w
+    p, _ = weighted_mean_and_stderr(log_w, np.ones(10, dtype=bool))
+    assert p == pytest.approx(np.exp(-720.0), rel=1e-12) and p > 0
+
+
+def test_kish_ess_counts_equal_weights_and_collapses_for_one_dominant_weight():
+    assert kish_ess(np.full(50, 700.0)) == pytest.approx(50.0)
+    assert kish_ess(np.array([800.0, 0.0, 0.0])) == pytest.approx(1.0)
+    assert kish_ess(np.array([])) == 0.0
+
+
+def test_normalized_weights_sum_to_one_even_for_huge_log_weights():
+    w = normalized_weights(np.array([1000.0, 1000.0 + np.log(3.0)]))
+    np.testing.assert_allclose(w, [0.25, 0.75])
+
+
+@pytest.mark.parametrize("k,n", [(0, 10), (3, 100), (50, 50), (7, 1_000_000)])
+def test_binomial_intervals_match_scipy(k, n):
+    res = stats.binomtest(k, n)
+    ref_cp = res.proportion_ci(0.95, method="exact")
+    ref_w = res.proportion_ci(0.95, method="wilson")
+    np.testing.assert_allclose(
+        clopper_pearson(k, n), (ref_cp.low, ref_cp.high), rtol=1e-9, atol=1e-15
+    )
+    np.testing.assert_allclose(
+        wilson(k, n), (ref_w.low, ref_w.high), rtol=1e-9, atol=1e-15
+    )
+
+
+def test_zero_hits_give_a_positive_upper_bound_near_the_rule_of_three():
+    low, high = clopper_pearson(0, 100_000)
+    assert low == 0.0
+    assert high == pytest.approx(1 - 0.025 ** (1 / 100_000), rel=1e-9)  # ~ 3.69 / n
+    assert 3.6e-5 < high < 3.8e-5
+
+
+def test_normal_interval_is_clipped_to_the_unit_interval():
+    assert normal_interval(1e-6, 1e-6) == (0.0, pytest.approx(1e-6 + 1.959964e-6))
+
+
+def test_interval_functions_reject_bad_levels_and_counts():
+    with pytest.raises(ValueError, match="confidence level"):
+        wilson(1, 10, level=1.5)
+    with pytest.raises(ValueError, match="0 <= k <= n"):
+        clopper_pearson(11, 10)
