@@ -163,7 +163,11 @@ def main() -> None:
         beta_sum_problem(6, p=1e-5, bounds=(1.5, 7.0)),
         mixed_problem(1e-2, 1e-3),
     ]
-    methods = [avrisk_naive(args.budget), avrisk_ce(args.budget)]
+    methods = [
+        avrisk_naive(args.budget),
+        avrisk_ce(args.budget, "quantile"),
+        avrisk_ce(args.budget, "variance"),
+    ]
     if ot is not None:
         methods.append(openturns_ce(args.budget))
     else:

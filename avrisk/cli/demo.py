@@ -38,7 +38,12 @@ def _row(table: Table, problem: AnalyticProblem, est: Estimate) -> None:
 
 @app.command()
 def demo(
-    budget: int = typer.Option(100_000, min=1000, help="Calls of f per estimator."),
+    budget: int = typer.Option(
+        100_000,
+        min=50_000,
+        help="Calls of f per estimator (at least 50,000: with fewer, the "
+        "100-dimensional search has too few elite samples per iteration).",
+    ),
     seed: int = typer.Option(0, min=0, help="Run seed."),
     out: Path | None = typer.Option(None, help="Write both estimates as JSON here."),
 ) -> None:

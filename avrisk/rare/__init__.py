@@ -7,7 +7,7 @@ gamma)`` for thresholds where naive Monte Carlo is hopeless.
 
 from avrisk.rare.cross_entropy import CEState, ce_init, ce_step, cross_entropy
 from avrisk.rare.families import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
-from avrisk.rare.final_stage import ZeroHitsWarning
+from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
 from avrisk.rare.naive_mc import naive_mc
 from avrisk.rare.problem import RareEventProblem
 from avrisk.rare.results import CEInfo, Estimate, GammaEstimate
@@ -22,6 +22,7 @@ __all__ = [
     "Product",
     "RareEventProblem",
     "ScaledBeta",
+    "UnreliableEstimateWarning",
     "ZeroHitsWarning",
     "ce_init",
     "ce_step",

@@ -8,7 +8,8 @@ For ``k = 0 .. K-1``, with proposal ``P_theta_k`` (``theta_0`` = base):
    ``log w_i = log p0(X_i) - log p_theta_k(X_i)`` (self-normalised in log space);
 4. ``theta_{k+1} = argmax_{theta in box} theta^T m - A(theta)`` with
    ``m = alpha D + (1 - alpha) grad A(theta_k)`` (exact projection per family);
-5. remember the ``theta_k`` with the lowest ``rho``-quantile.
+5. remember the ``theta_k`` with the lowest ``rho``-quantile (``select=
+   "quantile"``, the paper's rule; see :data:`SELECTION_RULES` for another).
 
 The estimate comes from ``n`` fresh samples of the remembered proposal:
 ``p_hat = mean(w_i 1{f_i <= gamma})``, unbiased for ``P0(f <= gamma)``.
@@ -46,7 +47,11 @@ from avrisk.rare.problem import (
     threshold_list,
 )
 from avrisk.rare.results import CEInfo, Estimate
-from avrisk.rare.weights import kish_ess, normalized_weights
+from avrisk.rare.weights import (
+    kish_ess,
+    normalized_weights,
+    weighted_mean_and_stderr,
+)
 
 
 class CEState(NamedTuple):
@@ -59,9 +64,9 @@ class CEState(NamedTuple):
     iteration : int
         Iterations completed.
     best : ExponentialFamily
-        Evaluated proposal with the lowest ``rho``-quantile so far.
-    best_quantile : float
-        That quantile (``inf`` before the first iteration).
+        Evaluated proposal with the best selection score so far.
+    best_score : tuple of float
+        That score, smaller is better (``(inf,)`` before the first iteration).
     best_iteration : int
         Iteration that sampled ``best`` (-1: none yet, ``best`` is the base).
     n_evals : int
@@ -71,14 +76,40 @@ class CEState(NamedTuple):
     proposal: ExponentialFamily
     iteration: int
     best: ExponentialFamily
-    best_quantile: float
+    best_score: tuple[float, ...]
     best_iteration: int
     n_evals: int
 
 
 def ce_init(base: ExponentialFamily) -> CEState:
     """State before the first iteration: the proposal is the base distribution."""
-    return CEState(base, 0, base, math.inf, -1, 0)
+    return CEState(base, 0, base, (math.inf,), -1, 0)
+
+
+#: Hits an iterate needs before the ``"variance"`` rule trusts its estimate.
+MIN_HITS_FOR_VARIANCE = 10
+
+
+def _quantile_score(info: CEInfo) -> tuple[float, ...]:
+    return (info.quantile,)
+
+
+def _variance_score(info: CEInfo) -> tuple[float, ...]:
+    if info.n_hits >= MIN_HITS_FOR_VARIANCE:
+        return (-math.inf, info.rel_var)
+    return (info.quantile, math.inf)
+
+
+#: How the proposal of the final stage is chosen among the evaluated iterates.
+#: ``"quantile"``: lowest ``rho``-quantile (paper). Once the quantiles fall below
+#: ``gamma`` this favours proposals that overshoot into the event, which in high
+#: dimension can have degenerate weights. ``"variance"``: among iterates with at
+#: least ``MIN_HITS_FOR_VARIANCE`` hits, the lowest estimated relative variance
+#: (``CEInfo.rel_var``); before any has, the lowest quantile.
+SELECTION_RULES: dict[str, Callable[[CEInfo], tuple[float, ...]]] = {
+    "quantile": _quantile_score,
+    "variance": _variance_score,
+}
 
 
 def ce_step(
@@ -89,6 +120,7 @@ def ce_step(
     rho: float,
     alpha: float,
     n_per_iter: int,
+    select: str = "quantile",
 ) -> tuple[CEState, CEInfo]:
     """One cross-entropy iteration (steps 1-5 of the module docstring).
 
@@ -102,41 +134,49 @@ def ce_step(
     quantile = float(np.quantile(values, rho, method="inverted_cdf"))
     gamma_k = max(problem.gamma, quantile)
     elite = values <= gamma_k
-    log_w = problem.base.log_prob(x[elite]) - proposal.log_prob(x[elite])
-    if not np.isfinite(log_w).any():
+    log_w = problem.base.log_prob(x) - proposal.log_prob(x)
+    if not np.isfinite(log_w[elite]).any():
         raise FloatingPointError(
             f"iteration {state.iteration}: every elite sample has zero base density"
         )
-    target = normalized_weights(log_w) @ proposal.sufficient_stat(x[elite])
+    target = normalized_weights(log_w[elite]) @ proposal.sufficient_stat(x[elite])
     m = alpha * target + (1.0 - alpha) * proposal.mean_param()
-    better = quantile < state.best_quantile
+    hits = values <= problem.gamma
+    p_k, se_k = weighted_mean_and_stderr(log_w, hits)
     n_evals = state.n_evals + n_per_iter
-    new_state = CEState(
-        proposal=proposal.project(m),
-        iteration=stage,
-        best=proposal if better else state.best,
-        best_quantile=quantile if better else state.best_quantile,
-        best_iteration=state.iteration if better else state.best_iteration,
-        n_evals=n_evals,
-    )
     info = CEInfo(
         iteration=state.iteration,
         gamma_k=gamma_k,
         quantile=quantile,
-        ess=kish_ess(log_w),
+        ess=kish_ess(log_w[elite]),
         n_elite=int(elite.sum()),
-        n_hits=int(np.count_nonzero(values <= problem.gamma)),
+        n_hits=int(np.count_nonzero(hits)),
+        n_evals=n_evals,
+        rel_var=n_per_iter * (se_k / p_k) ** 2 if p_k > 0 else math.inf,
+    )
+    score = SELECTION_RULES[select](info)
+    better = score < state.best_score
+    new_state = CEState(
+        proposal=proposal.project(m),
+        iteration=stage,
+        best=proposal if better else state.best,
+        best_score=score if better else state.best_score,
+        best_iteration=state.iteration if better else state.best_iteration,
         n_evals=n_evals,
     )
     return new_state, info
 
 
-def check_ce_settings(rho: float, alpha: float) -> None:
-    """Raise a ValueError naming ``rho`` or ``alpha`` if it is out of range."""
+def check_ce_settings(rho: float, alpha: float, select: str = "quantile") -> None:
+    """Raise a ValueError naming ``rho``, ``alpha`` or ``select`` if out of range."""
     if not 0.0 < rho < 1.0:
         raise ValueError(f"rho must be in (0, 1); got {rho}")
     if not 0.0 < alpha <= 1.0:
         raise ValueError(f"alpha must be in (0, 1]; got {alpha}")
+    if select not in SELECTION_RULES:
+        raise ValueError(
+            f"select must be one of {sorted(SELECTION_RULES)}; got {select!r}"
+        )
 
 
 def cross_entropy(
@@ -152,6 +192,7 @@ def cross_entropy(
     seed: int = 0,
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
+    select: str = "quantile",
     callback: Callable[[CEInfo], None] | None = None,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by cross-entropy importance sampling.
@@ -180,6 +221,9 @@ def cross_entropy(
         Further thresholds estimated from the final samples.
     batch_size : int or None, default=None
         Largest number of rows per call of ``f``.
+    select : {"quantile", "variance"}, default="quantile"
+        Rule choosing the final proposal among the iterates
+        (:data:`SELECTION_RULES`); ``"quantile"`` is the paper's.
     callback : callable, optional
         Called with the :class:`CEInfo` of each iteration (progress display).
 
@@ -201,7 +245,7 @@ def cross_entropy(
     True
     """
     start = time.perf_counter()
-    check_ce_settings(rho, alpha)
+    check_ce_settings(rho, alpha, select)
     n_per_iter = check_positive_int("n_per_iter", n_per_iter)
     n_iter = check_positive_int("n_iter", n_iter, minimum=0)
     n_final = check_positive_int("n_final", n_final)
@@ -210,7 +254,13 @@ def cross_entropy(
     history = []
     for _ in range(n_iter):
         state, info = ce_step(
-            state, problem, seed=seed, rho=rho, alpha=alpha, n_per_iter=n_per_iter
+            state,
+            problem,
+            seed=seed,
+            rho=rho,
+            alpha=alpha,
+            n_per_iter=n_per_iter,
+            select=select,
         )
         history.append(info)
         if callback is not None:

@@ -16,8 +16,20 @@ CONFIDENCE = 0.95
 BINOMIAL_INTERVALS = {"clopper-pearson": clopper_pearson, "wilson": wilson}
 
 
+#: Below this effective number of hits the standard error itself is unreliable.
+MIN_RELIABLE_ESS = 10.0
+
+
 class ZeroHitsWarning(UserWarning):
     """The importance-sampling stage saw no event: its interval is only ``(0, 1)``."""
+
+
+class UnreliableEstimateWarning(UserWarning):
+    """Few effective hits: a handful of weights dominate the estimate.
+
+    The standard error and the interval are computed from those same weights,
+    so they cannot be trusted either.
+    """
 
 
 def binomial_estimates(
@@ -66,13 +78,23 @@ def importance_estimates(
             ci = (0.0, 1.0)
         else:
             ci = normal_interval(p, se, CONFIDENCE)
+        ess = kish_ess(log_w[hits])
+        if 0 < k and ess < MIN_RELIABLE_ESS:
+            warnings.warn(
+                f"f <= {g:g}: {k} hits but an effective number of only {ess:.1f}; "
+                "a few weights dominate and the standard error is unreliable "
+                "(the proposal is degenerate: raise n_per_iter or rho, or see "
+                "Estimate.history)",
+                UnreliableEstimateWarning,
+                stacklevel=3,
+            )
         out[g] = GammaEstimate(
             gamma=g,
             p=p,
             stderr=se,
             ci=ci,
             n_hits=k,
-            ess=kish_ess(log_w[hits]),
+            ess=ess,
             n_samples=values.size,
             confidence=CONFIDENCE,
         )

@@ -100,6 +100,11 @@ class CEInfo(NamedTuple):
         Samples with ``f <= gamma``.
     n_evals : int
         Calls of ``f`` so far, this iteration included.
+    rel_var : float
+        Estimated relative variance per sample, ``Var(w 1{f <= gamma}) / p^2``,
+        of importance sampling with this iteration's proposal, from its own
+        samples (``inf`` without hits). The final stage's relative standard error
+        would be about ``sqrt(rel_var / n_final)``.
     """
 
     iteration: int
@@ -109,6 +114,7 @@ class CEInfo(NamedTuple):
     n_elite: int
     n_hits: int
     n_evals: int
+    rel_var: float
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""

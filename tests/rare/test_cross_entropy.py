@@ -8,6 +8,7 @@ from avrisk.rare import (
     FixedCovNormal,
     RareEventProblem,
     ScaledBeta,
+    UnreliableEstimateWarning,
     ZeroHitsWarning,
     ce_init,
     ce_step,
@@ -238,3 +239,37 @@ def test_cross_entropy_is_unbiased_over_repeated_seeds_in_dimension_100():
     )
     se_of_mean = ests.std(ddof=1) / np.sqrt(len(ests))
     assert abs(ests.mean() - problem.p_exact) < 4 * se_of_mean
+
+
+def test_a_degenerate_proposal_warns_that_its_standard_error_is_unreliable():
+    # 80 elites in 100 dimensions: the lowest-quantile iterate overshoots and its
+    # weights collapse onto a few samples
+    problem = gaussian_linear_problem(100, p=1e-6)
+    with pytest.warns(UnreliableEstimateWarning, match="effective number of only"):
+        est = ce(problem, 0, rho=0.1, n_per_iter=800, n_iter=8, n_final=13_600)
+    assert est.ess < 10 < est.n_hits
+
+
+def test_variance_selection_avoids_the_overshooting_iterate_in_high_dimension():
+    problem = gaussian_linear_problem(100, p=1e-6)
+    settings = dict(rho=0.1, n_per_iter=800, n_iter=8, n_final=13_600)
+    est = ce(problem, 1, select="variance", **settings)
+    chosen = est.history[est.best_iteration]
+    assert chosen.n_hits >= 10
+    eligible = [h.rel_var for h in est.history if h.n_hits >= 10]
+    assert chosen.rel_var == min(eligible)
+    assert abs(est.p - problem.p_exact) < 5 * est.stderr
+    assert est.ess > 10
+
+
+def test_rel_var_predicts_the_final_relative_standard_error():
+    problem = beta_sum_problem(6, p=1e-5)
+    est = ce(problem, 2, n_iter=8, n_final=40_000)
+    predicted = np.sqrt(est.history[est.best_iteration].rel_var / est.n_samples)
+    assert 0.5 < est.main.rel_error / predicted < 2.0
+
+
+def test_an_unknown_selection_rule_is_rejected_by_name():
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    with pytest.raises(ValueError, match="select must be one of"):
+        cross_entropy(lambda x: x[:, 0], base, 0.0, select="best")
