@@ -11,6 +11,7 @@ from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
 from avrisk.rare.naive_mc import naive_mc
 from avrisk.rare.problem import RareEventProblem
 from avrisk.rare.results import CEInfo, Estimate, GammaEstimate
+from avrisk.rare.stages import StageBatch, run_stage
 
 __all__ = [
     "CEInfo",
@@ -22,10 +23,12 @@ __all__ = [
     "Product",
     "RareEventProblem",
     "ScaledBeta",
+    "StageBatch",
     "UnreliableEstimateWarning",
     "ZeroHitsWarning",
     "ce_init",
     "ce_step",
     "cross_entropy",
     "naive_mc",
+    "run_stage",
 ]

@@ -42,11 +42,10 @@ from avrisk.rare.problem import (
     BatchFunction,
     RareEventProblem,
     check_positive_int,
-    sample_seeds,
-    stage_rng,
     threshold_list,
 )
 from avrisk.rare.results import CEInfo, Estimate
+from avrisk.rare.stages import BatchCache, BatchRecorder, run_stage
 from avrisk.rare.weights import (
     kish_ess,
     normalized_weights,
@@ -121,25 +120,36 @@ def ce_step(
     alpha: float,
     n_per_iter: int,
     select: str = "quantile",
+    on_batch: BatchRecorder | None = None,
+    cache: BatchCache | None = None,
 ) -> tuple[CEState, CEInfo]:
     """One cross-entropy iteration (steps 1-5 of the module docstring).
 
     The samples of iteration ``k`` come from stage ``k + 1`` of ``seed``, so an
     iteration re-run from a checkpointed state gives the same result.
+    ``on_batch`` and ``cache`` are passed to
+    :func:`~avrisk.rare.stages.run_stage`.
     """
     stage = state.iteration + 1
     proposal = state.proposal
-    x = proposal.sample(n_per_iter, stage_rng(seed, stage))
-    values = problem.evaluate(x, sample_seeds(seed, stage, n_per_iter))
+    values, log_w, stats = run_stage(
+        problem,
+        proposal,
+        n_per_iter,
+        seed=seed,
+        stage=stage,
+        keep_stats=True,
+        on_batch=on_batch,
+        cache=cache,
+    )
     quantile = float(np.quantile(values, rho, method="inverted_cdf"))
     gamma_k = max(problem.gamma, quantile)
     elite = values <= gamma_k
-    log_w = problem.base.log_prob(x) - proposal.log_prob(x)
     if not np.isfinite(log_w[elite]).any():
         raise FloatingPointError(
             f"iteration {state.iteration}: every elite sample has zero base density"
         )
-    target = normalized_weights(log_w[elite]) @ proposal.sufficient_stat(x[elite])
+    target = normalized_weights(log_w[elite]) @ stats[elite]
     m = alpha * target + (1.0 - alpha) * proposal.mean_param()
     hits = values <= problem.gamma
     p_k, se_k = weighted_mean_and_stderr(log_w, hits)
@@ -194,6 +204,8 @@ def cross_entropy(
     batch_size: int | None = None,
     select: str = "quantile",
     callback: Callable[[CEInfo], None] | None = None,
+    on_batch: BatchRecorder | None = None,
+    cache: BatchCache | None = None,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by cross-entropy importance sampling.
 
@@ -226,6 +238,12 @@ def cross_entropy(
         (:data:`SELECTION_RULES`); ``"quantile"`` is the paper's.
     callback : callable, optional
         Called with the :class:`CEInfo` of each iteration (progress display).
+    on_batch : callable, optional
+        Called with each evaluated :class:`~avrisk.rare.stages.StageBatch`, of
+        every stage (a samples table, a progress bar).
+    cache : callable, optional
+        ``cache(stage, chunk)`` returns a recorded batch of an interrupted run
+        with the same settings, or ``None``: resuming replays the record.
 
     Returns
     -------
@@ -261,14 +279,22 @@ def cross_entropy(
             alpha=alpha,
             n_per_iter=n_per_iter,
             select=select,
+            on_batch=on_batch,
+            cache=cache,
         )
         history.append(info)
         if callback is not None:
             callback(info)
     proposal = state.best
-    x = proposal.sample(n_final, stage_rng(seed, FINAL_STAGE))
-    values = problem.evaluate(x, sample_seeds(seed, FINAL_STAGE, n_final))
-    log_w = base.log_prob(x) - proposal.log_prob(x)
+    values, log_w, _ = run_stage(
+        problem,
+        proposal,
+        n_final,
+        seed=seed,
+        stage=FINAL_STAGE,
+        on_batch=on_batch,
+        cache=cache,
+    )
     return Estimate(
         method="cross_entropy",
         gamma=problem.gamma,

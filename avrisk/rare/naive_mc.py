@@ -20,11 +20,10 @@ from avrisk.rare.problem import (
     BatchFunction,
     RareEventProblem,
     check_positive_int,
-    sample_seeds,
-    stage_rng,
     threshold_list,
 )
 from avrisk.rare.results import Estimate
+from avrisk.rare.stages import BatchCache, BatchRecorder, run_stage
 
 
 def naive_mc(
@@ -37,6 +36,8 @@ def naive_mc(
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
     interval: str = "clopper-pearson",
+    on_batch: BatchRecorder | None = None,
+    cache: BatchCache | None = None,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by plain sampling from ``base``.
 
@@ -58,6 +59,12 @@ def naive_mc(
         Largest number of rows per call of ``f``.
     interval : {"clopper-pearson", "wilson"}, default="clopper-pearson"
         Binomial confidence interval (95%).
+    on_batch : callable, optional
+        Called with each evaluated :class:`~avrisk.rare.stages.StageBatch`
+        (a samples table, a progress bar).
+    cache : callable, optional
+        ``cache(stage, chunk)`` returns a recorded batch of an interrupted run
+        with the same settings, or ``None`` (see :mod:`avrisk.rare.stages`).
 
     Returns
     -------
@@ -79,12 +86,13 @@ def naive_mc(
             f"interval must be one of {sorted(BINOMIAL_INTERVALS)}; got {interval!r}"
         )
     problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    x = base.sample(n, stage_rng(seed, FINAL_STAGE))
-    values = problem.evaluate(x, sample_seeds(seed, FINAL_STAGE, n))
+    stage = run_stage(
+        problem, base, n, seed=seed, stage=FINAL_STAGE, on_batch=on_batch, cache=cache
+    )
     return Estimate(
         method="naive_mc",
         gamma=problem.gamma,
-        by_gamma=binomial_estimates(values, problem.thresholds, interval),
+        by_gamma=binomial_estimates(stage.values, problem.thresholds, interval),
         n_evals=n,
         wall_time_s=time.perf_counter() - start,
     )

@@ -7,11 +7,16 @@ also depends on per-sample randomness (a stochastic simulator) declares
 ``needs_seeds = True`` and is then called as ``f(x, seeds=seeds)`` with one
 ``int64`` seed per row, derived from the run seed, the stage and the sample's
 index; so a row's value never depends on how the rows were batched.
+
+Samples of a stage are drawn in chunks of :data:`SAMPLE_CHUNK` rows, chunk ``j``
+from its own generator (:func:`chunk_rng`): sample ``i`` of a stage depends only
+on the run seed, the stage and ``i``, memory stays bounded for any ``n``, and a
+run interrupted between chunks can resume from the chunks it has recorded.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -23,6 +28,9 @@ BatchFunction = Callable[..., Any]
 
 #: Stage number of the final (estimation) stage; CE search iteration k is k + 1.
 FINAL_STAGE = 0
+
+#: Rows drawn from one random generator; fixed, because changing it changes X.
+SAMPLE_CHUNK = 8192
 
 _SPLITMIX_GAMMA = np.uint64(0x9E3779B97F4A7C15)
 
@@ -84,8 +92,19 @@ class RareEventProblem:
         """``gamma`` followed by the test thresholds not equal to it, in order."""
         return tuple(dict.fromkeys((self.gamma, *self.gamma_test)))
 
-    def evaluate(self, x: FloatArray, seeds: np.ndarray) -> FloatArray:
-        """``f`` on every row of ``x`` (shape (n, D)), in batches; shape (n,).
+    def evaluate(
+        self, x: FloatArray, seeds: np.ndarray
+    ) -> tuple[FloatArray, dict[str, np.ndarray]]:
+        """``f`` on every row of ``x`` (shape (n, D)), in batches.
+
+        ``f`` returns either the ``(n,)`` values, or a mapping with the values
+        under ``"f"`` and any other per-sample outputs (crash flags, ...) as
+        ``(n,)`` arrays: those are passed on for recording, never used.
+
+        Returns
+        -------
+        values : ndarray of shape (n,)
+        extras : dict of str to ndarray of shape (n,)
 
         Raises
         ------
@@ -94,21 +113,22 @@ class RareEventProblem:
         """
         needs_seeds = bool(getattr(self.f, "needs_seeds", False))
         step = self.batch_size or max(1, len(x))
-        parts = []
+        parts: list[FloatArray] = []
+        extras: dict[str, list[np.ndarray]] = {}
         for start in range(0, len(x), step):
             chunk = x[start : start + step]
-            out = (
-                self.f(chunk, seeds=seeds[start : start + step])
-                if needs_seeds
-                else self.f(chunk)
-            )
-            out = np.asarray(out, dtype=np.float64)
-            if out.shape != (len(chunk),):
-                raise ValueError(
-                    f"f must return an array of shape ({len(chunk)},) for an input of "
-                    f"shape {chunk.shape}; got shape {out.shape}"
-                )
-            parts.append(out)
+            if needs_seeds:
+                out = self.f(chunk, seeds=seeds[start : start + step])
+            else:
+                out = self.f(chunk)
+            if isinstance(out, Mapping):
+                for name, column in out.items():
+                    if name != "f":
+                        extras.setdefault(name, []).append(
+                            _column(column, len(chunk), name)
+                        )
+                out = out["f"]
+            parts.append(_column(out, len(chunk), "f", dtype=np.float64))
         values = np.concatenate(parts) if parts else np.empty(0)
         bad = np.flatnonzero(np.isnan(values))
         if bad.size:
@@ -116,24 +136,34 @@ class RareEventProblem:
                 f"f returned NaN for {bad.size} of {values.size} samples "
                 f"(first at row {bad[0]}: x = {x[bad[0]].tolist()[:8]}...)"
             )
-        return values
+        return values, {k: np.concatenate(v) for k, v in extras.items()}
 
 
-def stage_rng(seed: int, stage: int) -> np.random.Generator:
-    """Random generator of one stage, derived from the run seed and stage number."""
-    return np.random.default_rng(np.random.SeedSequence([_check_seed(seed), stage]))
+def _column(out: Any, n: int, name: str, dtype: Any = None) -> np.ndarray:
+    arr = np.asarray(out, dtype=dtype)
+    if arr.shape != (n,):
+        raise ValueError(
+            f"f must return an array of shape ({n},) for {n} input rows; "
+            f"got shape {arr.shape} for output {name!r}"
+        )
+    return arr
 
 
-def sample_seeds(seed: int, stage: int, n: int) -> np.ndarray:
-    """One ``int64`` seed per sample of a stage, shape (n,).
+def chunk_rng(seed: int, stage: int, chunk: int) -> np.random.Generator:
+    """Random generator of one sampling chunk of one stage of a run."""
+    key = [_check_seed(seed), stage, chunk]
+    return np.random.default_rng(np.random.SeedSequence(key))
 
-    Seed ``i`` is the SplitMix64 hash of a stage key plus ``i``: it depends only on
-    the run seed, the stage and the sample index (not on ``n`` or batching).
+
+def sample_seeds(seed: int, stage: int, ids: np.ndarray) -> np.ndarray:
+    """One ``int64`` seed per sample id of a stage, same shape as ``ids``.
+
+    Seed ``i`` is the SplitMix64 hash of a stage key plus ``i``: it depends only
+    on the run seed, the stage and the sample id.
     """
-    key = np.random.SeedSequence([_check_seed(seed), stage, 1]).generate_state(
-        1, np.uint64
-    )[0]
-    z = key + np.arange(n, dtype=np.uint64) * _SPLITMIX_GAMMA
+    sequence = np.random.SeedSequence([_check_seed(seed), stage, 1])
+    key = sequence.generate_state(1, np.uint64)[0]
+    z = key + np.asarray(ids, dtype=np.uint64) * _SPLITMIX_GAMMA
     with np.errstate(over="ignore"):
         z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
         z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)

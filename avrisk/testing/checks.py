@@ -25,7 +25,8 @@ def check_family(
 ) -> None:
     """Check that a family's parts agree with each other.
 
-    1. Samples have shape (n, dim) and finite log-density.
+    1. Samples have shape (n, dim) and finite log-density, and row ``i`` does
+       not depend on ``n`` (prefix consistency).
     2. Sample mean of ``T(X)`` equals ``mean_param()`` within ``Z_TOL`` stderr.
     3. ``mean_param()`` is the gradient of ``A(theta)`` (central differences).
     4. ``log_prob`` is normalised and consistent with sampling: for a nearby
@@ -35,8 +36,14 @@ def check_family(
     6. ``project(m)`` of another family's mean lands in the box and is no worse
        than the box-feasible starting point in ``theta^T m - A(theta)``.
     """
-    x = family.sample(n, rng)
+    seed = int(rng.integers(2**63))
+    x = family.sample(n, np.random.default_rng(seed))
     assert x.shape == (n, family.dim), f"sample shape {x.shape} != {(n, family.dim)}"
+    np.testing.assert_array_equal(
+        family.sample(n // 3, np.random.default_rng(seed)),
+        x[: n // 3],
+        err_msg="sample is not prefix-consistent: row i depends on n",
+    )
     logp = family.log_prob(x)
     assert logp.shape == (n,) and np.isfinite(logp).all(), (
         "log_prob not finite on samples"

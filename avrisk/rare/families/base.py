@@ -44,6 +44,10 @@ class ExponentialFamily(abc.ABC):
     def sample(self, n: int, rng: np.random.Generator) -> FloatArray:
         """Draw ``n`` samples.
 
+        Row ``i`` must not depend on ``n`` (prefix consistency): the first ``m``
+        rows of ``sample(n, rng)`` equal ``sample(m, rng)`` from the same state.
+        Then a sample of a run depends only on the seed and its id.
+
         Parameters
         ----------
         n : int

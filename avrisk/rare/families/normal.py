@@ -71,6 +71,7 @@ class FixedCovNormal(ExponentialFamily):
         if (cov is None) == (precision is None):
             raise ValueError("give exactly one of cov= and precision=")
         self.precision = _precision_matrix(cov, precision, self.dim)
+        self._sparse = sparse.issparse(self.precision)
         dense = (
             self.precision.toarray()
             if sparse.issparse(self.precision)
@@ -92,13 +93,14 @@ class FixedCovNormal(ExponentialFamily):
         return new
 
     def _quad(self, d: FloatArray) -> FloatArray:
-        """Row-wise ``d_i^T P d_i`` for ``d`` of shape (n, D)."""
-        return np.einsum("ij,ij->i", np.asarray((self.precision @ d.T).T), d)
+        """Row-wise ``d_i^T P d_i`` for ``d`` of shape (n, D) (``P`` symmetric)."""
+        pd = np.asarray(self.precision @ d.T).T if self._sparse else d @ self.precision
+        return (pd * d).sum(axis=1)
 
     def sample(self, n: int, rng: np.random.Generator) -> FloatArray:
         """Draw ``n`` samples, shape (n, D): ``mu + L^-T z`` with ``P = L L^T``."""
-        z = rng.standard_normal((self.dim, n))
-        y = linalg.solve_triangular(self._chol, z, lower=True, trans="T")
+        z = rng.standard_normal((n, self.dim))  # row-major: row i independent of n
+        y = linalg.solve_triangular(self._chol, z.T, lower=True, trans="T")
         return self.mean + y.T
 
     def log_prob(self, x: FloatArray) -> FloatArray:

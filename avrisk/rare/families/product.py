@@ -55,8 +55,14 @@ class Product(ExponentialFamily):
         )
 
     def sample(self, n: int, rng: np.random.Generator) -> FloatArray:
-        """Draw ``n`` samples, shape (n, D), block after block from ``rng``."""
-        return np.concatenate([b.sample(n, rng) for b in self.blocks], axis=1)
+        """Draw ``n`` samples, shape (n, D); each block from its own child of ``rng``.
+
+        Separate generators keep row ``i`` independent of ``n``: drawing block
+        after block from one stream would shift block 2's draws with ``n``.
+        """
+        streams = rng.spawn(len(self.blocks))
+        parts = [b.sample(n, s) for b, s in zip(self.blocks, streams, strict=True)]
+        return np.concatenate(parts, axis=1)
 
     def log_prob(self, x: FloatArray) -> FloatArray:
         """Sum of the blocks' log-densities, shape (n,)."""
