@@ -15,7 +15,7 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from avrisk.rare import CEInfo
+from avrisk.rare import CEInfo, CEState
 
 
 @contextmanager
@@ -38,7 +38,7 @@ def ce_progress(
     with Progress(*columns, console=console, transient=False) as progress:
         task = progress.add_task(label, total=n_iter, status="")
 
-        def update(info: CEInfo) -> None:
+        def update(info: CEInfo, state: CEState | None = None) -> None:
             status = f"gamma_k={info.gamma_k:.4g} hits={info.n_hits} ESS={info.ess:.0f}"
             progress.update(task, advance=1, status=status)
 

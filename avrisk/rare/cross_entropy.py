@@ -203,7 +203,7 @@ def cross_entropy(
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
     select: str = "quantile",
-    callback: Callable[[CEInfo], None] | None = None,
+    callback: Callable[[CEInfo, CEState], None] | None = None,
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
 ) -> Estimate:
@@ -237,7 +237,8 @@ def cross_entropy(
         Rule choosing the final proposal among the iterates
         (:data:`SELECTION_RULES`); ``"quantile"`` is the paper's.
     callback : callable, optional
-        Called with the :class:`CEInfo` of each iteration (progress display).
+        Called after each iteration with its :class:`CEInfo` and the new
+        :class:`CEState` (progress display, checkpoints).
     on_batch : callable, optional
         Called with each evaluated :class:`~avrisk.rare.stages.StageBatch`, of
         every stage (a samples table, a progress bar).
@@ -284,7 +285,7 @@ def cross_entropy(
         )
         history.append(info)
         if callback is not None:
-            callback(info)
+            callback(info, state)
     proposal = state.best
     values, log_w, _ = run_stage(
         problem,

@@ -1,0 +1,258 @@
+"""The run directory: everything a run leaves behind, written so nothing is lost.
+
+::
+
+    DIR/
+      config.json      resolved scenario and options; a different run is refused
+      chunks/          one Parquet file per evaluated chunk while the run goes on
+      checkpoint.json  CE state and history after the latest iteration
+      samples.parquet  every rollout of every stage, once the run is complete
+      summary.json     estimates, intervals, ESS, timing, versions (SUMMARY_SCHEMA)
+
+Every file is written to a temporary name and renamed into place, so a run
+killed at any moment (even ``kill -9``) leaves only whole files. Rerunning the
+same command replays the recorded chunks (bit-identical numbers, see
+:mod:`avrisk.rare.stages`) and evaluates only what is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from avrisk.rare import CEInfo, CEState, StageBatch
+from avrisk.rare.problem import FINAL_STAGE
+
+SUMMARY_SCHEMA = "avrisk.summary/1"
+CONFIG_FILE = "config.json"
+SUMMARY_FILE = "summary.json"
+SAMPLES_FILE = "samples.parquet"
+CHECKPOINT_FILE = "checkpoint.json"
+CHUNKS_DIR = "chunks"
+
+#: Columns of the samples table besides the scenario parameters and extras.
+BOOKKEEPING = ("phase", "stage", "iteration", "chunk", "sample_id", "seed")
+DENSITIES = ("log_p0", "log_p_proposal", "log_weight", "weight", "f")
+
+
+class RunDirectoryError(ValueError):
+    """The output directory cannot be used for this run (says why and what to do)."""
+
+
+def write_atomic(path: Path, data: bytes | str) -> None:
+    """Write ``data`` to ``path`` through a temporary file and a rename."""
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_bytes(data.encode() if isinstance(data, str) else data)
+    os.replace(tmp, path)
+
+
+def write_json(path: Path, obj: Any) -> None:
+    """Write ``obj`` as indented JSON, atomically."""
+    write_atomic(
+        path, json.dumps(obj, indent=2, sort_keys=False, allow_nan=False) + "\n"
+    )
+
+
+class RunDirectory:
+    """A run's output directory.
+
+    Parameters
+    ----------
+    path : path-like
+        The directory (created by :meth:`claim`).
+    param_names : sequence of str
+        Names of the ``D`` coordinates of ``X`` (Parquet column names).
+    """
+
+    def __init__(
+        self, path: str | os.PathLike[str], param_names: Sequence[str]
+    ) -> None:
+        self.path = Path(path)
+        self.param_names = list(param_names)
+        if len(set(self.param_names)) != len(self.param_names):
+            raise ValueError("parameter names must be unique")
+        clash = set(self.param_names) & set(BOOKKEEPING + DENSITIES)
+        if clash:
+            raise ValueError(
+                f"parameter names clash with table columns: {sorted(clash)}"
+            )
+
+    # -- lifecycle -----------------------------------------------------------------
+
+    def claim(self, config: dict[str, Any]) -> None:
+        """Create the directory for ``config``, or check that it holds the same run.
+
+        Raises
+        ------
+        RunDirectoryError
+            If the directory holds a different run, or other files.
+        """
+        config = json.loads(json.dumps(config))  # normalise tuples, keys
+        config_path = self.path / CONFIG_FILE
+        if config_path.is_file():
+            previous = json.loads(config_path.read_text())
+            if previous != config:
+                changed = sorted(_diff_keys(previous, config))
+                raise RunDirectoryError(
+                    f"{self.path} holds a different run (differs in: "
+                    f"{', '.join(changed)}); choose another output directory "
+                    "or delete this one"
+                )
+            return
+        if self.path.exists() and any(self.path.iterdir()):
+            raise RunDirectoryError(
+                f"{self.path} exists and is not an avrisk run directory "
+                f"(no {CONFIG_FILE}); choose an empty or new directory"
+            )
+        (self.path / CHUNKS_DIR).mkdir(parents=True, exist_ok=True)
+        write_json(config_path, config)
+
+    @property
+    def is_complete(self) -> bool:
+        """Whether the run finished (its summary exists)."""
+        return (self.path / SUMMARY_FILE).is_file()
+
+    def has_recorded_chunks(self) -> bool:
+        """Whether any chunk has been recorded (something to resume from)."""
+        chunks = self.path / CHUNKS_DIR
+        return chunks.is_dir() and any(chunks.glob("*.parquet"))
+
+    def discard(self) -> None:
+        """Remove the directory (a run that failed before recording anything)."""
+        shutil.rmtree(self.path, ignore_errors=True)
+
+    # -- chunks: record and replay ---------------------------------------------
+
+    def _chunk_path(self, stage: int, chunk: int) -> Path:
+        return self.path / CHUNKS_DIR / f"stage{stage:04d}-chunk{chunk:06d}.parquet"
+
+    def record(self, batch: StageBatch) -> None:
+        """Store one evaluated chunk (atomically)."""
+        table = self._batch_table(batch)
+        sink = pa.BufferOutputStream()
+        pq.write_table(table, sink)
+        write_atomic(
+            self._chunk_path(batch.stage, batch.chunk), sink.getvalue().to_pybytes()
+        )
+
+    def cached(self, stage: int, chunk: int) -> StageBatch | None:
+        """The recorded chunk ``(stage, chunk)``, or ``None``."""
+        path = self._chunk_path(stage, chunk)
+        if not path.is_file():
+            return None
+        table = pq.read_table(path)
+        cols = {name: table.column(name).to_numpy() for name in table.column_names}
+        x = np.column_stack([cols[name] for name in self.param_names])
+        known = set(BOOKKEEPING + DENSITIES + tuple(self.param_names))
+        extras = {k: v for k, v in cols.items() if k not in known}
+        return StageBatch(
+            stage=stage,
+            chunk=chunk,
+            ids=cols["sample_id"],
+            x=x,
+            values=cols["f"],
+            extras=extras,
+            log_p0=cols["log_p0"],
+            log_q=cols["log_p_proposal"],
+            seeds=cols["seed"],
+        )
+
+    def _batch_table(self, batch: StageBatch) -> pa.Table:
+        n = len(batch.values)
+        log_w = batch.log_p0 - batch.log_q
+        final = batch.stage == FINAL_STAGE
+        columns: dict[str, Any] = {
+            "phase": pa.array(["final" if final else "search"] * n),
+            "stage": np.full(n, batch.stage, dtype=np.int32),
+            "iteration": np.full(n, -1 if final else batch.stage - 1, dtype=np.int32),
+            "chunk": np.full(n, batch.chunk, dtype=np.int32),
+            "sample_id": batch.ids,
+            "seed": batch.seeds,
+        }
+        columns.update(zip(self.param_names, batch.x.T, strict=True))
+        with np.errstate(over="ignore"):
+            weight = np.exp(log_w)
+        columns.update(
+            log_p0=batch.log_p0,
+            log_p_proposal=batch.log_q,
+            log_weight=log_w,
+            weight=weight,
+            f=batch.values,
+        )
+        columns.update(batch.extras)
+        return pa.table(columns)
+
+    # -- checkpoints and the end of a run ---------------------------------------
+
+    def checkpoint(
+        self, info: CEInfo, state: CEState, history: Sequence[CEInfo]
+    ) -> None:
+        """Record the CE state after an iteration (for inspection and reports)."""
+        write_json(
+            self.path / CHECKPOINT_FILE,
+            {
+                "iterations_done": state.iteration,
+                "n_evals": state.n_evals,
+                "proposal": state.proposal.to_dict(),
+                "best": state.best.to_dict(),
+                "best_iteration": state.best_iteration,
+                "history": [h.to_dict() for h in history],
+            },
+        )
+
+    def finish(self, summary: dict[str, Any]) -> None:
+        """Gather the chunks into ``samples.parquet``, then write ``summary.json``.
+
+        The summary is written last: its presence marks a complete run.
+        """
+        files = sorted(
+            (self.path / CHUNKS_DIR).glob("*.parquet"),
+            key=lambda p: (p.name.startswith("stage0000"), p.name),  # final stage last
+        )
+        target = self.path / SAMPLES_FILE
+        tmp = target.with_name(f".{target.name}.tmp-{os.getpid()}")
+        writer = None
+        try:
+            for path in files:
+                table = pq.read_table(path)
+                if writer is None:
+                    writer = pq.ParquetWriter(tmp, table.schema)
+                writer.write_table(table.cast(writer.schema))
+        finally:
+            if writer is not None:
+                writer.close()
+        if writer is not None:
+            os.replace(tmp, target)
+        summary = {"schema": SUMMARY_SCHEMA, **summary}
+        write_json(self.path / SUMMARY_FILE, summary)
+        shutil.rmtree(self.path / CHUNKS_DIR, ignore_errors=True)
+
+    def summary(self) -> dict[str, Any]:
+        """The summary of a complete run."""
+        return json.loads((self.path / SUMMARY_FILE).read_text())
+
+    def config(self) -> dict[str, Any]:
+        """The resolved configuration of the run."""
+        return json.loads((self.path / CONFIG_FILE).read_text())
+
+    def samples(self, columns: Sequence[str] | None = None) -> pa.Table:
+        """The samples table of a complete run."""
+        return pq.read_table(self.path / SAMPLES_FILE, columns=columns)
+
+
+def _diff_keys(a: Any, b: Any, prefix: str = "") -> set[str]:
+    """Dotted paths at which two JSON values differ."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        out: set[str] = set()
+        for key in set(a) | set(b):
+            out |= _diff_keys(a.get(key), b.get(key), f"{prefix}{key}.")
+        return out
+    return set() if a == b else {prefix.rstrip(".") or "(root)"}

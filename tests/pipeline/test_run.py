@@ -1,0 +1,178 @@
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+import pytest
+
+from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
+from avrisk.testing import gaussian_linear_problem
+
+PROBLEM = gaussian_linear_problem(2, p=1e-4)
+NAMES = ["x0", "x1"]
+CE = RunSettings(
+    method="ce",
+    gamma=0.0,
+    gamma_test=(0.5,),
+    rho=0.1,
+    n_per_iter=2000,
+    n_iter=4,
+    n_final=20_000,
+    seed=3,
+)
+
+
+def with_crash_flag(x):
+    return {"f": PROBLEM.f(x), "crash": PROBLEM.f(x) < -1.0}
+
+
+def without_clock(estimate):
+    return {k: v for k, v in estimate.items() if k != "wall_time_s"}
+
+
+def run(path, settings=CE, f=with_crash_flag):
+    return run_estimation(
+        RunDirectory(path, NAMES),
+        PROBLEM.base,
+        f,
+        settings,
+        context={"scenario": {"name": "gaussian"}},
+    )
+
+
+def test_a_run_leaves_config_samples_checkpoint_and_a_versioned_summary(tmp_path):
+    summary = run(tmp_path / "run")
+    files = sorted(p.name for p in (tmp_path / "run").iterdir())
+    assert files == [
+        "checkpoint.json",
+        "config.json",
+        "samples.parquet",
+        "summary.json",
+    ]
+    assert summary["schema"] == "avrisk.summary/1"
+    est = summary["estimate"]
+    assert abs(est["p"] - PROBLEM.p_exact) < 5 * est["stderr"]
+    assert [g["gamma"] for g in est["by_gamma"]] == [0.0, 0.5]
+    assert summary["timing"]["rollouts_evaluated"] == 4 * 2000 + 20_000
+    table = pq.read_table(tmp_path / "run" / "samples.parquet")
+    assert table.num_rows == 4 * 2000 + 20_000
+    for col in (
+        "phase",
+        "stage",
+        "iteration",
+        "sample_id",
+        "seed",
+        "x0",
+        "x1",
+        "log_p0",
+        "log_p_proposal",
+        "log_weight",
+        "weight",
+        "f",
+        "crash",
+    ):
+        assert col in table.column_names
+    final = table.filter(pc.equal(table["phase"], "final"))
+    w = final.column("weight").to_numpy()
+    hits = final.column("f").to_numpy() <= 0.0
+    assert np.mean(w * hits) == pytest.approx(est["p"], rel=1e-9)
+    checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
+    assert checkpoint["iterations_done"] == 4 and len(checkpoint["history"]) == 4
+
+
+def test_rerunning_a_complete_run_reads_it_back_without_evaluating(tmp_path):
+    first = run(tmp_path / "run")
+    calls = []
+    again = run(tmp_path / "run", f=lambda x: calls.append(len(x)) or PROBLEM.f(x))
+    assert calls == [] and again == first
+
+
+def test_a_directory_holding_a_different_run_is_refused_by_name(tmp_path):
+    run(tmp_path / "run")
+    other = RunSettings(**{**CE.to_dict(), "seed": 4})
+    with pytest.raises(
+        RunDirectoryError, match=r"different run \(differs in: settings.seed\)"
+    ):
+        run(tmp_path / "run", settings=other)
+
+
+def test_a_non_run_directory_with_files_is_refused(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(RunDirectoryError, match="not an avrisk run directory"):
+        run(tmp_path)
+
+
+def test_nan_before_anything_is_recorded_leaves_no_directory(tmp_path):
+    with pytest.raises(ValueError, match="NaN"):
+        run(tmp_path / "run", f=lambda x: np.full(len(x), np.nan))
+    assert not (tmp_path / "run").exists()
+
+
+def test_an_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path):
+    reference = run(tmp_path / "reference")
+    calls = []
+
+    def interrupted(x):
+        if len(calls) == 3:  # stages 1-3 recorded, then the "machine dies"
+            raise KeyboardInterrupt
+        calls.append(len(x))
+        return with_crash_flag(x)
+
+    with pytest.raises(KeyboardInterrupt):
+        run(tmp_path / "run", f=interrupted)
+    assert (tmp_path / "run" / "chunks").is_dir()
+    resumed = run(tmp_path / "run")
+    assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
+    assert resumed["timing"]["rollouts_replayed"] == 3 * 2000
+
+
+def test_bad_settings_are_rejected_by_name():
+    with pytest.raises(ValueError, match="rho must be in"):
+        RunSettings(rho=2.0)
+    with pytest.raises(ValueError, match="method must be"):
+        RunSettings(method="splitting")
+    with pytest.raises(ValueError, match="n_final must be >= 1"):
+        RunSettings(n_final=0)
+
+
+SCRIPT = """
+import sys, time
+from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
+from avrisk.testing import gaussian_linear_problem
+
+PROBLEM = gaussian_linear_problem(2, p=1e-4)
+
+def slow(x):
+    time.sleep(0.4)
+    return {"f": PROBLEM.f(x), "crash": PROBLEM.f(x) < -1.0}
+
+options = __SETTINGS__
+settings = RunSettings(**{**options, "gamma_test": tuple(options["gamma_test"])})
+run_estimation(RunDirectory(sys.argv[1], ["x0", "x1"]), PROBLEM.base, slow, settings,
+               context={"scenario": {"name": "gaussian"}})
+""".replace("__SETTINGS__", repr(CE.to_dict()))
+
+
+@pytest.mark.slow
+def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_result(tmp_path):
+    reference = run(tmp_path / "reference")
+    root = Path(__file__).resolve().parents[2]
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SCRIPT, str(tmp_path / "run")], cwd=root
+    )
+    chunks = tmp_path / "run" / "chunks"
+    deadline = time.time() + 60
+    while time.time() < deadline and len(list(chunks.glob("*.parquet"))) < 2:
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not (tmp_path / "run" / "summary.json").exists()
+    resumed = run(tmp_path / "run")
+    assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
+    assert resumed["timing"]["rollouts_replayed"] >= 2 * 2000
