@@ -15,11 +15,17 @@ from __future__ import annotations
 
 import argparse
 import time
+import warnings
 from collections.abc import Callable
 
 import numpy as np
 
-from avrisk.rare import Estimate, cross_entropy, naive_mc
+from avrisk.rare import (
+    Estimate,
+    UnreliableEstimateWarning,
+    cross_entropy,
+    naive_mc,
+)
 from avrisk.testing import (
     AnalyticProblem,
     beta_sum_problem,
@@ -35,25 +41,29 @@ except ImportError:  # optional comparator
 Run = Callable[[AnalyticProblem, int], tuple[float, float, float, int]]
 
 
-def avrisk_ce(budget: int) -> Run:
+def avrisk_ce(budget: int, select: str) -> Run:
     n_iter, n_per_iter = 10, budget // 25
     n_final = budget - n_iter * n_per_iter
 
     def run(problem: AnalyticProblem, seed: int) -> tuple[float, float, float, int]:
-        est = cross_entropy(
-            problem.f,
-            problem.base,
-            problem.gamma,
-            rho=0.1,
-            alpha=0.8,
-            n_per_iter=n_per_iter,
-            n_iter=n_iter,
-            n_final=n_final,
-            seed=seed,
-        )
+        with warnings.catch_warnings():
+            # degenerate runs are part of what the RMSE measures
+            warnings.simplefilter("ignore", UnreliableEstimateWarning)
+            est = cross_entropy(
+                problem.f,
+                problem.base,
+                problem.gamma,
+                rho=0.1,
+                alpha=0.8,
+                n_per_iter=n_per_iter,
+                n_iter=n_iter,
+                n_final=n_final,
+                seed=seed,
+                select=select,
+            )
         return _unpack(est)
 
-    run.label = f"avrisk CE (rho=0.1, {n_iter}x{n_per_iter} + {n_final})"
+    run.label = f"avrisk CE, select={select} ({n_iter}x{n_per_iter} + {n_final})"
     return run
 
 
