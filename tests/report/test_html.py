@@ -1,0 +1,100 @@
+import re
+
+import pytest
+
+from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
+from avrisk.report.html import top_failures, write_report
+from avrisk.report.plots import comparison_rows
+from avrisk.testing import beta_sum_problem
+
+PROBLEM = beta_sum_problem(6, p=1e-5)
+NAMES = [f"veh{i}.s" for i in range(6)]
+GAMMAS = (PROBLEM.gamma - 3.0, PROBLEM.gamma + 3.0)
+
+
+def f(x):
+    return {"f": PROBLEM.f(x), "crash": PROBLEM.f(x) < PROBLEM.gamma - 5.0}
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("runs")
+    ce = RunSettings(
+        method="ce",
+        gamma=PROBLEM.gamma,
+        gamma_test=GAMMAS,
+        rho=0.1,
+        n_per_iter=2000,
+        n_iter=6,
+        n_final=10_000,
+    )
+    naive = RunSettings(
+        method="naive", gamma=PROBLEM.gamma, gamma_test=GAMMAS, n_final=22_000
+    )
+    out = []
+    for label, settings in (("CE", ce), ("naive", naive)):
+        run_dir = RunDirectory(root / settings.method, NAMES)
+        run_estimation(run_dir, PROBLEM.base, f, settings)
+        out.append((label, run_dir))
+    return root, out
+
+
+def test_report_has_every_section_and_only_working_image_links(runs):
+    root, dirs = runs
+    calls = []
+
+    def animate(row, path):
+        calls.append(row)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(b"GIF89a")
+        return path
+
+    report = write_report(
+        root / "report",
+        dirs,
+        title="t",
+        failures_from=dirs[0][1],
+        n_failures=3,
+        param_names=NAMES,
+        animate=animate,
+    )
+    html = report.read_text()
+    for heading in (
+        "Cross-entropy vs naive Monte Carlo",
+        "Most likely failures under P0",
+        "Settings",
+    ):
+        assert heading in html
+    assert "&amp;ndash;" not in html
+    links = re.findall(r'src="([^"]+)"', html)
+    assert "plots/comparison.png" in links and "animations/failure_1.gif" in links
+    for link in links:
+        assert (root / "report" / link).is_file(), link
+    assert len(calls) == 3
+
+
+def test_failures_are_ranked_by_their_likelihood_under_p0(runs):
+    _, dirs = runs
+    rows = top_failures(dirs[0][1], PROBLEM.gamma, 10)
+    assert len(rows) == 10
+    log_p0 = [r["log_p0"] for r in rows]
+    assert log_p0 == sorted(log_p0, reverse=True)
+    assert all(r["f"] <= PROBLEM.gamma for r in rows)
+    table = dirs[0][1].samples(["f", "log_p0"])
+    hit = table["f"].to_numpy() <= PROBLEM.gamma
+    assert log_p0[0] == table["log_p0"].to_numpy()[hit].max()
+
+
+def test_comparison_ratios_use_expected_naive_hits_at_the_same_n(runs):
+    _, dirs = runs
+    ce = dirs[0][1].summary()["estimate"]
+    rows = comparison_rows(ce)
+    for row, g in zip(
+        rows, sorted(ce["by_gamma"], key=lambda g: g["gamma"]), strict=True
+    ):
+        assert row["naive_hits_expected"] == pytest.approx(g["n_samples"] * g["p"])
+        assert row["rare_event_ratio"] == pytest.approx(
+            g["n_hits"] / (g["n_samples"] * g["p"])
+        )
+        assert row["variance_ratio"] == pytest.approx(g["variance_reduction"])
+        assert row["rare_event_ratio"] > 10 and row["variance_ratio"] > 10
