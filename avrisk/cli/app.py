@@ -36,6 +36,7 @@ def main() -> None:
     """Entry point of the ``avrisk`` console script."""
     # Sub-command modules register on `app` when imported.
     import avrisk.cli.demo  # noqa: F401
+    import avrisk.cli.run  # noqa: F401
     import avrisk.cli.simulate  # noqa: F401
 
     app()

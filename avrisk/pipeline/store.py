@@ -48,10 +48,24 @@ class RunDirectoryError(ValueError):
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
-    """Write ``data`` to ``path`` through a temporary file and a rename."""
+    """Write ``data`` to ``path`` through a temporary file and a rename.
+
+    A failure or interruption leaves no file at ``path`` (nor a stray temporary).
+    """
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_bytes(data.encode() if isinstance(data, str) else data)
-    os.replace(tmp, path)
+    try:
+        tmp.write_bytes(data.encode() if isinstance(data, str) else data)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_parquet_atomic(table: pa.Table, path: Path) -> None:
+    """Write ``table`` as Parquet to ``path``, atomically (see :func:`write_atomic`)."""
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink)
+    write_atomic(path, sink.getvalue().to_pybytes())
 
 
 def write_json(path: Path, obj: Any) -> None:
@@ -136,12 +150,8 @@ class RunDirectory:
 
     def record(self, batch: StageBatch) -> None:
         """Store one evaluated chunk (atomically)."""
-        table = self._batch_table(batch)
-        sink = pa.BufferOutputStream()
-        pq.write_table(table, sink)
-        write_atomic(
-            self._chunk_path(batch.stage, batch.chunk), sink.getvalue().to_pybytes()
-        )
+        path = self._chunk_path(batch.stage, batch.chunk)
+        write_parquet_atomic(self._batch_table(batch), path)
 
     def cached(self, stage: int, chunk: int) -> StageBatch | None:
         """The recorded chunk ``(stage, chunk)``, or ``None``."""

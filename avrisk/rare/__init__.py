@@ -9,7 +9,7 @@ from avrisk.rare.cross_entropy import CEState, ce_init, ce_step, cross_entropy
 from avrisk.rare.families import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
 from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
 from avrisk.rare.naive_mc import naive_mc
-from avrisk.rare.problem import RareEventProblem
+from avrisk.rare.problem import InvalidOutputError, RareEventProblem
 from avrisk.rare.results import CEInfo, Estimate, GammaEstimate
 from avrisk.rare.stages import StageBatch, run_stage
 
@@ -20,6 +20,7 @@ __all__ = [
     "ExponentialFamily",
     "FixedCovNormal",
     "GammaEstimate",
+    "InvalidOutputError",
     "Product",
     "RareEventProblem",
     "ScaledBeta",

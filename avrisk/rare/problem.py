@@ -35,6 +35,10 @@ SAMPLE_CHUNK = 8192
 _SPLITMIX_GAMMA = np.uint64(0x9E3779B97F4A7C15)
 
 
+class InvalidOutputError(ValueError):
+    """``f`` returned something unusable: the wrong shape, or NaN."""
+
+
 @dataclass(frozen=True)
 class RareEventProblem:
     """``p = P0(f(X) <= gamma)``, checked once at the boundary.
@@ -108,7 +112,7 @@ class RareEventProblem:
 
         Raises
         ------
-        ValueError
+        InvalidOutputError
             If ``f`` returns the wrong shape or any NaN.
         """
         needs_seeds = bool(getattr(self.f, "needs_seeds", False))
@@ -132,7 +136,7 @@ class RareEventProblem:
         values = np.concatenate(parts) if parts else np.empty(0)
         bad = np.flatnonzero(np.isnan(values))
         if bad.size:
-            raise ValueError(
+            raise InvalidOutputError(
                 f"f returned NaN for {bad.size} of {values.size} samples "
                 f"(first at row {bad[0]}: x = {x[bad[0]].tolist()[:8]}...)"
             )
@@ -142,7 +146,7 @@ class RareEventProblem:
 def _column(out: Any, n: int, name: str, dtype: Any = None) -> np.ndarray:
     arr = np.asarray(out, dtype=dtype)
     if arr.shape != (n,):
-        raise ValueError(
+        raise InvalidOutputError(
             f"f must return an array of shape ({n},) for {n} input rows; "
             f"got shape {arr.shape} for output {name!r}"
         )

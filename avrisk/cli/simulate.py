@@ -1,0 +1,398 @@
+"""``avrisk simulate`` and ``avrisk replay``: naive rollouts from P0, and animations.
+
+``simulate`` draws ``X ~ P0`` (seeded, batch-size independent), simulates every
+rollout and writes one Parquet row per rollout::
+
+    sample_id, seed, veh0.s, ..., veh5.speed, log_p0, f, crash, offroad,
+    reversing, steps
+
+The resolved scenario spec travels in the file's schema metadata, so
+``replay`` can re-simulate any row from the file alone.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import typer
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+from rich.table import Table
+
+import avrisk
+from avrisk.cli.app import app
+from avrisk.cli.common import CliError, err_console, user_errors
+from avrisk.pipeline.objective import EVENT_COLUMNS
+from avrisk.pipeline.store import write_parquet_atomic
+from avrisk.rare import RareEventProblem, StageBatch, run_stage
+from avrisk.rare.problem import FINAL_STAGE
+from avrisk.scenario import (
+    ParamLayout,
+    ScenarioSpec,
+    ScenarioSpecError,
+    build_base_distribution,
+    load_spec,
+    spec_from_dict,
+)
+
+#: Thresholds on the minimum TTC [s] counted in the summary.
+SUMMARY_GAMMAS: tuple[float, ...] = (0.1, 0.2, 0.3)
+
+#: Parquet schema-metadata keys.
+META_SCENARIO = b"avrisk.scenario"
+META_RUN = b"avrisk.run"
+
+_RESULT_COLUMNS = ("log_p0", "f", "crash", "offroad", "reversing", "steps")
+
+out_console = Console()
+
+
+# ----------------------------------------------------------------------- core
+@dataclass(frozen=True)
+class SimulationRun:
+    """The rows of one ``simulate`` run, as a Parquet-ready Arrow table.
+
+    Attributes
+    ----------
+    table : pyarrow.Table
+        One row per rollout, ``n`` rows, ordered by ``sample_id``.
+    wall_s : float
+        Wall-clock time of the simulation [s].
+    """
+
+    table: pa.Table
+    wall_s: float
+
+
+def simulate_rollouts(
+    spec: ScenarioSpec,
+    n: int,
+    *,
+    seed: int = 0,
+    batch_size: int = 1024,
+    device: str = "cpu",
+    on_batch: Callable[[int], None] | None = None,
+) -> SimulationRun:
+    """Sample ``n`` scenarios from ``P0`` and simulate them.
+
+    The samples are the final stage of a naive Monte Carlo run with the same
+    seed (:func:`avrisk.rare.run_stage`): sample ``i`` and its rollout seed
+    depend only on ``seed`` and ``i``, never on ``batch_size``, and
+    ``avrisk run --method naive --seed S`` simulates exactly these rollouts.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+    n : int
+        Number of rollouts, ``>= 1``.
+    seed : int, default=0
+        Run seed, ``>= 0``.
+    batch_size : int, default=1024
+        Rollouts simulated together (memory grows linearly with it).
+    device : str, default="cpu"
+        Torch device of the simulator.
+    on_batch : callable or None
+        Called with the number of rollouts finished after each chunk.
+
+    Returns
+    -------
+    SimulationRun
+    """
+    from avrisk.pipeline.objective import SimulationObjective
+
+    objective = SimulationObjective(spec, device=device)
+    p0 = build_base_distribution(spec)
+    problem = RareEventProblem(p0, objective, gamma=0.0, batch_size=batch_size)
+    batches: list[StageBatch] = []
+
+    def record(batch: StageBatch) -> None:
+        batches.append(batch)
+        if on_batch is not None:
+            on_batch(len(batch.values))
+
+    start_time = time.perf_counter()
+    run_stage(problem, p0, n, seed=seed, stage=FINAL_STAGE, on_batch=record)
+    wall_s = time.perf_counter() - start_time
+
+    def joined(get: Callable[[StageBatch], np.ndarray]) -> np.ndarray:
+        return np.concatenate([get(b) for b in batches])
+
+    x_all = joined(lambda b: b.x)
+    columns: dict[str, Any] = {
+        "sample_id": joined(lambda b: b.ids),
+        "seed": joined(lambda b: b.seeds),
+    }
+    columns.update({c: x_all[:, i] for i, c in enumerate(objective.layout.columns)})
+    columns["log_p0"] = joined(lambda b: b.log_p0)
+    columns["f"] = joined(lambda b: b.values)
+    columns.update({k: joined(lambda b, k=k: b.extras[k]) for k in EVENT_COLUMNS})
+    run_meta = {
+        "avrisk_version": avrisk.__version__,
+        "command": "simulate",
+        "run_seed": seed,
+        "n": n,
+        "device": device,
+        "scenario": spec.name,
+    }
+    layout = objective.layout
+    table = pa.table(columns, schema=_schema(layout, spec, run_meta))
+    return SimulationRun(table=table, wall_s=wall_s)
+
+
+def _schema(layout: ParamLayout, spec: ScenarioSpec, run_meta: dict) -> pa.Schema:
+    """Arrow schema with units in field metadata and the spec in schema metadata."""
+
+    def unit(u: str) -> dict[bytes, bytes]:
+        return {b"unit": u.encode()}
+
+    fields = [
+        pa.field("sample_id", pa.int64()),
+        pa.field("seed", pa.int64()),
+        *(
+            pa.field(c, pa.float64(), metadata=unit(layout.unit(c)))
+            for c in layout.columns
+        ),
+        pa.field("log_p0", pa.float64(), metadata=unit("log density")),
+        pa.field("f", pa.float64(), metadata=unit("s")),
+        pa.field("crash", pa.bool_()),
+        pa.field("offroad", pa.bool_()),
+        pa.field("reversing", pa.bool_()),
+        pa.field("steps", pa.int64()),
+    ]
+    meta = {
+        META_SCENARIO: json.dumps(spec.model_dump(mode="json")).encode(),
+        META_RUN: json.dumps(run_meta).encode(),
+    }
+    return pa.schema(fields, metadata=meta)
+
+
+def spec_from_parquet(path: Path) -> ScenarioSpec:
+    """The scenario spec stored in a ``simulate`` output file.
+
+    Raises
+    ------
+    CliError
+        If the file has no (valid) stored scenario.
+    """
+    meta = pq.read_schema(path).metadata or {}
+    if META_SCENARIO not in meta:
+        raise CliError(
+            f"{path} carries no scenario (not written by 'avrisk simulate'); "
+            "pass --scenario to name it"
+        )
+    return spec_from_dict(json.loads(meta[META_SCENARIO]), source=f"{path} (stored)")
+
+
+# ------------------------------------------------------------------------ CLI
+def _check_out_path(out: Path, suffixes: Sequence[str]) -> None:
+    if out.suffix.lower() not in suffixes:
+        raise CliError(
+            f"--out {out}: expected a file ending in {' or '.join(suffixes)}"
+        )
+    if not out.parent.is_dir():
+        raise CliError(
+            f"--out {out}: folder {out.parent} does not exist; create it first"
+        )
+    if out.is_dir():
+        raise CliError(f"--out {out}: is a folder; give a file name")
+
+
+def _summary_table(table: pa.Table, wall_s: float) -> Table:
+    n = table.num_rows
+    f = table.column("f").to_numpy()
+    summary = Table(
+        title=f"{n} rollouts in {wall_s:.1f} s ({n / max(wall_s, 1e-9):.0f}/s)"
+    )
+    summary.add_column("event")
+    summary.add_column("count", justify="right")
+    summary.add_column("fraction", justify="right")
+    rows = [(f"min TTC <= {g:g} s", int(np.sum(f <= g))) for g in SUMMARY_GAMMAS]
+    rows += [
+        (k, int(np.sum(table.column(k).to_numpy())))
+        for k in ("crash", "offroad", "reversing")
+    ]
+    for name, k in rows:
+        # Zero hits is not p = 0: show the 95% upper bound (rule of three).
+        frac = f"{k / n:.3g}" if k else f"< {3.0 / n:.2g} (95%)"
+        summary.add_row(name, str(k), frac)
+    return summary
+
+
+@app.command()
+def simulate(
+    scenario: Annotated[
+        str, typer.Argument(help="Scenario YAML file, or a bundled name.")
+    ] = "highway_default",
+    n: Annotated[int, typer.Option("--n", min=1, help="Number of rollouts.")] = 1000,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Run seed.")] = 0,
+    out: Annotated[
+        Path, typer.Option("--out", help="Parquet file to write (one row per rollout).")
+    ] = Path("rollouts.parquet"),
+    batch_size: Annotated[
+        int, typer.Option("--batch-size", min=1, help="Rollouts simulated together.")
+    ] = 1024,
+    device: Annotated[
+        str, typer.Option(help="Torch device, e.g. cpu or cuda.")
+    ] = "cpu",
+    threads: Annotated[
+        int | None, typer.Option(min=1, help="CPU threads for torch (default: all).")
+    ] = None,
+) -> None:
+    """Sample scenarios from P0, simulate them, write one Parquet row per rollout."""
+    with user_errors(ScenarioSpecError):
+        spec = load_spec(scenario)
+        _check_out_path(out, (".parquet", ".pq"))
+        if threads is not None:
+            import torch
+
+            torch.set_num_threads(threads)
+        progress = Progress(
+            TextColumn("[bold]simulate[/] {task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=err_console,
+            transient=False,
+        )
+        with progress:
+            task = progress.add_task(spec.name, total=n)
+            run = simulate_rollouts(
+                spec,
+                n,
+                seed=seed,
+                batch_size=batch_size,
+                device=device,
+                on_batch=lambda k: progress.advance(task, k),
+            )
+        try:
+            write_parquet_atomic(run.table, out)
+        except OSError as exc:
+            raise CliError(f"--out {out}: cannot write: {exc}") from None
+    out_console.print(_summary_table(run.table, run.wall_s))
+    out_console.print(f"wrote {out}", highlight=False)
+
+
+def _parse_rows(rows: str, n_rows: int) -> list[int]:
+    try:
+        picked = [int(r) for r in rows.split(",") if r.strip()]
+    except ValueError:
+        raise CliError(f"--rows {rows!r}: expected row numbers like 0,5,12") from None
+    if not picked:
+        raise CliError("--rows: give at least one row number, like 0,5")
+    bad = [r for r in picked if not 0 <= r < n_rows]
+    if bad:
+        raise CliError(f"--rows: {bad} out of range; the file has rows 0..{n_rows - 1}")
+    return picked
+
+
+@app.command()
+def replay(
+    file: Annotated[
+        Path, typer.Argument(help="Parquet file written by 'avrisk simulate'.")
+    ],
+    rows: Annotated[
+        str | None, typer.Option(help="Comma-separated row numbers, e.g. 0,5,12.")
+    ] = None,
+    worst: Annotated[
+        int | None,
+        typer.Option(min=1, help="Instead of --rows: the K rows of lowest f."),
+    ] = None,
+    out: Annotated[Path, typer.Option(help="GIF file to write.")] = Path("replay.gif"),
+    scenario: Annotated[
+        str | None,
+        typer.Option(help="Scenario to use instead of the one stored in the file."),
+    ] = None,
+    fps: Annotated[int, typer.Option(min=1, max=50, help="Frames per second.")] = 10,
+    view_length: Annotated[
+        float,
+        typer.Option(min=10.0, help="Length of road shown around the ego, in metres."),
+    ] = 120.0,
+    frame_png: Annotated[
+        Path | None, typer.Option(help="Also save the frame of lowest TTC as a PNG.")
+    ] = None,
+) -> None:
+    """Re-simulate chosen rows of a simulate output and write a top-down GIF."""
+    from avrisk.report.animate import (
+        animate_rollouts,
+        save_frame_png,
+        traces_from_rollout,
+    )
+
+    with user_errors(ScenarioSpecError):
+        if not file.is_file():
+            raise CliError(f"{file}: no such file")
+        _check_out_path(out, (".gif",))
+        try:
+            table = pq.read_table(file)
+        except (pa.ArrowInvalid, OSError) as exc:
+            raise CliError(f"{file}: not a readable Parquet file: {exc}") from None
+        spec = load_spec(scenario) if scenario else spec_from_parquet(file)
+        layout = ParamLayout.from_spec(spec)
+        if (rows is None) == (worst is None):
+            raise CliError("give exactly one of --rows i,j,... or --worst K")
+        if rows is not None:
+            picked = _parse_rows(rows, table.num_rows)
+        else:
+            order = np.argsort(table.column("f").to_numpy(), kind="stable")
+            picked = [int(i) for i in order[:worst]]
+        missing = [c for c in (*layout.columns, "seed") if c not in table.column_names]
+        if missing:
+            raise CliError(
+                f"{file}: lacks column(s) {missing[:4]} needed to replay scenario "
+                f"{spec.name!r}"
+            )
+        sub = table.take(picked)
+        x = np.stack([sub.column(c).to_numpy() for c in layout.columns], axis=1)
+        seeds = sub.column("seed").to_numpy()
+        from avrisk.scenario.builder import ScenarioSimulator
+
+        sim = ScenarioSimulator(spec)
+        result = sim.rollout(x, seeds, record_trace=True)
+        labels = [f"row {r}" for r in picked]
+        traces = traces_from_rollout(sim, x, result, labels=labels)
+        if "f" in sub.column_names:
+            stored = sub.column("f").to_numpy()
+            again = result.f.cpu().numpy().astype(np.float64)
+            if not np.allclose(stored, again, rtol=1e-5, atol=1e-6, equal_nan=True):
+                err_console.print(
+                    "[yellow]warning:[/] re-simulated min TTC differs from the file "
+                    f"(stored {stored.tolist()}, now {again.tolist()}); was the "
+                    "simulator or scenario changed?"
+                )
+        animate_rollouts(
+            traces, spec.road, spec.simulation.dt, out, fps=fps, view_length=view_length
+        )
+        if frame_png is not None:
+            save_frame_png(
+                traces,
+                spec.road,
+                spec.simulation.dt,
+                frame_png,
+                view_length=view_length,
+            )
+    for r, tr in zip(picked, traces, strict=True):
+        out_console.print(
+            f"row {r}: min TTC {tr.min_ttc:.3g} s"
+            + (", crash" if tr.crashed else "")
+            + f", {tr.n_frames} frames",
+            highlight=False,
+        )
+    out_console.print(
+        f"wrote {out}" + (f" and {frame_png}" if frame_png else ""), highlight=False
+    )

@@ -1,0 +1,399 @@
+"""Top-down animations of recorded rollouts (Matplotlib, written as GIF by Pillow).
+
+One panel per rollout, stacked vertically and played in lockstep. Each panel
+follows its ego along the road and shows the lanes, every vehicle as an
+oriented rectangle (the ego in orange, a short line marking each heading), and
+a title with the time and the minimum time-to-collision so far. A rollout that
+ended early (crash) holds its last frame, marked in red.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+FloatArray = NDArray[np.float64]
+
+EGO_COLOUR = "#f28e2b"
+OTHER_COLOUR = "#4e79a7"
+ROAD_COLOUR = "#d9d9d9"
+CRASH_COLOUR = "#d62728"
+
+
+class RoadLike(Protocol):
+    """What the renderer needs of a road (``RoadSpec`` or ``avrisk.sim.road.Road``)."""
+
+    n_lanes: int
+    lane_width: float
+    length: float
+
+
+@dataclass(frozen=True)
+class RolloutTrace:
+    """One recorded rollout, as plain arrays.
+
+    Attributes
+    ----------
+    x, y : ndarray of shape (T+1, A)
+        Centre position along the road and from the right road edge [m].
+    heading : ndarray of shape (T+1, A)
+        Heading, ccw from the road direction [rad].
+    speed : ndarray of shape (T+1, A)
+        Speed [m/s].
+    length, width : ndarray of shape (A,)
+        Vehicle size [m]; vehicle 0 is the ego.
+    ttc_so_far : ndarray of shape (T+1,)
+        Minimum time-to-collision up to and including each step [s] (inf when
+        nothing has approached the ego yet).
+    n_frames : int
+        Steps actually simulated plus one (the rollout may stop at a crash).
+    crashed : bool
+        Whether the rollout ended in a crash.
+    label : str
+        Shown in the panel title, e.g. ``"row 12"``.
+    """
+
+    x: FloatArray
+    y: FloatArray
+    heading: FloatArray
+    speed: FloatArray
+    length: FloatArray
+    width: FloatArray
+    ttc_so_far: FloatArray
+    n_frames: int
+    crashed: bool
+    label: str = ""
+
+    @property
+    def min_ttc(self) -> float:
+        """Minimum time-to-collision of the whole rollout [s]."""
+        return float(self.ttc_so_far[self.n_frames - 1])
+
+
+def box_corners(
+    x: FloatArray,
+    y: FloatArray,
+    heading: FloatArray,
+    length: FloatArray,
+    width: FloatArray,
+) -> FloatArray:
+    """Corners of oriented rectangles, counter-clockwise from the front left.
+
+    Parameters
+    ----------
+    x, y, heading, length, width : ndarray of shape (...)
+        Centre [m], heading [rad] and size [m].
+
+    Returns
+    -------
+    ndarray of shape (..., 4, 2)
+        Corner coordinates [m].
+    """
+    c, s = np.cos(heading), np.sin(heading)
+    hl, hw = 0.5 * np.asarray(length), 0.5 * np.asarray(width)
+    sign_l = np.array([1.0, -1.0, -1.0, 1.0])
+    sign_w = np.array([1.0, 1.0, -1.0, -1.0])
+    dl = hl[..., None] * sign_l
+    dw = hw[..., None] * sign_w
+    cx = x[..., None] + dl * c[..., None] - dw * s[..., None]
+    cy = y[..., None] + dl * s[..., None] + dw * c[..., None]
+    return np.stack([cx, cy], axis=-1)
+
+
+class _Panel:
+    """The artists of one rollout's panel, updated in place frame by frame."""
+
+    def __init__(
+        self, ax: Axes, trace: RolloutTrace, road: RoadLike, view_length: float
+    ):
+        from matplotlib.patches import Polygon, Rectangle
+
+        self.ax, self.trace, self.view_length = ax, trace, view_length
+        width = road.n_lanes * road.lane_width
+        ax.add_patch(
+            Rectangle(
+                (-1e4, 0.0), 2e4 + road.length, width, color=ROAD_COLOUR, zorder=0
+            )
+        )
+        xs = [-1e4, road.length + 1e4]
+        for k in range(road.n_lanes + 1):
+            edge = k in (0, road.n_lanes)
+            ax.plot(
+                xs,
+                [k * road.lane_width] * 2,
+                color="white" if not edge else "#404040",
+                lw=2.0 if edge else 1.0,
+                ls="-" if edge else (0, (6, 6)),
+                zorder=1,
+            )
+        ax.axvline(road.length, color="#404040", lw=1.0, ls=":", zorder=1)
+        ax.set_ylim(-1.0, width + 1.0)
+        # A fixed x-span before layout, so tight_layout sees the final aspect.
+        ax.set_xlim(0.0, view_length)
+        ax.set_aspect("equal")
+        ax.set_yticks([])
+        ax.tick_params(axis="x", labelsize=7)
+        n_agents = trace.x.shape[1]
+        self.boxes = []
+        self.noses = []
+        for j in range(n_agents):
+            colour = EGO_COLOUR if j == 0 else OTHER_COLOUR
+            poly = Polygon(
+                np.zeros((4, 2)),
+                closed=True,
+                facecolor=colour,
+                edgecolor="black",
+                lw=1.4 if j == 0 else 0.6,
+                zorder=3 if j == 0 else 2,
+            )
+            ax.add_patch(poly)
+            self.boxes.append(poly)
+            (nose,) = ax.plot([], [], color="black", lw=0.8, zorder=4)
+            self.noses.append(nose)
+        self.title = ax.set_title("", fontsize=9, loc="left")
+
+    def draw(self, k: int, dt: float) -> None:
+        tr = self.trace
+        i = min(k, tr.n_frames - 1)
+        corners = box_corners(tr.x[i], tr.y[i], tr.heading[i], tr.length, tr.width)
+        for j, poly in enumerate(self.boxes):
+            poly.set_xy(corners[j])
+            hx = tr.x[i, j] + 0.5 * tr.length[j] * np.cos(tr.heading[i, j])
+            hy = tr.y[i, j] + 0.5 * tr.length[j] * np.sin(tr.heading[i, j])
+            self.noses[j].set_data([tr.x[i, j], hx], [tr.y[i, j], hy])
+        ended = tr.crashed and k >= tr.n_frames - 1
+        self.boxes[0].set_edgecolor(CRASH_COLOUR if ended else "black")
+        ego_x = tr.x[i, 0]
+        self.ax.set_xlim(
+            ego_x - 0.35 * self.view_length, ego_x + 0.65 * self.view_length
+        )
+        ttc = tr.ttc_so_far[i]
+        ttc_text = "inf" if not np.isfinite(ttc) else f"{ttc:.2f} s"
+        status = "   CRASH" if ended else ""
+        label = f"{tr.label}   " if tr.label else ""
+        self.title.set_text(
+            f"{label}t = {i * dt:4.1f} s   ego {tr.speed[i, 0]:4.1f} m/s   "
+            f"min TTC so far {ttc_text}{status}"
+        )
+        self.title.set_color(CRASH_COLOUR if ended else "black")
+
+
+def _figure(
+    traces: Sequence[RolloutTrace], road: RoadLike, view_length: float
+) -> tuple[Figure, list[_Panel]]:
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    width_in = 10.0
+    road_w = road.n_lanes * road.lane_width + 2.0
+    panel_h = width_in * road_w / view_length + 0.55
+    fig, axes = plt.subplots(
+        len(traces), 1, figsize=(width_in, panel_h * len(traces)), squeeze=False
+    )
+    panels = [
+        _Panel(ax, tr, road, view_length)
+        for ax, tr in zip(axes[:, 0], traces, strict=True)
+    ]
+    axes[-1, 0].set_xlabel("x along the road [m]   (ego orange)", fontsize=8)
+    fig.tight_layout(pad=0.5, h_pad=0.8)
+    return fig, panels
+
+
+def _render(fig: Figure) -> Any:
+    from PIL import Image
+
+    fig.canvas.draw()
+    rgba = np.asarray(fig.canvas.buffer_rgba())
+    return Image.fromarray(rgba[..., :3].copy())
+
+
+def animate_rollouts(
+    traces: Sequence[RolloutTrace],
+    road: RoadLike,
+    dt: float,
+    out: str | Path,
+    *,
+    fps: int = 10,
+    view_length: float = 120.0,
+    stride: int | None = None,
+) -> Path:
+    """Write a top-down GIF of one or more rollouts played together.
+
+    Parameters
+    ----------
+    traces : sequence of RolloutTrace
+        One panel per trace, top to bottom.
+    road : RoadLike
+        Lane count, lane width [m] and length [m].
+    dt : float
+        Simulator time step [s].
+    out : str or pathlib.Path
+        GIF file to write (written to a temporary name, then renamed).
+    fps : int, default=10
+        Frames per second of the GIF.
+    view_length : float, default=120.0
+        Length of road shown around each ego [m].
+    stride : int or None
+        Show every ``stride``-th step; default chooses real time at ``fps``.
+
+    Returns
+    -------
+    pathlib.Path
+        ``out``.
+    """
+    import matplotlib.pyplot as plt
+
+    if not traces:
+        raise ValueError("animate_rollouts needs at least one trace")
+    out = Path(out)
+    if stride is None:
+        stride = max(1, round(1.0 / (fps * dt)))
+    n_frames = max(tr.n_frames for tr in traces)
+    steps = list(range(0, n_frames, stride))
+    if steps[-1] != n_frames - 1:
+        steps.append(n_frames - 1)
+    fig, panels = _figure(traces, road, view_length)
+    frames = []
+    try:
+        for k in steps:
+            for panel in panels:
+                panel.draw(k, dt)
+            frames.append(_render(fig))
+    finally:
+        plt.close(fig)
+    # Hold the last frame a second so the ending can be read.
+    durations = [int(1000 / fps)] * (len(frames) - 1) + [1000]
+    tmp = out.with_name(f".{out.name}.tmp")
+    try:
+        frames[0].save(
+            tmp,
+            format="GIF",
+            save_all=True,
+            append_images=frames[1:],
+            duration=durations,
+            loop=0,
+            optimize=False,
+        )
+        tmp.replace(out)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return out
+
+
+def save_frame_png(
+    traces: Sequence[RolloutTrace],
+    road: RoadLike,
+    dt: float,
+    out: str | Path,
+    *,
+    step: int | None = None,
+    view_length: float = 120.0,
+) -> Path:
+    """Save one frame as a PNG (default: when the first trace reaches its min TTC).
+
+    Parameters
+    ----------
+    traces : sequence of RolloutTrace
+    road : RoadLike
+    dt : float
+        Time step [s].
+    out : str or pathlib.Path
+        PNG file to write.
+    step : int or None
+        Step to show; default is the first step reaching the first trace's minimum.
+    view_length : float, default=120.0
+        Length of road shown around each ego [m].
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    if step is None:
+        first = traces[0]
+        series = first.ttc_so_far[: first.n_frames]
+        step = (
+            int(np.argmax(series <= first.min_ttc)) if np.isfinite(first.min_ttc) else 0
+        )
+    fig, panels = _figure(traces, road, view_length)
+    try:
+        for panel in panels:
+            panel.draw(step, dt)
+        fig.savefig(out, dpi=100)
+    finally:
+        plt.close(fig)
+    return out
+
+
+def traces_from_rollout(
+    sim: Any, x: FloatArray, result: Any, *, labels: Sequence[str] | None = None
+) -> list[RolloutTrace]:
+    """Turn a recorded batch rollout into per-rollout traces.
+
+    Parameters
+    ----------
+    sim : avrisk.scenario.builder.ScenarioSimulator
+        The simulator that produced ``result`` (for vehicle sizes and TTC).
+    x : ndarray of shape (B, D)
+        The flat scenario samples that were simulated.
+    result : avrisk.sim.simulator.RolloutResult
+        With ``trace`` recorded (``record_trace=True``).
+    labels : sequence of str or None
+        One label per rollout.
+
+    Returns
+    -------
+    list of RolloutTrace
+        Length ``B``.
+    """
+    from avrisk.scenario.builder import ttc_series
+
+    trace = result.trace
+    if trace is None:
+        raise ValueError("the rollout was run without record_trace=True")
+
+    def np_(t: Any) -> np.ndarray:
+        return t.detach().cpu().numpy()
+
+    xs, ys, hs, vs = (
+        np_(getattr(trace, k)).astype(np.float64)
+        for k in ("x", "y", "heading", "speed")
+    )
+    alive = np_(trace.alive).astype(bool)
+    ttc = ttc_series(sim, result)  # (B, T+1), running minimum
+    spec = sim.spec
+    length = np.array([v.length for v in spec.vehicles], dtype=np.float64)
+    width = np.array([v.width for v in spec.vehicles], dtype=np.float64)
+    crash = np_(result.crash).astype(bool)
+    out = []
+    for b in range(xs.shape[0]):
+        n_frames = int(alive[b].sum()) if alive[b].any() else 1
+        out.append(
+            RolloutTrace(
+                x=xs[b],
+                y=ys[b],
+                heading=hs[b],
+                speed=vs[b],
+                length=length,
+                width=width,
+                ttc_so_far=ttc[b],
+                n_frames=n_frames,
+                crashed=bool(crash[b]),
+                label=labels[b] if labels is not None else "",
+            )
+        )
+    return out

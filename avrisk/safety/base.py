@@ -1,0 +1,80 @@
+"""The safety-measure interface and its registry.
+
+A safety measure maps a rollout to one number ``f`` per rollout, low meaning
+dangerous. It is evaluated online, one state at a time, so the simulator never
+keeps a rollout's history:
+
+    carry = measure.init(measure.instant(state_0))
+    carry = measure.update(carry, measure.instant(state_t), alive)  # t = 1..T
+    f = measure.finalize(carry)
+
+``instant`` maps a state (..., A) to a value (...); ``update`` must leave a
+rollout's carry untouched where ``alive`` is false (it stopped).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, Protocol, runtime_checkable
+
+from torch import Tensor
+
+from avrisk.safety.ttc import MinTTC
+from avrisk.sim.state import VehicleState
+
+__all__ = ["SafetyMeasure", "get_safety_measure", "register_safety_measure"]
+
+
+@runtime_checkable
+class SafetyMeasure(Protocol):
+    """What the simulator needs of a safety measure (see module docstring)."""
+
+    name: str
+
+    def instant(
+        self, state: VehicleState, cos: Tensor | None = None, sin: Tensor | None = None
+    ) -> Tensor:
+        """Value at one instant, shape (B,), for a state of shape (B, A)."""
+        ...
+
+    def init(self, value: Tensor) -> Tensor:
+        """Carry from the value at ``t = 0``."""
+        ...
+
+    def update(self, carry: Tensor, value: Tensor, alive: Tensor) -> Tensor:
+        """Fold in one more step's value where ``alive`` (B,)."""
+        ...
+
+    def finalize(self, carry: Tensor) -> Tensor:
+        """``f`` per rollout, shape (B,)."""
+        ...
+
+
+_REGISTRY: dict[str, Callable[..., Any]] = {}
+
+
+def register_safety_measure(name: str, factory: Callable[..., Any]) -> None:
+    """Make ``factory(**kwargs)`` available as ``get_safety_measure(name, ...)``."""
+    if name in _REGISTRY:
+        raise ValueError(f"safety measure {name!r} is already registered")
+    _REGISTRY[name] = factory
+
+
+def get_safety_measure(name: str, **kwargs: Any) -> SafetyMeasure:
+    """Build a registered safety measure by name (e.g. ``"min_ttc"``).
+
+    Raises
+    ------
+    KeyError
+        If ``name`` is not registered; the message lists the known names.
+    """
+    try:
+        factory = _REGISTRY[name]
+    except KeyError:
+        raise KeyError(
+            f"unknown safety measure {name!r}; known: {sorted(_REGISTRY)}"
+        ) from None
+    return factory(**kwargs)
+
+
+register_safety_measure("min_ttc", MinTTC)

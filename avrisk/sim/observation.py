@@ -1,0 +1,165 @@
+"""What a policy sees at one step: privileged state, lidar, lane features, flags."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from avrisk.sim.lidar import LidarScan
+from avrisk.sim.mathops import wrap_angle
+from avrisk.sim.road import Road
+from avrisk.sim.state import VehicleState
+from avrisk.sim.tensors import TensorDataclass
+
+__all__ = ["LaneFeatures", "Observation", "driver_features", "lane_features"]
+
+
+@dataclass(frozen=True)
+class LaneFeatures(TensorDataclass):
+    """Each vehicle's position relative to its lane and the road.
+
+    The lane is the one containing the vehicle centre (clamped to the road).
+
+    Attributes
+    ----------
+    lane : Tensor of int64, shape (B, A)
+        Lane index, 0 = rightmost.
+    lateral_offset : Tensor of shape (B, A)
+        Centre minus lane centre line [m], positive to the left.
+    heading_offset : Tensor of shape (B, A)
+        Heading minus lane heading, wrapped to ``[-pi, pi]`` [rad].
+    left_marking : Tensor of shape (B, A)
+        Distance from the centre to the lane's left boundary [m].
+    right_marking : Tensor of shape (B, A)
+        Distance from the centre to the lane's right boundary [m].
+    left_edge : Tensor of shape (B, A)
+        Distance from the centre to the left road edge [m] (negative beyond it).
+    right_edge : Tensor of shape (B, A)
+        Distance from the centre to the right road edge [m] (negative beyond it).
+    curvature : Tensor of shape (B, A)
+        Lane curvature at the vehicle [1/m].
+    """
+
+    lane: Tensor  # [B, A] int64
+    lateral_offset: Tensor  # [B, A] m
+    heading_offset: Tensor  # [B, A] rad
+    left_marking: Tensor  # [B, A] m
+    right_marking: Tensor  # [B, A] m
+    left_edge: Tensor  # [B, A] m
+    right_edge: Tensor  # [B, A] m
+    curvature: Tensor  # [B, A] 1/m
+
+
+def lane_features(state: VehicleState, road: Road) -> LaneFeatures:
+    """Lane-relative features of every vehicle on a straight road.
+
+    Parameters
+    ----------
+    state : VehicleState
+        Fields of shape (..., A).
+    road : Road
+
+    Returns
+    -------
+    LaneFeatures
+        Fields of shape (..., A).
+    """
+    lane = road.lane_index(state.y)
+    right = lane.to(state.y.dtype) * road.lane_width
+    return LaneFeatures(
+        lane=lane,
+        lateral_offset=state.y - (right + 0.5 * road.lane_width),
+        heading_offset=wrap_angle(state.heading),
+        left_marking=(right + road.lane_width) - state.y,
+        right_marking=state.y - right,
+        left_edge=road.width - state.y,
+        right_edge=state.y,
+        curvature=torch.full_like(state.y, road.curvature),
+    )
+
+
+@dataclass(frozen=True)
+class Observation:
+    """Everything a policy may use at one step, for every vehicle.
+
+    An ego policy reads vehicle 0's rows (``lidar.range[:, 0]``, ...) and may
+    use the rest as privileged information; a driver model acts for all.
+
+    Attributes
+    ----------
+    state : VehicleState
+        Privileged ground truth, fields of shape (B, A).
+    lidar : LidarScan or None
+        Each vehicle's lidar, fields of shape (B, A, R); None when the
+        simulator runs without lidar (``n_lidar_beams = 0``).
+    lane : LaneFeatures
+        Fields of shape (B, A).
+    collided : Tensor of bool, shape (B, A)
+        The vehicle overlaps another one now.
+    offroad : Tensor of bool, shape (B, A)
+        A corner of the vehicle is beyond a road edge now.
+    reversing : Tensor of bool, shape (B, A)
+        The vehicle moves against the road direction now.
+    seeds : Tensor of int64, shape (B,)
+        Per-rollout seeds, for counter-based noise (:mod:`avrisk.sim.noise`).
+    step : int
+        Index ``t`` of this step; the action applies from ``t`` to ``t + 1``.
+    dt : float
+        Time step [s].
+    """
+
+    state: VehicleState
+    lidar: LidarScan | None
+    lane: LaneFeatures
+    collided: Tensor  # [B, A] bool
+    offroad: Tensor  # [B, A] bool
+    reversing: Tensor  # [B, A] bool
+    seeds: Tensor  # [B] int64
+    step: int
+    dt: float
+
+    @property
+    def time(self) -> float:
+        """Simulated time of this step [s]."""
+        return self.step * self.dt
+
+
+def driver_features(obs: Observation) -> Tensor:
+    """The learned drivers' input vector for every vehicle (paper, appendix B).
+
+    In order: length, width [m]; speed [m/s]; lateral offset [m], heading offset
+    [rad]; distances to the left and right lane boundaries [m]; lane curvature
+    [1/m]; collision, road-departure and reversing indicators (0/1); lidar
+    ranges [m] then range-rates [m/s] (``R`` each).
+
+    Parameters
+    ----------
+    obs : Observation
+        With lidar.
+
+    Returns
+    -------
+    Tensor of shape (B, A, 11 + 2 R)
+    """
+    if obs.lidar is None:
+        raise ValueError("driver_features needs lidar; use n_lidar_beams > 0")
+    s, lane = obs.state, obs.lane
+    scalars = torch.stack(
+        [
+            s.length,
+            s.width,
+            s.speed,
+            lane.lateral_offset,
+            lane.heading_offset,
+            lane.left_marking,
+            lane.right_marking,
+            lane.curvature,
+            obs.collided.to(s.x.dtype),
+            obs.offroad.to(s.x.dtype),
+            obs.reversing.to(s.x.dtype),
+        ],
+        dim=-1,
+    )
+    return torch.cat([scalars, obs.lidar.range, obs.lidar.range_rate], dim=-1)

@@ -1,0 +1,142 @@
+import json
+from importlib import resources
+
+import pyarrow.parquet as pq
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+import avrisk.cli.run  # noqa: F401  (registers the commands)
+from avrisk.cli.app import app
+
+SUMMARY_KEYS = {"schema", "method", "settings", "estimate", "timing", "versions"}
+
+
+@pytest.fixture(scope="module")
+def short_scenario(tmp_path_factory):
+    """The bundled scenario with a 1.5 s horizon and 36 TTC rays, to keep CI fast."""
+    text = resources.files("avrisk.data.scenarios").joinpath("highway_default.yaml")
+    spec = yaml.safe_load(text.read_text())
+    spec["name"] = "highway_short"
+    spec["simulation"]["horizon"] = 1.5
+    spec["safety"]["n_rays"] = 36
+    path = tmp_path_factory.mktemp("scenario") / "short.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+def invoke(*args):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+CE_ARGS = (
+    "--rho",
+    0.1,
+    "--n-per-iter",
+    60,
+    "--n-iter",
+    2,
+    "--n-final",
+    100,
+    "--gamma",
+    1.0,
+    "--gamma-test",
+    "0.5,2.0",
+    "--batch-size",
+    64,
+    "--failures",
+    1,
+)
+
+
+def test_run_writes_a_complete_run_directory_with_a_report(short_scenario, tmp_path):
+    out = tmp_path / "run"
+    result = invoke("run", short_scenario, "--out", out, *CE_ARGS)
+    assert result.exit_code == 0, result.output
+    assert {p.name for p in out.iterdir()} >= {
+        "config.json",
+        "checkpoint.json",
+        "samples.parquet",
+        "summary.json",
+        "report.html",
+        "plots",
+    }
+    summary = json.loads((out / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(summary) and summary["schema"] == "avrisk.summary/1"
+    assert [g["gamma"] for g in summary["estimate"]["by_gamma"]] == [1.0, 0.5, 2.0]
+    table = pq.read_table(out / "samples.parquet")
+    assert table.num_rows == 2 * 60 + 100
+    for col in (
+        "veh0.s",
+        "veh5.speed",
+        "seed",
+        "log_p0",
+        "log_p_proposal",
+        "weight",
+        "f",
+        "crash",
+        "offroad",
+        "reversing",
+        "steps",
+        "stage",
+        "iteration",
+    ):
+        assert col in table.column_names, col
+
+
+def test_rerunning_run_reads_back_the_same_summary(short_scenario, tmp_path):
+    out = tmp_path / "run"
+    assert invoke("run", short_scenario, "--out", out, *CE_ARGS).exit_code == 0
+    first = json.loads((out / "summary.json").read_text())
+    assert invoke("run", short_scenario, "--out", out, *CE_ARGS).exit_code == 0
+    assert json.loads((out / "summary.json").read_text()) == first
+    assert invoke("report", out, "--failures", 0).exit_code == 0
+
+
+def test_run_refuses_a_directory_holding_a_different_run(short_scenario, tmp_path):
+    out = tmp_path / "run"
+    assert invoke("run", short_scenario, "--out", out, *CE_ARGS).exit_code == 0
+    result = invoke("run", short_scenario, "--out", out, *CE_ARGS, "--seed", 5)
+    assert result.exit_code == 2
+    assert "holds a different run" in result.output and "settings.seed" in result.output
+
+
+def test_bad_input_gives_one_clear_line_and_leaves_nothing(tmp_path):
+    out = tmp_path / "run"
+    missing = invoke("run", tmp_path / "nope.yaml", "--out", out)
+    assert missing.exit_code == 2 and "error:" in missing.output
+    bad_rho = invoke("run", "highway_default", "--out", out, "--rho", 1.5)
+    assert bad_rho.exit_code == 2 and "rho must be in (0, 1)" in bad_rho.output
+    bad_gamma = invoke("run", "highway_default", "--out", out, "--gamma-test", "0.1,x")
+    assert bad_gamma.exit_code == 2 and "--gamma-test" in bad_gamma.output
+    assert not out.exists()
+    assert "Traceback" not in missing.output + bad_rho.output + bad_gamma.output
+
+
+def test_naive_run_with_zero_hits_reports_an_upper_bound(short_scenario, tmp_path):
+    out = tmp_path / "naive"
+    result = invoke(
+        "run",
+        short_scenario,
+        "--out",
+        out,
+        "--method",
+        "naive",
+        "--n-final",
+        50,
+        "--gamma",
+        0.001,
+        "--gamma-test",
+        "",
+        "--failures",
+        0,
+    )
+    assert result.exit_code == 0, result.output
+    est = json.loads((out / "summary.json").read_text())["estimate"]
+    assert est["n_hits"] == 0 and est["p"] == 0.0
+    assert est["ci"][1] == pytest.approx(1 - 0.025 ** (1 / 50))
+
+
+def test_report_of_a_directory_without_a_run_is_an_error(tmp_path):
+    result = invoke("report", tmp_path)
+    assert result.exit_code == 2 and "holds no avrisk run" in result.output

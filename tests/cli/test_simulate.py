@@ -1,0 +1,158 @@
+"""``avrisk simulate`` and ``avrisk replay`` through the Typer app."""
+
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+import yaml
+from PIL import Image
+from typer.testing import CliRunner
+
+import avrisk.cli.simulate as simulate_mod
+from avrisk.cli.app import app
+from avrisk.scenario import ParamLayout, load_spec
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def short_scenario(tmp_path_factory) -> Path:
+    """The default scenario cut to 2 s and 36 TTC rays, to keep tests fast."""
+    data = load_spec("highway_default").model_dump(mode="json")
+    data["simulation"]["horizon"] = 2.0
+    data["safety"]["n_rays"] = 36
+    path = tmp_path_factory.mktemp("scen") / "short.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _simulate(*args: str):
+    return runner.invoke(app, ["simulate", *args])
+
+
+def test_simulate_writes_one_row_per_rollout_with_named_columns(
+    short_scenario, tmp_path
+):
+    out = tmp_path / "rollouts.parquet"
+    result = _simulate(
+        str(short_scenario), "--n", "12", "--seed", "3", "--out", str(out)
+    )
+    assert result.exit_code == 0, result.output
+    table = pq.read_table(out)
+    layout = ParamLayout(n_vehicles=6)
+    expected = [
+        "sample_id",
+        "seed",
+        *layout.columns,
+        "log_p0",
+        "f",
+        "crash",
+        "offroad",
+        "reversing",
+        "steps",
+    ]
+    assert table.column_names == expected
+    assert table.num_rows == 12
+    assert table.column("sample_id").to_pylist() == list(range(12))
+    assert table.schema.field("veh3.speed").metadata == {b"unit": b"m/s"}
+    assert table.schema.field("f").metadata == {b"unit": b"s"}
+    assert np.isfinite(table.column("log_p0").to_numpy()).all()
+    steps = table.column("steps").to_numpy()
+    assert ((steps >= 1) & (steps <= 20)).all()
+    assert "min TTC <= 0.2 s" in result.output and "crash" in result.output
+
+
+def test_the_same_seed_gives_the_same_rows_whatever_the_batch_size(
+    short_scenario, tmp_path
+):
+    a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
+    common = [str(short_scenario), "--n", "5", "--seed", "4"]
+    assert _simulate(*common, "--out", str(a), "--batch-size", "5").exit_code == 0
+    assert _simulate(*common, "--out", str(b), "--batch-size", "2").exit_code == 0
+    ta, tb = pq.read_table(a), pq.read_table(b)
+    assert ta.equals(tb)
+    assert len(set(ta.column("seed").to_pylist())) == 5
+
+
+def test_an_unknown_scenario_is_a_clear_error_without_a_traceback(tmp_path):
+    out = tmp_path / "x.parquet"
+    result = _simulate("no_such_scenario.yaml", "--n", "2", "--out", str(out))
+    assert result.exit_code == 2
+    assert "no scenario file" in result.output and "Traceback" not in result.output
+    assert not out.exists()
+
+
+def test_an_invalid_field_is_named_in_the_error(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: bad\nvehicles: [{lane: 9}]\n")
+    result = _simulate(str(bad), "--n", "2", "--out", str(tmp_path / "x.parquet"))
+    assert result.exit_code == 2
+    assert "vehicles.0.lane" in result.output and "Traceback" not in result.output
+
+
+def test_a_missing_output_folder_is_a_clear_error(short_scenario, tmp_path):
+    out = tmp_path / "nope" / "x.parquet"
+    result = _simulate(str(short_scenario), "--n", "2", "--out", str(out))
+    assert result.exit_code == 2 and "does not exist" in result.output
+
+
+def test_a_failing_run_leaves_no_output_file(short_scenario, tmp_path, monkeypatch):
+    def boom(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(simulate_mod.pq, "write_table", boom)
+    out = tmp_path / "x.parquet"
+    result = _simulate(str(short_scenario), "--n", "2", "--out", str(out))
+    assert result.exit_code != 0
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_replay_resimulates_rows_and_writes_a_gif_and_a_png(short_scenario, tmp_path):
+    table_path = tmp_path / "r.parquet"
+    assert (
+        _simulate(str(short_scenario), "--n", "4", "--out", str(table_path)).exit_code
+        == 0
+    )
+    gif, png = tmp_path / "anim.gif", tmp_path / "frame.png"
+    result = runner.invoke(
+        app,
+        [
+            "replay",
+            str(table_path),
+            "--rows",
+            "0,2",
+            "--out",
+            str(gif),
+            "--frame-png",
+            str(png),
+            "--fps",
+            "5",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    assert "warning" not in result.output
+    with Image.open(gif) as im:
+        # At most 2 s at 5 frames/s plus the first frame (fewer after a crash).
+        assert im.format == "GIF" and 2 <= im.n_frames <= 11
+    with Image.open(png) as im:
+        assert im.format == "PNG"
+    worst = tmp_path / "worst.gif"
+    result = runner.invoke(
+        app,
+        ["replay", str(table_path), "--worst", "1", "--out", str(worst), "--fps", "2"],
+    )
+    assert result.exit_code == 0 and worst.exists()
+
+
+def test_replay_rejects_rows_out_of_range(short_scenario, tmp_path):
+    table_path = tmp_path / "r.parquet"
+    assert (
+        _simulate(str(short_scenario), "--n", "2", "--out", str(table_path)).exit_code
+        == 0
+    )
+    result = runner.invoke(
+        app,
+        ["replay", str(table_path), "--rows", "5", "--out", str(tmp_path / "a.gif")],
+    )
+    assert result.exit_code == 2 and "out of range" in result.output

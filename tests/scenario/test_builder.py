@@ -1,0 +1,106 @@
+"""From named scenario parameters to the simulator's inputs, and rollouts."""
+
+import numpy as np
+import pytest
+import torch
+
+from avrisk.scenario import ParamLayout, ScenarioParams, load_spec, spec_from_dict
+from avrisk.scenario.builder import (
+    ScenarioSimulator,
+    driver_params,
+    initial_state,
+    road_from_spec,
+    sim_config_from_spec,
+)
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return spec_from_dict(
+        {
+            "name": "two",
+            "road": {"n_lanes": 3, "lane_width": 4.0},
+            "drivers": {"slow": {"desired_speed": 12.0, "politeness": 0.7}},
+            "ego": {"params": {"desired_speed": 31.0}},
+            "vehicles": [
+                {"lane": 1, "offset": 0.0},
+                {
+                    "lane": 2,
+                    "offset": 30.0,
+                    "length": 12.0,
+                    "width": 2.5,
+                    "driver": "slow",
+                },
+            ],
+            "simulation": {"horizon": 1.0},
+            "safety": {"n_rays": 24},
+        }
+    )
+
+
+def test_initial_state_places_each_vehicle_relative_to_its_slot(spec):
+    layout = ParamLayout.from_spec(spec)
+    x = np.zeros((1, layout.dim))
+    x[0, layout.index("veh0.s")] = 90.0
+    x[0, layout.index("veh1.s")] = 100.0
+    x[0, layout.index("veh1.t")] = -0.2
+    x[0, layout.index("veh1.heading")] = 90.0
+    x[0, layout.index("veh1.speed")] = 14.0
+    state = initial_state(
+        ScenarioParams.from_flat(x, layout), spec, dtype=torch.float64
+    )
+    assert state.x.tolist() == [[90.0, 130.0]]
+    assert state.y[0].tolist() == pytest.approx([6.0, 9.8])
+    assert state.heading[0, 1].item() == pytest.approx(np.pi / 2)
+    assert state.speed[0].tolist() == [0.0, 14.0]
+    assert state.length[0].tolist() == [4.8, 12.0] and state.width[0].tolist() == [
+        1.9,
+        2.5,
+    ]
+
+
+def test_driver_params_put_the_ego_policy_in_slot_0_and_drivers_elsewhere(spec):
+    p = driver_params(spec, 3)
+    assert p.desired_speed.shape == (3, 2)
+    assert p.desired_speed[:, 0].tolist() == [31.0] * 3
+    assert p.desired_speed[:, 1].tolist() == [12.0] * 3
+    assert p.politeness[0, 1].item() == pytest.approx(0.7)
+
+
+def test_the_static_pieces_follow_the_spec(spec):
+    road = road_from_spec(spec)
+    assert (road.n_lanes, road.lane_width, road.length) == (3, 4.0, 500.0)
+    cfg = sim_config_from_spec(spec)
+    assert (cfg.dt, cfg.horizon, cfg.n_ttc_rays, cfg.n_lidar_beams) == (
+        0.1,
+        1.0,
+        24,
+        20,
+    )
+
+
+def test_a_rollout_of_the_bundled_default_is_batch_independent():
+    spec = load_spec("highway_default")
+    spec = spec.model_copy(
+        update={
+            "simulation": spec.simulation.model_copy(update={"horizon": 1.0}),
+            "safety": spec.safety.model_copy(update={"n_rays": 36}),
+        }
+    )
+    from avrisk.rare.problem import chunk_rng, sample_seeds
+    from avrisk.scenario import build_base_distribution
+
+    sim = ScenarioSimulator(spec)
+    x = build_base_distribution(spec).sample(5, chunk_rng(0, 0, 0))
+    seeds = sample_seeds(0, 0, np.arange(5))
+    together = sim.rollout(x, seeds)
+    alone = sim.rollout(x[3:4], seeds[3:4])
+    assert together.f.shape == (5,) and together.steps.dtype == torch.int64
+    assert together.f[3].item() == alone.f[0].item()
+    assert sim.min_ttc(x, seeds).dtype == np.float64
+
+
+def test_seeds_of_the_wrong_shape_are_refused(spec):
+    sim = ScenarioSimulator(spec)
+    with pytest.raises(ValueError, match="seeds"):
+        sim.rollout(np.full((2, 8), 1.0), np.arange(3))

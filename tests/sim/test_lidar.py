@@ -1,0 +1,102 @@
+import math
+
+import pytest
+import torch
+
+from avrisk.sim.lidar import beam_directions, lidar_scan, others_index
+from avrisk.sim.road import Road
+from avrisk.sim.state import VehicleState
+
+ROAD = Road(n_lanes=3, lane_width=4.0)  # edges at y = 0 and y = 12
+N_BEAMS = 20  # beam k at 18 k degrees: 0 ahead, 5 left, 10 behind, 15 right
+AHEAD, LEFT, BEHIND, RIGHT = 0, 5, 10, 15
+
+
+def scan(rows, shape=(1,), max_range=50.0):
+    state = VehicleState.from_rows(rows)
+    if shape != (1,):
+        state = state.map(lambda t: t[0].expand(*shape, -1).contiguous())
+    cos, sin = state.cos_sin
+    bc, bs = beam_directions(N_BEAMS)
+    return lidar_scan(state, cos, sin, ROAD, bc, bs, max_range)
+
+
+EGO = [0.0, 6.0, 0.0, 20.0, 4.8, 2.0]
+
+
+@pytest.mark.parametrize("shape", [(), (1,), (7,)])
+def test_a_beam_reads_the_distance_to_the_vehicle_ahead_and_its_closing_speed(shape):
+    s = scan([EGO, [20.0, 6.0, 0.0, 15.0, 4.0, 2.0]], shape)
+    assert s.range.shape == shape + (2, N_BEAMS)
+    assert torch.all(s.range[..., 0, AHEAD] == 18.0)
+    assert torch.all(s.range_rate[..., 0, AHEAD] == -5.0)
+    assert torch.all(s.hit[..., 0, AHEAD] == 1)
+
+
+def test_the_vehicle_ahead_sees_the_ego_behind_it_approaching():
+    s = scan([EGO, [20.0, 6.0, 0.0, 15.0, 4.0, 2.0]])
+    assert s.range[0, 1, BEHIND].item() == pytest.approx(20.0 - 2.4, rel=1e-6)
+    assert s.range_rate[0, 1, BEHIND].item() == pytest.approx(-5.0, rel=1e-6)
+    assert s.hit[0, 1, BEHIND].item() == 0
+
+
+def test_beams_across_the_road_read_the_road_edges_with_no_vehicle_and_no_rate():
+    s = scan([EGO])
+    assert s.range[0, 0, LEFT].item() == pytest.approx(6.0, rel=1e-6)
+    assert s.range[0, 0, RIGHT].item() == pytest.approx(6.0, rel=1e-6)
+    assert s.hit[0, 0, LEFT].item() == -1 and s.hit[0, 0, RIGHT].item() == -1
+    assert s.range_rate[0, 0, LEFT].item() == 0.0
+
+
+def test_a_slanted_beam_reads_the_edge_along_its_slant():
+    s = scan([EGO])
+    k = 3  # 54 degrees to the left
+    assert s.range[0, 0, k].item() == pytest.approx(
+        6.0 / math.sin(math.radians(54)), rel=1e-6
+    )
+
+
+def test_a_vehicle_beyond_the_road_edge_is_hidden_by_the_edge():
+    offroad = [0.0, -3.0, 0.0, 20.0, 4.0, 2.0]  # its near side is 8 m from the ego
+    s = scan([EGO, offroad])
+    assert s.range[0, 0, RIGHT].item() == pytest.approx(6.0, rel=1e-6)
+    assert s.hit[0, 0, RIGHT].item() == -1
+    assert s.range_rate[0, 0, RIGHT].item() == 0.0
+
+
+def test_a_vehicle_between_the_sensor_and_the_edge_is_seen():
+    beside = [0.0, 2.0, 0.0, 20.0, 4.0, 2.0]  # near side at y = 3
+    s = scan([EGO, beside])
+    assert s.range[0, 0, RIGHT].item() == pytest.approx(3.0, rel=1e-6)
+    assert s.hit[0, 0, RIGHT].item() == 1
+
+
+def test_a_beam_that_hits_nothing_reads_the_maximum_range():
+    s = scan([EGO, [20.0, 6.0, 0.0, 15.0, 4.0, 2.0]], max_range=50.0)
+    assert s.range[0, 0, BEHIND].item() == 50.0
+    assert s.hit[0, 0, BEHIND].item() == -1
+    assert s.range_rate[0, 0, BEHIND].item() == 0.0
+
+
+def test_a_vehicle_beyond_the_range_is_not_seen():
+    s = scan([EGO, [60.0, 6.0, 0.0, 15.0, 4.0, 2.0]], max_range=50.0)
+    assert s.range[0, 0, AHEAD].item() == 50.0
+    assert s.hit[0, 0, AHEAD].item() == -1
+
+
+def test_beams_turn_with_the_vehicle():
+    turned = [0.0, 6.0, math.pi / 2, 20.0, 4.8, 2.0]  # facing the left edge
+    s = scan([turned])
+    assert s.range[0, 0, AHEAD].item() == pytest.approx(6.0, rel=1e-6)
+    assert s.range[0, 0, LEFT].item() == 50.0  # along the road, backwards
+
+
+def test_the_nearer_of_two_vehicles_on_a_beam_is_the_one_hit():
+    s = scan([EGO, [40.0, 6.0, 0.0, 0.0, 4.0, 2.0], [20.0, 6.0, 0.0, 30.0, 4.0, 2.0]])
+    assert s.hit[0, 0, AHEAD].item() == 2
+    assert s.range[0, 0, AHEAD].item() == 18.0
+    assert s.range_rate[0, 0, AHEAD].item() == pytest.approx(10.0)
+
+
+def test_others_index_lists_everyone_but_oneself():
+    assert others_index(3).tolist() == [[1, 2], [0, 2], [0, 1]]

@@ -1,0 +1,266 @@
+import math
+
+import pytest
+import torch
+
+from avrisk.agents import ConstantPolicy, IDMParams, IDMPolicy
+from avrisk.sim import Road, SimConfig, Simulator, VehicleState
+
+F64 = torch.float64
+SIZE = [4.0, 2.0]
+ROAD = Road(n_lanes=3, lane_width=4.0)
+
+
+def seeds(n):
+    return torch.arange(n, dtype=torch.int64)
+
+
+def test_a_cruising_ego_rear_ends_a_slower_car_at_the_step_the_boxes_first_overlap():
+    # Bumper gap 26 m closing at 10 m/s, 1 m per step: touching (not a crash)
+    # after 26 steps, overlapping after 27.
+    sim = Simulator(ROAD, SimConfig(), dtype=F64)
+    state = VehicleState.from_rows(
+        [[0.0, 2.0, 0.0, 25.0, *SIZE], [30.0, 2.0, 0.0, 15.0, *SIZE]], dtype=F64
+    )
+    params = IDMParams.full(state.shape, dtype=F64, desired_speed=15.0)
+    res = sim.rollout(
+        state, params, seeds(1), record_trace=True, ego_policy=ConstantPolicy()
+    )
+    assert res.crash.tolist() == [True]
+    assert res.steps.tolist() == [27]
+    assert res.collision_with.tolist() == [1]
+    # At the crash step the ego centre is 1 m from the lead's rear, closing at 10 m/s.
+    assert res.f.item() == pytest.approx(0.1, rel=1e-9)
+    # The rollout stopped: later frames repeat the crash frame and are not alive.
+    tr = res.trace
+    assert tr.alive[0].tolist() == [True] * 28 + [False] * 73
+    assert torch.equal(tr.x[0, 27:], tr.x[0, 27:28].expand(74, -1))
+    assert tr.ttc[0, 28:].eq(math.inf).all()
+    assert not res.offroad.item() and not res.reversing.item()
+
+
+def test_a_rollout_that_starts_in_a_crash_stops_at_step_zero():
+    sim = Simulator(ROAD, SimConfig())
+    state = VehicleState.from_rows(
+        [[0.0, 2.0, 0.0, 25.0, *SIZE], [3.0, 2.5, 0.0, 15.0, *SIZE]]
+    )
+    res = sim.rollout(state, IDMParams.full(state.shape), seeds(1))
+    assert res.crash.tolist() == [True] and res.steps.tolist() == [0]
+    assert res.f.item() == pytest.approx(0.1, rel=1e-6)  # 1 m at 10 m/s
+
+
+def test_steering_off_the_road_is_flagged_without_stopping_the_rollout():
+    sim = Simulator(ROAD, SimConfig(horizon=3.0))
+    state = VehicleState.from_rows([[0.0, 10.0, 0.0, 20.0, *SIZE]])
+    res = sim.rollout(
+        state,
+        IDMParams.full(state.shape),
+        seeds(1),
+        ego_policy=ConstantPolicy(steer=0.1),
+    )
+    assert res.offroad.tolist() == [True]
+    assert not res.crash.item() and res.steps.item() == 30
+
+
+def test_braking_through_standstill_is_flagged_as_reversing():
+    sim = Simulator(ROAD, SimConfig(horizon=2.0))
+    state = VehicleState.from_rows([[0.0, 2.0, 0.0, 3.0, *SIZE]])
+    params = IDMParams.full(state.shape)
+    assert not sim.rollout(state, params, seeds(1)).reversing.item()
+    res = sim.rollout(state, params, seeds(1), ego_policy=ConstantPolicy(accel=-4.0))
+    assert res.reversing.tolist() == [True]
+
+
+def test_a_free_road_gives_infinite_ttc_and_the_full_horizon():
+    sim = Simulator(ROAD, SimConfig(horizon=1.0))
+    state = VehicleState.from_rows(
+        [[0.0, 2.0, 0.0, 20.0, *SIZE], [50.0, 10.0, 0.0, 25.0, *SIZE]]
+    )
+    res = sim.rollout(state, IDMParams.full(state.shape), seeds(1), record_trace=True)
+    assert res.f.tolist() == [math.inf]
+    assert res.steps.tolist() == [10] and res.collision_with.tolist() == [-1]
+    assert res.trace.x.shape == (1, 11, 2) and res.trace.alive.all()
+
+
+def traffic(n, seed=0):
+    """n varied scenes of six vehicles, some of them dense enough to crash."""
+    g = torch.Generator().manual_seed(seed)
+    lanes = torch.tensor([1, 1, 2, 0, 1, 2])
+    offsets = torch.tensor([0.0, 18.0, 6.0, 8.0, -16.0, 25.0])
+    x = offsets + 8.0 * torch.rand(n, 6, generator=g)
+    y = (lanes + 0.5) * 4.0 + 0.5 * torch.rand(n, 6, generator=g) - 0.25
+    heading = torch.deg2rad(7.2 * torch.rand(n, 6, generator=g) - 3.6)
+    speed = 10.0 + 15.0 * torch.rand(n, 6, generator=g)
+    length = torch.tensor([4.8, 4.8, 4.8, 4.8, 4.8, 12.0]).expand(n, 6).contiguous()
+    width = torch.tensor([1.9, 1.9, 1.9, 1.9, 1.9, 2.5]).expand(n, 6).contiguous()
+    if n >= 6:
+        # Scene 3: a slow car cuts in 2 m ahead of the ego, too close to brake.
+        x[3, 1], y[3, 1], speed[3, 0], speed[3, 1] = x[3, 0] + 6.8, y[3, 0], 25.0, 5.0
+        # Scene 5: starts with a car overlapping the ego.
+        x[5, 2], y[5, 2] = x[5, 0] + 3.0, y[5, 0] + 1.0
+    state = VehicleState(x, y, heading, speed, length, width)
+    params = IDMParams.full((n, 6))
+    params = IDMParams(
+        desired_speed=15.0 + 15.0 * torch.rand(n, 6, generator=g),
+        time_headway=0.5 + 1.5 * torch.rand(n, 6, generator=g),
+        min_gap=params.min_gap,
+        max_accel=params.max_accel,
+        comfort_decel=params.comfort_decel,
+        politeness=torch.rand(n, 6, generator=g),
+        lane_change_threshold=0.3 * torch.rand(n, 6, generator=g),
+    )
+    return state, params
+
+
+def assert_same(a, b):
+    for name in ("f", "crash", "offroad", "reversing", "steps", "collision_with"):
+        assert torch.equal(getattr(a, name), getattr(b, name)), name
+    for name in ("x", "y", "heading", "speed", "alive", "ttc"):
+        assert torch.equal(getattr(a.trace, name), getattr(b.trace, name)), name
+
+
+@pytest.fixture(scope="module")
+def batch_of_seven():
+    sim = Simulator(ROAD, SimConfig(horizon=3.0))
+    state, params = traffic(7)
+    return sim, state, params, sim.rollout(state, params, seeds(7), record_trace=True)
+
+
+def test_the_test_traffic_exercises_crashes_lane_changes_and_near_misses(
+    batch_of_seven,
+):
+    _, state, _, res = batch_of_seven
+    assert res.crash[3] and res.crash[5] and res.steps[5] == 0 and not res.crash.all()
+    lanes_at_end = ROAD.lane_index(res.trace.y[:, -1])
+    assert (lanes_at_end != ROAD.lane_index(state.y)).any()
+    assert torch.isfinite(res.f).all()
+
+
+def test_a_rollout_alone_gives_bit_identical_results_to_the_same_rollout_in_a_batch(
+    batch_of_seven,
+):
+    sim, state, params, res = batch_of_seven
+    for b in range(7):
+        alone = sim.rollout(
+            state[b : b + 1], params[b : b + 1], seeds(7)[b : b + 1], record_trace=True
+        )
+        assert_same(alone, _select(res, [b]))
+
+
+def test_permuting_the_batch_permutes_the_results_bit_for_bit(batch_of_seven):
+    sim, state, params, res = batch_of_seven
+    perm = torch.tensor([3, 6, 0, 5, 1, 4, 2])
+    shuffled = sim.rollout(state[perm], params[perm], seeds(7)[perm], record_trace=True)
+    assert_same(shuffled, _select(res, perm))
+
+
+def test_a_larger_batch_gives_the_same_results_for_the_shared_rollouts(batch_of_seven):
+    sim, state, params, res = batch_of_seven
+    state2, params2 = traffic(5, seed=1)
+    both = sim.rollout(
+        VehicleState.cat([state, state2]), IDMParams.cat([params, params2]), seeds(12),
+        record_trace=True,
+    )  # fmt: skip
+    assert_same(_select(both, list(range(7))), res)
+
+
+def _select(res, index):
+    index = torch.as_tensor(index)
+    tr = res.trace
+    return type(res)(
+        f=res.f[index],
+        crash=res.crash[index],
+        offroad=res.offroad[index],
+        reversing=res.reversing[index],
+        steps=res.steps[index],
+        collision_with=res.collision_with[index],
+        trace=type(tr)(
+            *(
+                getattr(tr, k)[index]
+                for k in ("x", "y", "heading", "speed", "alive", "ttc")
+            )
+        ),
+    )
+
+
+def test_the_idm_ego_policy_drives_exactly_like_the_default_ego(batch_of_seven):
+    sim, state, params, res = batch_of_seven
+    with_policy = sim.rollout(
+        state, params, seeds(7), record_trace=True, ego_policy=IDMPolicy(params, ROAD)
+    )
+    assert_same(with_policy, res)
+
+
+def test_trace_alive_marks_exactly_the_simulated_steps(batch_of_seven):
+    _, _, _, res = batch_of_seven
+    t = torch.arange(res.trace.alive.shape[1])
+    assert torch.equal(res.trace.alive, t[None, :] <= res.steps[:, None])
+
+
+def test_f_is_the_minimum_of_the_traced_ttc(batch_of_seven):
+    _, _, _, res = batch_of_seven
+    assert torch.equal(res.f, res.trace.ttc.amin(dim=1))
+
+
+def test_observations_carry_lidar_and_lane_features_for_every_vehicle():
+    sim = Simulator(ROAD, SimConfig(n_lidar_beams=8))
+    state, _ = traffic(3)
+    obs = sim.observe(state, seeds(3))
+    assert obs.lidar.range.shape == (3, 6, 8)
+    assert obs.lane.lane.tolist() == ROAD.lane_index(state.y).tolist()
+    assert obs.collided.shape == (3, 6)
+    assert (
+        Simulator(ROAD, SimConfig(n_lidar_beams=0)).observe(state, seeds(3)).lidar
+        is None
+    )
+
+
+def test_bad_inputs_are_rejected_with_a_message_that_names_them():
+    sim = Simulator(ROAD, SimConfig(horizon=0.5))
+    state, params = traffic(2)
+    with pytest.raises(ValueError, match="seeds"):
+        sim.rollout(state, params, torch.zeros(2, dtype=torch.int32))
+    with pytest.raises(ValueError, match="driver_params"):
+        sim.rollout(state, params[:1], seeds(2))
+    with pytest.raises(ValueError, match="length"):
+        sim.rollout(state.map(lambda t: t * 0), params, seeds(2))
+    with pytest.raises(NotImplementedError, match="curvature"):
+        Simulator(Road(curvature=0.01))
+    with pytest.raises(ValueError, match="dt"):
+        SimConfig(dt=0.0)
+
+
+def test_the_config_counts_steps_like_the_horizon_over_the_time_step():
+    assert SimConfig().n_steps == 100
+    assert SimConfig(dt=0.05, horizon=1.0).n_steps == 20
+    assert SimConfig(dt=0.3, horizon=1.0).n_steps == 4
+
+
+def _have_cxx():
+    import shutil
+
+    return any(shutil.which(c) for c in ("g++", "c++", "clang++"))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not _have_cxx(), reason="torch.compile needs a C++ compiler")
+def test_compiled_steps_give_bit_identical_results_to_eager_ones(batch_of_seven):
+    _, state, params, res = batch_of_seven
+    sim = Simulator(ROAD, SimConfig(horizon=3.0), compile=True)
+    assert sim.compile
+    assert_same(sim.rollout(state, params, seeds(7), record_trace=True), res)
+    perm = torch.tensor([6, 5, 4, 3, 2, 1, 0])
+    shuffled = sim.rollout(state[perm], params[perm], seeds(7)[perm], record_trace=True)
+    assert_same(shuffled, _select(res, perm))
+
+
+def test_the_environment_switches_compilation_on_unless_told_otherwise(monkeypatch):
+    from avrisk.sim.simulator import COMPILE_ENV, compile_requested
+
+    monkeypatch.setenv(COMPILE_ENV, "1")
+    assert compile_requested(None) and not compile_requested(False)
+    monkeypatch.setenv(COMPILE_ENV, "0")
+    assert not compile_requested(None) and compile_requested(True)
+    monkeypatch.delenv(COMPILE_ENV)
+    assert not compile_requested(None)
+    assert not Simulator(ROAD).compile
