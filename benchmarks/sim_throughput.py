@@ -72,8 +72,9 @@ def worker_avrisk(batch_size: int, scenario: str, min_seconds: float) -> dict:
     p0 = build_base_distribution(spec)
     x = p0.sample(batch_size, chunk_rng(0, 0, 0))
     seeds = sample_seeds(0, 0, np.arange(batch_size))
-    warm = min(batch_size, 16)
-    sim.rollout(x[:warm], seeds[:warm])  # first-call costs (allocator, kernels)
+    # warm up at the timed batch size: first-call costs (allocator, kernels), and
+    # under AVRISK_COMPILE=1 the compilation for this shape, stay out of the timing
+    sim.rollout(x, seeds)
     _reset_peak()
     base_kib = _status_kib("VmRSS")
     steps = 0

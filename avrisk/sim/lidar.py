@@ -128,7 +128,7 @@ def scan_boxes(
     ray_cos, ray_sin : Tensor of shape (R,)
         Ray directions in the sensor frame.
     max_range : float
-        Hits beyond this distance [m] are misses.
+        Hits at or beyond this distance [m] are misses.
 
     Returns
     -------
@@ -184,7 +184,6 @@ def lidar_scan(
     beam_cos: Tensor,
     beam_sin: Tensor,
     max_range: float,
-    others: Tensor | None = None,
 ) -> LidarScan:
     """Lidar sweep of every vehicle against the others and the road edges.
 
@@ -200,8 +199,6 @@ def lidar_scan(
         Beam directions in the vehicle frame (:func:`beam_directions`).
     max_range : float
         Sensor range [m].
-    others : Tensor of int64, shape (A, A - 1), optional
-        :func:`others_index` of ``A``, if the caller caches it.
 
     Returns
     -------
@@ -209,8 +206,6 @@ def lidar_scan(
         Fields of shape (..., A, R).
     """
     n = state.n_vehicles
-    if others is None:
-        others = others_index(n, device=state.x.device)
     y = state.y.unsqueeze(-1)  # (..., A, 1)
     # Road edges, the lines y = 0 and y = W: distance to the nearest one ahead
     # along each beam (branch-free, see ray_box_distance for why).
@@ -221,9 +216,9 @@ def lidar_scan(
     wall = torch.clamp_max(wall, max_range)  # (..., A, R)
     if n == 1:
         zeros = torch.zeros_like(wall)
-        return LidarScan(
-            range=wall, range_rate=zeros, hit=torch.full_like(wall, -1).long()
-        )
+        return LidarScan(range=wall, range_rate=zeros, hit=zeros.long() - 1)
+
+    others = others_index(n, device=state.x.device)  # (A, A-1)
 
     def tgt(t: Tensor) -> Tensor:
         return t[..., others]  # (..., A, A-1)
@@ -231,15 +226,16 @@ def lidar_scan(
     def src(t: Tensor) -> Tensor:
         return t.unsqueeze(-1)  # (..., A, 1)
 
+    tc, ts = tgt(cos), tgt(sin)
     dist = scan_boxes(
         src(state.x),
-        src(state.y),
+        y,
         src(cos),
         src(sin),
         tgt(state.x),
         tgt(state.y),
-        tgt(cos),
-        tgt(sin),
+        tc,
+        ts,
         0.5 * tgt(state.length),
         0.5 * tgt(state.width),
         beam_cos,
@@ -249,10 +245,11 @@ def lidar_scan(
     nearest, j = min_argmin(dist, dim=-2)  # (..., A, R)
     seen = step(wall - nearest)  # 1.0 for a vehicle; a tie goes to the wall
     wx, wy = relative_velocity(
-        src(cos), src(sin), src(state.speed), tgt(cos), tgt(sin), tgt(state.speed)
+        src(cos), src(sin), src(state.speed), tc, ts, tgt(state.speed)
     )
     rate = wx.gather(-1, j) * beam_cos + wy.gather(-1, j) * beam_sin
-    hit_id = others.expand(*j.shape[:-1], n - 1).gather(-1, j)
+    # others[a, k] = k + (k >= a): the k-th other vehicle of vehicle a.
+    hit_id = j + (j >= torch.arange(n, device=j.device).unsqueeze(-1)).to(torch.int64)
     seen_id = seen.to(torch.int64)
     return LidarScan(
         range=torch.minimum(nearest, wall),

@@ -9,7 +9,17 @@ from avrisk.cli.app import app
 
 def test_demo_prints_both_estimators_and_writes_json(tmp_path):
     out = tmp_path / "demo.json"
-    args = ["demo", "--budget", "50000", "--seed", "3", "--out", str(out)]
+    args = [
+        "demo",
+        "--budget",
+        "50000",
+        "--seed",
+        "3",
+        "--out",
+        str(out),
+        "--rollouts",
+        "0",
+    ]
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     assert "naive MC" in result.output and "CE" in result.output

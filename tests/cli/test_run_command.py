@@ -140,3 +140,20 @@ def test_naive_run_with_zero_hits_reports_an_upper_bound(short_scenario, tmp_pat
 def test_report_of_a_directory_without_a_run_is_an_error(tmp_path):
     result = invoke("report", tmp_path)
     assert result.exit_code == 2 and "holds no avrisk run" in result.output
+
+
+def test_compare_runs_ce_naive_and_reference_then_reports_them(
+    short_scenario, tmp_path
+):
+    out = tmp_path / "cmp"
+    result = invoke(
+        "compare", short_scenario, "--out", out, *CE_ARGS, "--reference-n", 150
+    )
+    assert result.exit_code == 0, result.output
+    for part, n in (("ce", 220), ("naive", 220), ("reference", 150)):
+        summary = json.loads((out / part / "summary.json").read_text())
+        assert summary["estimate"]["n_evals"] == n
+    html = (out / "report.html").read_text()
+    assert "Cross-entropy vs naive Monte Carlo" in html and "Summary" in html
+    assert (out / "plots" / "comparison.png").is_file()
+    assert invoke("report", out, "--failures", 0).exit_code == 0
