@@ -58,7 +58,7 @@ class GammaEstimate:
         ``p (1 - p) / n / stderr^2``: how many times more samples naive Monte
         Carlo would need for the same standard error.
         """
-        if self.stderr <= 0 or self.p <= 0:
+        if self.stderr <= 0 or not 0 < self.p < 1:  # an IS estimate can exceed 1
             return math.nan
         return self.p * (1 - self.p) / self.n_samples / self.stderr**2
 

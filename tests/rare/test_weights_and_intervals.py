@@ -61,3 +61,28 @@ def test_interval_functions_reject_bad_levels_and_counts():
         wilson(1, 10, level=1.5)
     with pytest.raises(ValueError, match="0 <= k <= n"):
         clopper_pearson(11, 10)
+
+
+def test_variance_reduction_is_undefined_for_an_estimate_outside_0_1():
+    from avrisk.rare import GammaEstimate
+
+    over = GammaEstimate(
+        gamma=1.0,
+        p=1.09,
+        stderr=0.26,
+        ci=(0.59, 1.0),
+        n_hits=10,
+        ess=3.0,
+        n_samples=100,
+    )
+    assert np.isnan(over.variance_reduction)
+    fine = GammaEstimate(
+        gamma=1.0,
+        p=0.5,
+        stderr=0.01,
+        ci=(0.48, 0.52),
+        n_hits=50,
+        ess=50.0,
+        n_samples=100,
+    )
+    assert fine.variance_reduction == pytest.approx(0.25 / 100 / 0.01**2)
