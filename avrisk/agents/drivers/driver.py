@@ -1,0 +1,351 @@
+"""Learned drivers in the simulator: the environment model and the lidar ego.
+
+:class:`LearnedDriver` is a :class:`~avrisk.agents.policy.DriverModel`: every
+vehicle of rollout ``b`` is driven by the network with last layer ``xi[b]``
+(one draw of ``xi ~ N(mu0, Sigma0)`` per rollout, DESIGN.md §2). Actions are
+sampled from the network's Gaussians with counter-based noise
+(:mod:`avrisk.sim.noise`), a pure function of the rollout's seed, the step,
+the vehicle and the action, so a rollout gets the same noise alone or in any
+batch. :class:`LearnedEgoPolicy` drives vehicle 0 with the same network (the
+paper's non-vision ego, DESIGN.md §5), by default with its mean action.
+
+Sampling: ``action_t = mean_t + c * std_t * eps_t`` with standardised noise
+``eps_t = rho eps_{t-1} + sqrt(1 - rho^2) z_t``, ``z_t ~ N(0, 1)`` counter-based,
+``rho = net.noise_correlation`` and ``c = net.noise_scale`` per action. With
+``rho = 0`` and ``c = 1`` (the paper) every step is an independent draw from
+the network's Gaussian. A fitted ``rho > 0`` keeps a Gaussian marginal at
+every step but makes the noise as persistent as human residuals are
+(independent draws at 10 Hz give a jerk far above human jerk); a calibrated
+``c < 1`` tempers the variance that behaviour cloning inflates on states it
+cannot predict. ``eps`` is the driver's memory (its state in the simulator
+loop).
+
+Examples
+--------
+>>> import torch
+>>> from avrisk.agents.drivers.network import DriverNet
+>>> from avrisk.sim import Road, SimConfig, Simulator, VehicleState
+>>> sim = Simulator(Road(n_lanes=3), SimConfig(horizon=0.5))
+>>> state = VehicleState.from_rows(
+...     [[0.0, 5.55, 0.0, 20.0, 4.8, 1.9], [30.0, 5.55, 0.0, 18.0, 4.8, 1.9]]
+... )
+>>> net = DriverNet()
+>>> driver = LearnedDriver(net, net.default_xi.expand(1, -1))
+>>> sim.run(state, driver, torch.tensor([0])).steps.tolist()
+[5]
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from avrisk.agents.drivers.features import features_from_observation
+from avrisk.agents.drivers.network import ActionDistribution, DriverNet
+from avrisk.agents.drivers.xi import XI_DIM
+from avrisk.agents.policy import Action, register_policy
+from avrisk.sim.noise import normal
+from avrisk.sim.observation import Observation
+
+__all__ = [
+    "DRIVER_NOISE_STREAM",
+    "EGO_NOISE_STREAM",
+    "LearnedDriver",
+    "LearnedEgoPolicy",
+    "ar1_noise",
+    "reproducible_exp",
+    "sample_actions",
+]
+
+#: Counter-based noise stream of the environment drivers (:mod:`avrisk.sim.noise`).
+DRIVER_NOISE_STREAM = 0x4C44  # "LD"
+#: Noise stream of the learned ego (distinct from the drivers').
+EGO_NOISE_STREAM = 0x4C45
+
+_LOG2E = 1.44269504088896341
+_LN2_HI, _LN2_LO = 0.693359375, -2.12194440e-4
+_EXP_POLY = (
+    1.9875691500e-4,
+    1.3981999507e-3,
+    8.3334519073e-3,
+    4.1665795894e-2,
+    1.6666665459e-1,
+    5.0000001201e-1,
+)
+
+
+def reproducible_exp(x: Tensor) -> Tensor:
+    """``exp(x)`` from IEEE basic operations only (bit-reproducible).
+
+    ``torch.exp`` may round an element differently depending on where it sits
+    in a tensor (vectorised body or scalar tail); this function, like
+    :mod:`avrisk.sim.mathops`, uses only ``+ - * /``, ``round`` and an exact
+    power of two, so it does not (Cephes ``expf``: a few ulp in float32).
+
+    Parameters
+    ----------
+    x : Tensor of shape (...)
+        Float32 or float64; clipped to ``[-87, 88]``.
+
+    Returns
+    -------
+    Tensor of shape (...)
+
+    Examples
+    --------
+    >>> import torch
+    >>> round(reproducible_exp(torch.tensor([1.0]))[0].item(), 5)
+    2.71828
+    """
+    x = torch.clamp(x, -87.0, 88.0)
+    k = torch.round(x * _LOG2E)
+    r = x - k * _LN2_HI
+    r = r - k * _LN2_LO
+    p = r * 0.0 + _EXP_POLY[0]
+    for c in _EXP_POLY[1:]:
+        p = p * r + c
+    y = p * (r * r) + r + 1.0
+    # 2**k exactly, by building the float from its exponent bits.
+    ki = k.to(torch.int32 if x.dtype == torch.float32 else torch.int64)
+    if x.dtype == torch.float32:
+        two_k = ((ki + 127) << 23).view(torch.float32)
+    elif x.dtype == torch.float64:
+        two_k = ((ki + 1023) << 52).view(torch.float64)
+    else:
+        raise TypeError(f"reproducible_exp takes float32 or float64; got {x.dtype}")
+    return y * two_k
+
+
+def ar1_noise(
+    previous: Tensor | None,
+    seeds: Tensor,
+    step: int,
+    stream: int,
+    shape: tuple[int, ...],
+    rho: Tensor,
+    *,
+    dtype: torch.dtype = torch.float32,
+) -> Tensor:
+    """Standardised action noise, autocorrelated over steps, counter-based.
+
+    Parameters
+    ----------
+    previous : Tensor of shape (B, *shape, 2) or None
+        Last step's noise; None starts the process (a plain draw).
+    seeds : Tensor of int64, shape (B,)
+        Per-rollout seeds.
+    step : int
+        Time step (the noise counter).
+    stream : int
+        Noise stream.
+    shape : tuple of int
+        Per-rollout shape before the action axis (``(A,)`` or ``()``).
+    rho : Tensor of shape (2,)
+        Autocorrelation per action in ``[0, 1)``.
+    dtype : torch.dtype, default=torch.float32
+
+    Returns
+    -------
+    Tensor of shape (B, *shape, 2)
+        Marginally standard normal at every step.
+    """
+    z = normal(seeds, step, stream, (*shape, 2), dtype=dtype)
+    if previous is None:
+        return z
+    rho = rho.to(dtype)
+    return rho * previous + torch.sqrt(1.0 - rho * rho) * z
+
+
+def sample_actions(
+    dist: ActionDistribution, eps: Tensor | None, scale: Tensor | None = None
+) -> tuple[Tensor, Tensor]:
+    """Actions from per-vehicle Gaussians and standardised noise.
+
+    Parameters
+    ----------
+    dist : ActionDistribution
+        Fields of shape (B,) or (B, A).
+    eps : Tensor of shape (B, 2) or (B, A, 2), or None
+        Standardised noise (:func:`ar1_noise`); None returns the means.
+    scale : Tensor of shape (2,), optional
+        Factor on the standard deviations (default 1).
+
+    Returns
+    -------
+    accel : Tensor of shape (B,) or (B, A)
+        Acceleration [m/s^2].
+    steer : Tensor of shape (B,) or (B, A)
+        Steering [rad].
+    """
+    accel, steer = dist.accel_mean, dist.steer_mean
+    if eps is None:
+        return accel, steer
+    eps = eps.to(accel.dtype)
+    if scale is not None:
+        eps = eps * scale.to(accel.dtype)
+    accel = accel + reproducible_exp(0.5 * dist.accel_log_var) * eps[..., 0]
+    steer = steer + reproducible_exp(0.5 * dist.steer_log_var) * eps[..., 1]
+    return accel, steer
+
+
+def _no_reverse(accel: Tensor, speed: Tensor, dt: float) -> Tensor:
+    """Brake at most to a stop within the step (as the IDM drivers do)."""
+    return torch.maximum(accel, speed * (-1.0 / dt))
+
+
+class LearnedDriver:
+    """Every vehicle driven by the driver network, one ``xi`` per rollout.
+
+    Parameters
+    ----------
+    net : DriverNet
+        On the simulator's device.
+    xi : Tensor of shape (B, XI_DIM) or (XI_DIM,), optional
+        Last layer per rollout, or one for all; default ``net.default_xi``.
+    stochastic : bool, default=True
+        Sample the actions (the paper's generative model); False drives with
+        the mean actions.
+    allow_reverse : bool, default=False
+        False clips braking so that a vehicle stops rather than reverses
+        within a step (speed noise around 0 in congested traffic would
+        otherwise back cars up).
+
+    Notes
+    -----
+    The state is the last step's standardised noise (None before the first
+    step, and always None without sampling). The ego's column of the action is
+    replaced by the ego policy when the simulator is given one.
+    """
+
+    def __init__(
+        self,
+        net: DriverNet,
+        xi: Tensor | None = None,
+        *,
+        stochastic: bool = True,
+        allow_reverse: bool = False,
+    ) -> None:
+        xi = net.default_xi if xi is None else torch.as_tensor(xi)
+        if xi.shape[-1] != XI_DIM or xi.dim() not in (1, 2):
+            raise ValueError(
+                f"xi must have shape (B, {XI_DIM}) or ({XI_DIM},); got "
+                f"{tuple(xi.shape)}"
+            )
+        self.net = net
+        self.xi = xi.to(net.input_mean.device, net.input_mean.dtype)
+        self.stochastic = stochastic
+        self.allow_reverse = allow_reverse
+
+    def init(self, obs: Observation) -> None:
+        """Check that ``xi`` matches the batch; the noise starts at the first act.
+
+        Raises
+        ------
+        ValueError
+            If per-rollout ``xi`` has another batch size than ``obs``.
+        """
+        b = obs.state.batch_size
+        if self.xi.dim() == 2 and self.xi.shape[0] != b:
+            raise ValueError(
+                f"LearnedDriver got xi for {self.xi.shape[0]} rollouts and a batch "
+                f"of {b}; pass xi of shape ({b}, {XI_DIM})"
+            )
+        return None
+
+    def distribution(self, obs: Observation) -> ActionDistribution:
+        """Every vehicle's action distribution, fields of shape (B, A)."""
+        with torch.no_grad():
+            return self.net(features_from_observation(obs), self.xi)
+
+    def act(
+        self, obs: Observation, state: Tensor | None
+    ) -> tuple[Action, Tensor | None]:
+        """Sampled (or mean) actions of every vehicle, fields of shape (B, A)."""
+        dist = self.distribution(obs)
+        eps = None
+        if self.stochastic:
+            eps = ar1_noise(
+                state,
+                obs.seeds,
+                obs.step,
+                DRIVER_NOISE_STREAM,
+                (obs.state.n_vehicles,),
+                self.net.noise_correlation,
+                dtype=dist.accel_mean.dtype,
+            )
+        accel, steer = sample_actions(dist, eps, self.net.noise_scale)
+        dtype = obs.state.x.dtype
+        accel, steer = accel.to(dtype), steer.to(dtype)
+        if not self.allow_reverse:
+            accel = _no_reverse(accel, obs.state.speed, obs.dt)
+        return Action(accel=accel, steer=steer), eps
+
+
+class LearnedEgoPolicy:
+    """The lidar-based imitation ego: the driver network on vehicle 0.
+
+    Parameters
+    ----------
+    net : DriverNet
+    xi : Tensor of shape (XI_DIM,) or (B, XI_DIM), optional
+        Default ``net.default_xi``.
+    stochastic : bool, default=False
+        An ego under test usually acts with its mean action.
+    allow_reverse : bool, default=False
+        See :class:`LearnedDriver`.
+    """
+
+    def __init__(
+        self,
+        net: DriverNet,
+        xi: Tensor | None = None,
+        *,
+        stochastic: bool = False,
+        allow_reverse: bool = False,
+    ) -> None:
+        self.driver = LearnedDriver(
+            net, xi, stochastic=stochastic, allow_reverse=allow_reverse
+        )
+
+    def init(self, obs: Observation) -> None:
+        """See :meth:`LearnedDriver.init`."""
+        return self.driver.init(obs)
+
+    def act(
+        self, obs: Observation, state: Tensor | None
+    ) -> tuple[Action, Tensor | None]:
+        """The ego's action, fields of shape (B,)."""
+        d = self.driver
+        feats = features_from_observation(obs)[:, :1]  # (B, 1, F)
+        with torch.no_grad():
+            dist = d.net(feats, d.xi)[:, 0]
+        eps = None
+        if d.stochastic:
+            eps = ar1_noise(
+                state,
+                obs.seeds,
+                obs.step,
+                EGO_NOISE_STREAM,
+                (),
+                d.net.noise_correlation,
+                dtype=dist.accel_mean.dtype,
+            )
+        accel, steer = sample_actions(dist, eps, d.net.noise_scale)
+        dtype = obs.state.x.dtype
+        accel, steer = accel.to(dtype), steer.to(dtype)
+        if not d.allow_reverse:
+            accel = _no_reverse(accel, obs.state.speed[:, 0], obs.dt)
+        return Action(accel=accel, steer=steer), eps
+
+
+def _lidar_ego_factory(**kwargs: Any) -> LearnedEgoPolicy:
+    if "net" not in kwargs:
+        from avrisk.agents.drivers.store import load_driver_net
+
+        kwargs["net"] = load_driver_net()
+    return LearnedEgoPolicy(**kwargs)
+
+
+register_policy("lidar_imitation", _lidar_ego_factory)

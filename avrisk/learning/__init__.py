@@ -1,0 +1,45 @@
+"""Learning the environment drivers and their ``xi`` distribution from data.
+
+Modules (import them directly; this package imports nothing heavy on load):
+
+* :mod:`~avrisk.learning.ngsim` -- loaders for the NGSIM samples, in SI units;
+* :mod:`~avrisk.learning.demonstrations` -- (features, action) pairs from NGSIM
+  and from IDM+MOBIL drivers in our simulator, through the simulator's own
+  observation code;
+* :mod:`~avrisk.learning.dagger` -- expert labels on the states the learned
+  drivers visit;
+* :mod:`~avrisk.learning.replay` -- closed-loop replays of human car following
+  (realism, and the calibration of the sampling noise);
+* :mod:`~avrisk.learning.train` -- behaviour cloning, DAgger, the bootstrap
+  ensemble of heads, :func:`~avrisk.learning.train.train_drivers`;
+* :mod:`~avrisk.learning.glasso` -- Ledoit-Wolf + graphical lasso fit of a
+  sparse precision;
+* :mod:`~avrisk.learning.prior` -- the fitted ``xi ~ N(mu0, Sigma0)`` as the
+  engine's :class:`~avrisk.rare.FixedCovNormal`.
+
+What the data can and cannot teach
+----------------------------------
+The NGSIM files hold car-following pairs (a follower and its leader) and
+single-vehicle trajectories: they give human *longitudinal* behaviour and human
+lane keeping, but no lane changes with neighbours and no vehicles in other
+lanes. Those demonstrations come from IDM drivers in our own simulator
+(:func:`~avrisk.learning.demonstrations.simulated_demonstrations`), among
+IDM+MOBIL traffic that changes lanes around them, and DAgger labels the
+learner's own states with IDM as the expert: the learned drivers' reactions to
+neighbours and their emergency braking are therefore IDM's, not a human's.
+Their acceleration targets carry a lower loss weight than the human ones.
+
+The learned drivers do not change lanes: a unimodal Gaussian policy of the
+current state cannot represent the discrete decision (trained on MOBIL's lane
+changes it drifted half-way into the next lane and sideswiped), so lane
+changes are not demonstrated. The human rate (US-101, about 50 per
+vehicle-hour) is not matched.
+
+Not done (the paper's method)
+-----------------------------
+The paper trains its generators with model-based GAIL (Baram et al. 2017): a
+discriminator reward made differentiable through a learned forward model.
+Here the generators are trained by behaviour cloning with DAgger; neither GAIL
+nor model-based GAIL is implemented. The ensemble is one trunk with ``m``
+bootstrap heads (DESIGN.md §4), not ``m`` independently trained generators.
+"""

@@ -1,0 +1,533 @@
+"""Loaders for the NGSIM samples the project uses, in SI units.
+
+Three files (provenance in the data folder's ``SOURCE.md``), each read into a
+frozen dataclass of equal-length numpy columns, one row per 0.1 s sample:
+
+* :func:`load_i80_pairs` -- I-80 leader-follower car-following pairs
+  (``i80_cf_pairs.csv.gz``). **The file is in feet**: positions [ft],
+  speeds [ft/s] and accelerations [ft/s^2] are converted to m, m/s, m/s^2
+  (``FT = 0.3048`` m exactly). Longitudinal only: no lateral position.
+* :func:`load_i80_lateral` -- I-80 16:00-16:15 car-following pairs with
+  lateral positions (``i80_0400_0415_emd_cf_pairs.parquet``); already SI.
+* :func:`load_us101` -- US-101 single-vehicle trajectories with lateral
+  positions (``us101_vehicle_subset.csv.gz``); already SI. The vehicles around
+  them are not in the file.
+
+NGSIM frame: ``Local_Y`` runs along the road in the direction of travel and
+marks the *front* centre of the vehicle; ``Local_X`` is lateral, from the
+left-most edge of the section, increasing to the **right**; lane 1 is the
+left-most lane. (avrisk's road frame has ``y`` increasing to the left and lane
+0 on the right; :mod:`avrisk.learning.demonstrations` converts.)
+
+One I-80 period (17:15-17:30) is held back by the project for independent
+evaluation and is not in these files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Self
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pa_csv
+import pyarrow.parquet as pq
+from numpy.typing import NDArray
+
+__all__ = [
+    "FT",
+    "I80_LANE_WIDTH",
+    "I80_N_LANES",
+    "NGSIM_DIR_ENV",
+    "US101_LANE_WIDTH",
+    "CarFollowingPairs",
+    "LateralPairs",
+    "VehicleTrajectories",
+    "episode_bounds",
+    "lateral_pair_split",
+    "load_i80_lateral",
+    "load_i80_pairs",
+    "load_us101",
+    "ngsim_dir",
+]
+
+#: One international foot [m].
+FT = 0.3048
+#: Main-line lanes of I-80 in the study area (lane 7 is the on-ramp).
+I80_N_LANES = 6
+#: Nominal lane width of I-80 and US-101 (12 ft) [m].
+I80_LANE_WIDTH = US101_LANE_WIDTH = 12 * FT
+#: Environment variable naming the folder that holds the NGSIM files.
+NGSIM_DIR_ENV = "AVRISK_NGSIM_DIR"
+#: Where the project keeps its copy (used when the variable is unset).
+_SHARED_NGSIM_DIR = Path("/work/shared/data/ngsim")
+
+I80_PAIRS_FILE = "i80_cf_pairs.csv.gz"
+I80_LATERAL_FILE = "i80_0400_0415_emd_cf_pairs.parquet"
+US101_FILE = "us101_vehicle_subset.csv.gz"
+
+IntArray = NDArray[np.int64]
+FloatArray = NDArray[np.float64]
+
+
+def ngsim_dir(path: str | Path | None = None) -> Path:
+    """The folder holding the NGSIM files.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        Explicit folder; else ``$AVRISK_NGSIM_DIR``; else the project's shared
+        data folder.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FileNotFoundError
+        If the folder does not exist; the message says how to point to one.
+    """
+    candidates = [path, os.environ.get(NGSIM_DIR_ENV), _SHARED_NGSIM_DIR]
+    for c in candidates:
+        if c is not None:
+            p = Path(c)
+            if p.is_dir():
+                return p
+            if c is not _SHARED_NGSIM_DIR:
+                raise FileNotFoundError(f"NGSIM folder {p} does not exist")
+    raise FileNotFoundError(
+        f"no NGSIM data folder: pass data_dir= or set ${NGSIM_DIR_ENV} to the "
+        "folder holding i80_cf_pairs.csv.gz (see its SOURCE.md)"
+    )
+
+
+class _Columns:
+    """Shared helpers of the column dataclasses (all fields: arrays of one length)."""
+
+    def __len__(self) -> int:
+        return len(getattr(self, dataclasses.fields(self)[0].name))  # type: ignore[arg-type]
+
+    def _check(self) -> None:
+        lengths = {f.name: len(getattr(self, f.name)) for f in dataclasses.fields(self)}  # type: ignore[arg-type]
+        if len(set(lengths.values())) > 1:
+            raise ValueError(
+                f"{type(self).__name__}: columns differ in length {lengths}"
+            )
+
+    def take(self, index: Any) -> Self:
+        """Rows ``index`` (a mask, slice or integer array) of every column."""
+        return dataclasses.replace(
+            self,  # type: ignore[type-var]
+            **{f.name: getattr(self, f.name)[index] for f in dataclasses.fields(self)},  # type: ignore[arg-type]
+        )
+
+
+@dataclass(frozen=True)
+class CarFollowingPairs(_Columns):
+    """I-80 leader-follower pairs (``i80_cf_pairs.csv.gz``), in SI units.
+
+    Every column is an array of shape (N,), rows sorted by ``pair_id`` then
+    ``t``. Positions mark the front bumper (NGSIM ``Local_Y``).
+
+    Attributes
+    ----------
+    pair_id : ndarray of int64
+        Pair (episode) id, unique in the file.
+    period : ndarray of str
+        Recording period, e.g. ``"0400pm-0415pm"``.
+    follower_id, leader_id : ndarray of int64
+        NGSIM ``Vehicle_ID`` within the period.
+    lane : ndarray of int64
+        NGSIM lane (1 = left-most); -1 where the source does not say.
+    split : ndarray of str
+        ``"train"`` or ``"test"``, from the source repository.
+    in_manifest : ndarray of bool
+        The pair is listed in the source's curated manifest.
+    t : ndarray of float64
+        Time from the start of the period [s].
+    x_follower, x_leader : ndarray of float64
+        Position along the road [m] (file: ft).
+    v_follower, v_leader : ndarray of float64
+        Speed [m/s] (file: ft/s).
+    a_follower, a_leader : ndarray of float64
+        Acceleration [m/s^2] (file: ft/s^2).
+    leader_length : ndarray of float64
+        Leader length [m] (file: ft).
+    gap : ndarray of float64
+        Bumper-to-bumper gap ``x_leader - x_follower - leader_length`` [m]
+        (the file's ``spacing``, ft).
+    dv : ndarray of float64
+        Approach rate ``v_follower - v_leader`` [m/s] (file: ft/s).
+    """
+
+    pair_id: IntArray
+    period: NDArray[np.str_]
+    follower_id: IntArray
+    leader_id: IntArray
+    lane: IntArray
+    split: NDArray[np.str_]
+    in_manifest: NDArray[np.bool_]
+    t: FloatArray  # s
+    x_follower: FloatArray  # m
+    v_follower: FloatArray  # m/s
+    a_follower: FloatArray  # m/s^2
+    x_leader: FloatArray  # m
+    v_leader: FloatArray  # m/s
+    a_leader: FloatArray  # m/s^2
+    leader_length: FloatArray  # m
+    gap: FloatArray  # m
+    dv: FloatArray  # m/s
+
+    def __post_init__(self) -> None:
+        self._check()
+
+
+@dataclass(frozen=True)
+class LateralPairs(_Columns):
+    """I-80 16:00-16:15 pairs with lateral positions (EMD parquet), SI units.
+
+    Every column is an array of shape (N,), rows sorted by ``pair_id`` then
+    ``t``; the follower's columns are unprefixed.
+
+    Attributes
+    ----------
+    pair_id : ndarray of str
+        ``"<follower>-<leader>"``.
+    follower_id, leader_id : ndarray of int64
+        NGSIM ``Vehicle_ID`` (16:00-16:15).
+    frame : ndarray of int64
+        NGSIM frame (0.1 s).
+    t : ndarray of float64
+        Time from the start of the pair [s].
+    lateral : ndarray of float64
+        ``Local_X``: front centre from the left edge of the section, to the
+        right [m].
+    x : ndarray of float64
+        ``Local_Y``: front centre along the road [m].
+    length, width : ndarray of float64
+        Follower size [m].
+    vehicle_class : ndarray of int64
+        1 motorcycle, 2 car, 3 truck.
+    speed : ndarray of float64
+        [m/s].
+    accel : ndarray of float64
+        [m/s^2].
+    lane : ndarray of int64
+        NGSIM lane (1 = left-most).
+    space_headway : ndarray of float64
+        Front-to-front distance to the leader [m].
+    time_headway : ndarray of float64
+        [s].
+    leader_x : ndarray of float64
+        Leader's ``Local_Y`` [m].
+    leader_length, leader_width : ndarray of float64
+        [m].
+    leader_class : ndarray of int64
+    leader_speed : ndarray of float64
+        [m/s].
+    leader_accel : ndarray of float64
+        [m/s^2].
+    """
+
+    pair_id: NDArray[np.str_]
+    follower_id: IntArray
+    leader_id: IntArray
+    frame: IntArray
+    t: FloatArray  # s
+    lateral: FloatArray  # m
+    x: FloatArray  # m
+    length: FloatArray  # m
+    width: FloatArray  # m
+    vehicle_class: IntArray
+    speed: FloatArray  # m/s
+    accel: FloatArray  # m/s^2
+    lane: IntArray
+    space_headway: FloatArray  # m
+    time_headway: FloatArray  # s
+    leader_x: FloatArray  # m
+    leader_length: FloatArray  # m
+    leader_width: FloatArray  # m
+    leader_class: IntArray
+    leader_speed: FloatArray  # m/s
+    leader_accel: FloatArray  # m/s^2
+
+    def __post_init__(self) -> None:
+        self._check()
+
+    @property
+    def gap(self) -> FloatArray:
+        """Bumper-to-bumper gap to the leader [m], shape (N,)."""
+        return self.space_headway - self.leader_length
+
+
+@dataclass(frozen=True)
+class VehicleTrajectories(_Columns):
+    """US-101 single-vehicle trajectories (``us101_vehicle_subset.csv.gz``), SI.
+
+    Every column is an array of shape (N,), rows sorted by ``vehicle_id`` then
+    ``frame``. These are NGSIM's raw (unsmoothed) trajectories.
+
+    Attributes
+    ----------
+    vehicle_id : ndarray of int64
+    frame : ndarray of int64
+        NGSIM frame (0.1 s).
+    t : ndarray of float64
+        ``Global_Time`` [s] since the Unix epoch (file: ms).
+    lateral : ndarray of float64
+        ``Local_X`` [m], to the right from the left edge.
+    x : ndarray of float64
+        ``Local_Y`` [m], front centre along the road.
+    speed : ndarray of float64
+        [m/s].
+    accel : ndarray of float64
+        [m/s^2] (NGSIM clips it at about +-3.45).
+    space_headway : ndarray of float64
+        Front-to-front distance to the leader [m]; NaN when there is none
+        (file: 0).
+    time_headway : ndarray of float64
+        [s]; NaN when there is no leader (file: 9999.99).
+
+    Notes
+    -----
+    The file's ``H_v_Vel(m)`` and ``H_v_Acc(m)`` columns are undocumented by
+    their author and are not loaded.
+    """
+
+    vehicle_id: IntArray
+    frame: IntArray
+    t: FloatArray  # s
+    lateral: FloatArray  # m
+    x: FloatArray  # m
+    speed: FloatArray  # m/s
+    accel: FloatArray  # m/s^2
+    space_headway: FloatArray  # m
+    time_headway: FloatArray  # s
+
+    def __post_init__(self) -> None:
+        self._check()
+
+    @property
+    def lane(self) -> IntArray:
+        """Lane from the lateral position, 1 = left-most (12 ft lanes), shape (N,)."""
+        return np.floor(self.lateral / US101_LANE_WIDTH).astype(np.int64) + 1
+
+
+def episode_bounds(keys: Sequence[Any] | NDArray[Any]) -> tuple[IntArray, IntArray]:
+    """Start and end (exclusive) rows of the runs of equal consecutive keys.
+
+    Parameters
+    ----------
+    keys : array_like of shape (N,)
+        Episode key per row (rows of one episode contiguous).
+
+    Returns
+    -------
+    starts, ends : ndarray of int64, shape (E,)
+
+    Examples
+    --------
+    >>> starts, ends = episode_bounds([5, 5, 7, 7, 7, 2])
+    >>> starts.tolist(), ends.tolist()
+    ([0, 2, 5], [2, 5, 6])
+    """
+    k = np.asarray(keys)
+    if k.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    change = np.flatnonzero(k[1:] != k[:-1]) + 1
+    starts = np.r_[0, change].astype(np.int64)
+    ends = np.r_[change, k.size].astype(np.int64)
+    return starts, ends
+
+
+def _col(table: pa.Table, name: str, dtype: Any) -> NDArray[Any]:
+    col = table.column(name)
+    if pa.types.is_dictionary(col.type):
+        col = col.cast(pa.string())
+    arr = col.to_numpy(zero_copy_only=False)
+    if dtype is str:
+        return np.asarray(arr, dtype=np.str_)
+    return np.asarray(arr, dtype=dtype)
+
+
+def _require(table: pa.Table, names: Sequence[str], path: Path) -> None:
+    missing = [n for n in names if n not in table.column_names]
+    if missing:
+        raise ValueError(f"{path} lacks the columns {missing}; see SOURCE.md")
+
+
+def load_i80_pairs(path: str | Path | None = None) -> CarFollowingPairs:
+    """Read the I-80 car-following pairs, converting feet to metres.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        The ``.csv`` or ``.csv.gz`` file; default ``i80_cf_pairs.csv.gz`` in
+        :func:`ngsim_dir`.
+
+    Returns
+    -------
+    CarFollowingPairs
+        Sorted by pair and time.
+    """
+    path = Path(path) if path is not None else ngsim_dir() / I80_PAIRS_FILE
+    types = {"lane_id": pa.float64(), "period": pa.string(), "split": pa.string()}
+    table = pa_csv.read_csv(
+        path, convert_options=pa_csv.ConvertOptions(column_types=types)
+    )
+    ft_cols = ["x_follower", "x_leader", "leader_length", "spacing"]
+    fts_cols = ["v_follower", "v_leader", "dv", "a_follower", "a_leader"]
+    _require(
+        table,
+        ["pair_id", "period", "follower_id", "leader_id", "lane_id", "split",
+         "in_manifest", "t", *ft_cols, *fts_cols],
+        path,
+    )  # fmt: skip
+    lane = _col(table, "lane_id", np.float64)
+    order = np.lexsort((_col(table, "t", np.float64), _col(table, "pair_id", np.int64)))
+
+    def m(name: str) -> FloatArray:
+        return _col(table, name, np.float64)[order] * FT
+
+    return CarFollowingPairs(
+        pair_id=_col(table, "pair_id", np.int64)[order],
+        period=_col(table, "period", str)[order],
+        follower_id=_col(table, "follower_id", np.int64)[order],
+        leader_id=_col(table, "leader_id", np.int64)[order],
+        lane=np.where(np.isnan(lane), -1, np.nan_to_num(lane)).astype(np.int64)[order],
+        split=_col(table, "split", str)[order],
+        in_manifest=_col(table, "in_manifest", np.int64)[order] != 0,
+        t=_col(table, "t", np.float64)[order],
+        x_follower=m("x_follower"),
+        v_follower=m("v_follower"),
+        a_follower=m("a_follower"),
+        x_leader=m("x_leader"),
+        v_leader=m("v_leader"),
+        a_leader=m("a_leader"),
+        leader_length=m("leader_length"),
+        gap=m("spacing"),
+        dv=m("dv"),
+    )
+
+
+def load_i80_lateral(path: str | Path | None = None) -> LateralPairs:
+    """Read the I-80 16:00-16:15 pairs with lateral positions (already SI).
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        The ``.parquet`` file; default ``i80_0400_0415_emd_cf_pairs.parquet`` in
+        :func:`ngsim_dir`.
+
+    Returns
+    -------
+    LateralPairs
+        Sorted by pair and time.
+    """
+    path = Path(path) if path is not None else ngsim_dir() / I80_LATERAL_FILE
+    table = pq.read_table(path)
+    names = {
+        "vehicle_id": "follower_id", "preceding": "leader_id", "frame_id": "frame",
+        "time": "t", "local_x": "lateral", "local_y": "x", "v_length": "length",
+        "v_width": "width", "v_class": "vehicle_class", "v_vel": "speed",
+        "v_acc": "accel", "lane_id": "lane", "space_headway": "space_headway",
+        "time_headway": "time_headway", "preceding_local_y": "leader_x",
+        "preceding_length": "leader_length", "preceding_width": "leader_width",
+        "preceding_class": "leader_class", "preceding_vel": "leader_speed",
+        "preceding_acc": "leader_accel",
+    }  # fmt: skip
+    _require(table, ["pair_id", *names], path)
+    ints = {
+        "follower_id",
+        "leader_id",
+        "frame",
+        "vehicle_class",
+        "lane",
+        "leader_class",
+    }
+    cols: dict[str, NDArray[Any]] = {"pair_id": _col(table, "pair_id", str)}
+    for src, dst in names.items():
+        if dst in ints:
+            cols[dst] = np.rint(_col(table, src, np.float64)).astype(np.int64)
+        else:
+            cols[dst] = _col(table, src, np.float64)
+    order = np.lexsort((cols["t"], cols["pair_id"]))
+    return LateralPairs(**{k: v[order] for k, v in cols.items()})
+
+
+def load_us101(path: str | Path | None = None) -> VehicleTrajectories:
+    """Read the US-101 single-vehicle trajectories (already SI).
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        The ``.csv`` or ``.csv.gz`` file; default ``us101_vehicle_subset.csv.gz``
+        in :func:`ngsim_dir`.
+
+    Returns
+    -------
+    VehicleTrajectories
+        Sorted by vehicle and frame.
+    """
+    path = Path(path) if path is not None else ngsim_dir() / US101_FILE
+    table = pa_csv.read_csv(path)
+    names = ["Vehicle_ID", "Frame_ID", "Global_Time", "local_x(m)", "local_y(m)",
+             "v_Vel(m)", "v_Acc(m)", "Space_Headway(m)", "Time_Headway"]  # fmt: skip
+    _require(table, names, path)
+    vid = _col(table, "Vehicle_ID", np.int64)
+    frame = _col(table, "Frame_ID", np.int64)
+    order = np.lexsort((frame, vid))
+    space = _col(table, "Space_Headway(m)", np.float64)
+    timeh = _col(table, "Time_Headway", np.float64)
+    return VehicleTrajectories(
+        vehicle_id=vid[order],
+        frame=frame[order],
+        t=_col(table, "Global_Time", np.float64)[order] * 1e-3,
+        lateral=_col(table, "local_x(m)", np.float64)[order],
+        x=_col(table, "local_y(m)", np.float64)[order],
+        speed=_col(table, "v_Vel(m)", np.float64)[order],
+        accel=_col(table, "v_Acc(m)", np.float64)[order],
+        space_headway=np.where(space > 0, space, np.nan)[order],
+        time_headway=np.where(timeh < 9999.0, timeh, np.nan)[order],
+    )
+
+
+def lateral_pair_split(
+    lateral: LateralPairs, pairs: CarFollowingPairs, test_fraction: float = 0.2
+) -> NDArray[np.str_]:
+    """Train/test split of the lateral pairs that does not leak through I-80 pairs.
+
+    Both files cover 16:00-16:15 with the same NGSIM vehicle ids (different
+    reconstructions). A lateral pair is ``"test"`` if its follower is a test
+    follower of the car-following pairs in that period, or if a fixed hash of
+    the follower id falls in ``test_fraction`` and the follower is not a train
+    follower there; otherwise ``"train"``.
+
+    Parameters
+    ----------
+    lateral : LateralPairs
+    pairs : CarFollowingPairs
+    test_fraction : float, default=0.2
+
+    Returns
+    -------
+    ndarray of str, shape (N,)
+        Per row of ``lateral``.
+    """
+    in_period = np.char.startswith(pairs.period, "0400")
+    test_ids = set(pairs.follower_id[in_period & (pairs.split == "test")].tolist())
+    train_ids = set(pairs.follower_id[in_period & (pairs.split == "train")].tolist())
+    out = np.full(len(lateral), "train", dtype="<U5")
+    for vid in np.unique(lateral.follower_id):
+        rows = lateral.follower_id == vid
+        v = int(vid)
+        hashed = zlib.crc32(f"i80-0400-{v}".encode()) / 2**32 < test_fraction
+        if v in test_ids or (hashed and v not in train_ids):
+            out[rows] = "test"
+    return out

@@ -1,0 +1,396 @@
+"""Closed-loop replays of human car following, and the noise calibration on them.
+
+A *window* is ``T`` steps of one NGSIM car-following episode. In a replay the
+follower starts from its recorded state and is driven by a model in the
+simulator while its leader replays the recorded speed profile (a classic
+car-following validation; the follower's actions change its own future
+states, so it is closed loop). Comparing the simulated follower with the
+recorded one measures realism; :func:`calibrate_noise` uses replays of
+*training* windows to choose how much of the network's action noise to sample.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from numpy.typing import NDArray
+from scipy import stats
+from torch import Tensor
+
+from avrisk.agents.drivers.driver import LearnedDriver
+from avrisk.agents.drivers.network import DriverNet
+from avrisk.agents.policy import Action
+from avrisk.learning.demonstrations import (
+    DEFAULT_WIDTH,
+    LaneCentres,
+    lateral_tracks,
+)
+from avrisk.learning.ngsim import (
+    I80_N_LANES,
+    CarFollowingPairs,
+    LateralPairs,
+    episode_bounds,
+)
+from avrisk.sim import Road, SimConfig, Simulator, VehicleState
+from avrisk.sim.observation import Observation
+
+__all__ = [
+    "CarFollowingWindows",
+    "ReplayLeader",
+    "ReplayResult",
+    "calibrate_noise",
+    "car_following_windows",
+    "replay",
+    "replay_distances",
+]
+
+DT = 0.1  # [s] NGSIM sampling period and simulator step
+
+
+@dataclass(frozen=True)
+class CarFollowingWindows:
+    """Recorded car-following windows: ``W`` windows of ``T`` steps.
+
+    Attributes
+    ----------
+    v_f, v_l : ndarray of shape (W, T+1)
+        Follower and leader speed [m/s].
+    gap : ndarray of shape (W, T+1)
+        Bumper-to-bumper gap [m].
+    offset : ndarray of shape (W, T+1)
+        Follower's lateral offset from its lane centre [m] (0 where the data
+        have no lateral position).
+    has_lateral : ndarray of bool, shape (W,)
+        The window comes from the lateral file.
+    len_f, len_l, width_f : ndarray of shape (W,)
+        Follower length, leader length, follower width [m].
+    lane : ndarray of int, shape (W,)
+        avrisk lane index on the scenario road.
+    heading : ndarray of shape (W,)
+        Follower's initial heading offset [rad].
+    """
+
+    v_f: NDArray[np.float64]
+    v_l: NDArray[np.float64]
+    gap: NDArray[np.float64]
+    offset: NDArray[np.float64]
+    has_lateral: NDArray[np.bool_]
+    len_f: NDArray[np.float64]
+    len_l: NDArray[np.float64]
+    width_f: NDArray[np.float64]
+    lane: NDArray[np.int64]
+    heading: NDArray[np.float64]
+
+    def __len__(self) -> int:
+        return len(self.len_f)
+
+    @property
+    def n_steps(self) -> int:
+        """Steps ``T`` per window."""
+        return self.v_f.shape[1] - 1
+
+    def take(self, index: Any) -> CarFollowingWindows:
+        """Windows ``index``."""
+        return dataclasses.replace(
+            self,
+            **{f.name: getattr(self, f.name)[index] for f in dataclasses.fields(self)},
+        )
+
+
+def _cut(starts: NDArray[Any], ends: NDArray[Any], n_steps: int) -> Iterator[int]:
+    for s, e in zip(starts, ends, strict=True):
+        yield from range(s, e - n_steps, n_steps)
+
+
+def car_following_windows(
+    pairs: CarFollowingPairs,
+    lateral: LateralPairs,
+    centres: LaneCentres,
+    n_steps: int,
+    road: Road,
+) -> CarFollowingWindows:
+    """Non-overlapping windows of ``n_steps`` from both I-80 files.
+
+    Parameters
+    ----------
+    pairs : CarFollowingPairs
+        Already restricted to the wanted split.
+    lateral : LateralPairs
+        Already restricted to the wanted split.
+    centres : LaneCentres
+        Lane centre lines (fitted on the training split).
+    n_steps : int
+        ``T``.
+    road : Road
+        The scenario road (lanes mapped as in the demonstrations).
+
+    Returns
+    -------
+    CarFollowingWindows
+    """
+    cols: dict[str, list[Any]] = {
+        f: [] for f in CarFollowingWindows.__dataclass_fields__
+    }
+    median_len = float(np.median(pairs.leader_length)) if len(pairs) else 4.5
+    s, e = episode_bounds(pairs.pair_id)
+    for w in _cut(s, e, n_steps):
+        sl = slice(w, w + n_steps + 1)
+        lane = int(pairs.lane[w])
+        cols["v_f"].append(pairs.v_follower[sl])
+        cols["v_l"].append(pairs.v_leader[sl])
+        cols["gap"].append(pairs.gap[sl])
+        cols["offset"].append(np.zeros(n_steps + 1))
+        cols["has_lateral"].append(False)
+        cols["len_f"].append(median_len)
+        cols["len_l"].append(pairs.leader_length[w])
+        cols["width_f"].append(DEFAULT_WIDTH)
+        ok = 1 <= lane <= I80_N_LANES
+        cols["lane"].append(min(I80_N_LANES - lane, road.n_lanes - 1) if ok else 2)
+        cols["heading"].append(0.0)
+    if len(lateral):
+        offset, heading, _ = lateral_tracks(lateral, centres)
+        s, e = episode_bounds(lateral.pair_id)
+        for w in _cut(s, e, n_steps):
+            sl = slice(w, w + n_steps + 1)
+            cols["v_f"].append(lateral.speed[sl])
+            cols["v_l"].append(lateral.leader_speed[sl])
+            cols["gap"].append(lateral.gap[sl])
+            cols["offset"].append(offset[sl])
+            cols["has_lateral"].append(True)
+            cols["len_f"].append(lateral.length[w])
+            cols["len_l"].append(lateral.leader_length[w])
+            cols["width_f"].append(lateral.width[w])
+            cols["lane"].append(
+                min(I80_N_LANES - int(lateral.lane[w]), road.n_lanes - 1)
+            )
+            cols["heading"].append(heading[w])
+    shape = (0, n_steps + 1)
+    arrays = {
+        k: np.asarray(v)
+        if v
+        else np.zeros(shape if k in ("v_f", "v_l", "gap", "offset") else 0)
+        for k, v in cols.items()
+    }
+    return CarFollowingWindows(**arrays)
+
+
+class ReplayLeader:
+    """Vehicle 1 replays an acceleration profile; vehicle 0 is driven by a model.
+
+    Parameters
+    ----------
+    follower : DriverModel
+        Acts for both vehicles; its vehicle-1 action is overridden.
+    leader_accel : Tensor of shape (W, T)
+        Leader acceleration per step [m/s^2] (steering 0: straight ahead).
+    """
+
+    def __init__(self, follower: Any, leader_accel: Tensor) -> None:
+        self.follower = follower
+        self.leader_accel = leader_accel
+
+    def init(self, obs: Observation) -> Any:
+        """The follower model's initial state."""
+        return self.follower.init(obs)
+
+    def act(self, obs: Observation, state: Any) -> tuple[Action, Any]:
+        """Follower's action in column 0, the replayed leader's in column 1."""
+        action, state = self.follower.act(obs, state)
+        accel, steer = action.accel.clone(), action.steer.clone()
+        accel[:, 1] = self.leader_accel[:, obs.step].to(accel)
+        steer[:, 1] = 0.0
+        return Action(accel=accel, steer=steer), state
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """The simulated follower in every window.
+
+    Attributes
+    ----------
+    v, v_l, gap, offset : ndarray of shape (W, T+1)
+        Follower speed, leader speed [m/s], gap [m], lateral offset from the
+        initial lane centre [m].
+    alive : ndarray of bool, shape (W, T+1)
+        Frame simulated (false after a collision with the leader).
+    crash, offroad : ndarray of bool, shape (W,)
+    """
+
+    v: NDArray[np.float64]
+    v_l: NDArray[np.float64]
+    gap: NDArray[np.float64]
+    offset: NDArray[np.float64]
+    alive: NDArray[np.bool_]
+    crash: NDArray[np.bool_]
+    offroad: NDArray[np.bool_]
+
+
+def replay(
+    windows: CarFollowingWindows, follower_model: Any, road: Road, *, seed: int = 0
+) -> ReplayResult:
+    """Simulate the follower of every window with a driver model.
+
+    Parameters
+    ----------
+    windows : CarFollowingWindows
+    follower_model : DriverModel
+        Built for ``B = len(windows)`` rollouts of 2 vehicles.
+    road : Road
+    seed : int, default=0
+        Rollout ``w`` has seed ``seed * 1_000_003 + w``.
+
+    Returns
+    -------
+    ReplayResult
+    """
+    n = len(windows)
+    w = windows
+    centre = (w.lane + 0.5) * road.lane_width
+    x_l = 0.5 * w.len_f + w.gap[:, 0] + 0.5 * w.len_l
+    zeros = np.zeros(n)
+    follower = [
+        zeros,
+        centre + w.offset[:, 0],
+        w.heading,
+        w.v_f[:, 0],
+        w.len_f,
+        w.width_f,
+    ]
+    leader = [x_l, centre, zeros, w.v_l[:, 0], w.len_l, np.full(n, DEFAULT_WIDTH)]
+    rows = np.stack([np.stack(follower, -1), np.stack(leader, -1)], axis=1)
+    state = VehicleState.from_rows(rows.tolist())
+    leader_accel = torch.as_tensor(np.diff(w.v_l, axis=1) / DT, dtype=torch.float32)
+    sim = Simulator(road, SimConfig(horizon=w.n_steps * DT, n_ttc_rays=1))
+    seeds = torch.as_tensor(seed * 1_000_003 + np.arange(n), dtype=torch.int64)
+    driver = ReplayLeader(follower_model, leader_accel)
+    res = sim.run(state, driver, seeds, record_trace=True)
+    tr = res.trace
+    gap = (tr.x[..., 1] - tr.x[..., 0]).double().numpy() - 0.5 * (w.len_f + w.len_l)[
+        :, None
+    ]
+    return ReplayResult(
+        v=tr.speed[..., 0].double().numpy(),
+        v_l=tr.speed[..., 1].double().numpy(),
+        gap=gap,
+        offset=tr.y[..., 0].double().numpy() - centre[:, None],
+        alive=tr.alive.numpy(),
+        crash=res.crash.numpy(),
+        offroad=res.offroad.numpy(),
+    )
+
+
+def _accel_jerk(
+    v: NDArray[Any], alive: NDArray[Any]
+) -> tuple[NDArray[Any], NDArray[Any]]:
+    a = np.diff(v, axis=1) / DT
+    ok_a = alive[:, 1:] & alive[:, :-1]
+    j = np.diff(a, axis=1) / DT
+    ok_j = ok_a[:, 1:] & ok_a[:, :-1]
+    return a[ok_a], j[ok_j]
+
+
+def replay_distances(
+    windows: CarFollowingWindows, result: ReplayResult
+) -> dict[str, float]:
+    """Kolmogorov-Smirnov distances between simulated and recorded followers.
+
+    Parameters
+    ----------
+    windows : CarFollowingWindows
+    result : ReplayResult
+
+    Returns
+    -------
+    dict of str to float
+        ``"speed"``, ``"accel"``, ``"jerk"``, ``"gap"``, ``"offset"`` (lateral
+        windows only) KS statistics, and ``"crash_rate"``: the fraction of
+        windows that end in a collision with the leader.
+    """
+    human_alive = np.ones_like(windows.v_f, dtype=bool)
+    ha, hj = _accel_jerk(windows.v_f, human_alive)
+    sa, sj = _accel_jerk(result.v, result.alive)
+    lat = windows.has_lateral
+    out = {
+        "speed": stats.ks_2samp(result.v[result.alive], windows.v_f.ravel()).statistic,
+        "accel": stats.ks_2samp(sa, ha).statistic,
+        "jerk": stats.ks_2samp(sj, hj).statistic,
+        "gap": stats.ks_2samp(result.gap[result.alive], windows.gap.ravel()).statistic,
+        "crash_rate": float(result.crash.mean()),
+    }
+    if lat.any():
+        sim_off = result.offset[lat][result.alive[lat]]
+        out["offset"] = stats.ks_2samp(sim_off, windows.offset[lat].ravel()).statistic
+    return {k: float(v) for k, v in out.items()}
+
+
+def calibrate_noise(
+    net: DriverNet,
+    windows: CarFollowingWindows,
+    road: Road,
+    *,
+    grid: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3, 0.5, 1.0),
+    crash_penalty: float = 5.0,
+    seed: int = 0,
+) -> tuple[tuple[float, float], list[dict[str, float]]]:
+    """Choose ``net.noise_scale`` by closed-loop replays of human windows.
+
+    Coordinate search over ``grid``: first the acceleration scale (steering
+    noise off) by ``KS(accel) + KS(jerk) + KS(speed) + KS(gap) +
+    crash_penalty * crash_rate``, then the steering scale (acceleration scale
+    fixed) by ``KS(offset) + crash_penalty * crash_rate``. The network's
+    ``noise_correlation`` is used as it is.
+
+    Parameters
+    ----------
+    net : DriverNet
+        Its ``noise_scale`` is set to the result.
+    windows : CarFollowingWindows
+        Training windows (never the evaluation ones).
+    road : Road
+    grid : tuple of float
+        Candidate scales.
+    crash_penalty : float, default=5.0
+        Weight of the collision rate in both objectives.
+    seed : int, default=0
+
+    Returns
+    -------
+    scale : tuple of float
+        ``(c_accel, c_steer)``.
+    trials : list of dict
+        Every evaluated candidate with its distances.
+    """
+    done: dict[tuple[float, float], dict[str, float]] = {}
+
+    def run(c_a: float, c_s: float) -> dict[str, float]:
+        if (c_a, c_s) not in done:
+            net.noise_scale.copy_(torch.tensor([c_a, c_s]))
+            res = replay(windows, LearnedDriver(net), road, seed=seed)
+            done[c_a, c_s] = {
+                "c_accel": c_a,
+                "c_steer": c_s,
+                **replay_distances(windows, res),
+            }
+        return done[c_a, c_s]
+
+    def longitudinal(r: dict[str, float]) -> float:
+        return (
+            r["accel"]
+            + r["jerk"]
+            + r["speed"]
+            + r["gap"]
+            + crash_penalty * r["crash_rate"]
+        )
+
+    def lateral(r: dict[str, float]) -> float:
+        return r.get("offset", 0.0) + crash_penalty * r["crash_rate"]
+
+    best_a = min(grid, key=lambda c: longitudinal(run(c, 0.0)))
+    best_s = min(grid, key=lambda c: lateral(run(best_a, c)))
+    net.noise_scale.copy_(torch.tensor([best_a, best_s]))
+    return (float(best_a), float(best_s)), list(done.values())

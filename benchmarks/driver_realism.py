@@ -1,0 +1,479 @@
+"""How human-like are the learned drivers? Closed loop vs held-out human data.
+
+Two checks, both in the avrisk simulator, each printed as a markdown table with
+the same figures for the IDM+MOBIL drivers next to the learned ones.
+
+A. Car following on held-out NGSIM I-80 episodes (the ``test`` split of the
+   I-80 pairs and of the lateral pairs; never trained on). Each episode is cut
+   into 15 s windows. The simulated follower starts from the recorded state;
+   the leader replays its recorded speed profile; the follower is driven by
+   the learned network (``mu0``, or a fresh ``xi ~ N(mu0, Sigma0)`` per window;
+   actions sampled) or by IDM (the scenario's ``normal`` driver, lane changes
+   off). Distributions
+   of speed, acceleration, jerk, gap and TTC are compared with the human
+   follower's by the Kolmogorov-Smirnov statistic and the 1-Wasserstein
+   distance; rates of hard braking (< -3 m/s^2), lane changes, collisions
+   and road departures are per vehicle-hour.
+
+B. Multi-lane traffic (6 lanes, 6 vehicles, random scenes unseen in
+   training, 20 s): learned drivers for every vehicle vs IDM+MOBIL, with the
+   human lane-change rate and speed/acceleration distributions of the US-101
+   file as the human reference (raw NGSIM: accelerations are taken from the
+   speed smoothed over 1 s, and jerk is not compared).
+
+Usage::
+
+    .venv/bin/python benchmarks/driver_realism.py            # shipped drivers
+    .venv/bin/python benchmarks/driver_realism.py --net DIR/driver_net.npz \
+        --prior DIR/xi_prior.npz --scenes 128
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+import numpy as np
+import torch
+from scipy import stats
+from scipy.ndimage import uniform_filter1d
+
+from avrisk.agents.drivers.driver import LearnedDriver
+from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
+from avrisk.agents.idm import IDMDriver, IDMParams
+from avrisk.learning.demonstrations import LaneCentres, random_highway_scenes
+from avrisk.learning.ngsim import (
+    US101_LANE_WIDTH,
+    episode_bounds,
+    lateral_pair_split,
+    load_i80_lateral,
+    load_i80_pairs,
+    load_us101,
+)
+from avrisk.learning.prior import xi_base_family
+from avrisk.learning.replay import (
+    CarFollowingWindows,
+    car_following_windows,
+    replay,
+)
+from avrisk.sim import Road, SimConfig, Simulator, VehicleState
+from avrisk.sim.collision import pairwise_overlap
+
+DT = 0.1
+HARD_BRAKE = -3.0  # [m/s^2]
+TTC_CAP = 20.0  # [s]
+IDM_NORMAL = {  # the bundled scenario's "normal" driver
+    "desired_speed": 25.0,
+    "time_headway": 1.5,
+    "min_gap": 2.0,
+    "max_accel": 1.5,
+    "comfort_decel": 2.0,
+    "politeness": 0.3,
+    "lane_change_threshold": 0.2,
+}
+
+
+# ---------------------------------------------------------------- windows
+def held_out_windows(n_steps: int, road: Road) -> CarFollowingWindows:
+    """Windows of the test splits; lane centres from the training split."""
+    pairs = load_i80_pairs()
+    lat = load_i80_lateral()
+    split = lateral_pair_split(lat, pairs)
+    centres = LaneCentres.fit(lat.take(split == "train"))
+    return car_following_windows(
+        pairs.take(pairs.split == "test"),
+        lat.take(split == "test"),
+        centres,
+        n_steps,
+        road,
+    )
+
+
+# ------------------------------------------------------------------ metrics
+def kinematics(v: np.ndarray, alive: np.ndarray):
+    """Speed, acceleration and jerk samples over alive frames."""
+    a = np.diff(v, axis=1) / DT
+    j = np.diff(a, axis=1) / DT
+    ok_a = alive[:, 1:] & alive[:, :-1]
+    ok_j = ok_a[:, 1:] & ok_a[:, :-1]
+    return v[alive], a[ok_a], j[ok_j], a, ok_a
+
+
+def ttc_samples(gap, v, v_l, alive):
+    closing = v - v_l
+    m = alive & (closing > 0.05)
+    return np.minimum(gap[m] / closing[m], TTC_CAP)
+
+
+def hard_brake_events(a, ok):
+    hard = (a < HARD_BRAKE) & ok
+    onset = hard[:, 1:] & ~hard[:, :-1]
+    return int(onset.sum() + hard[:, 0].sum())
+
+
+def lane_changes(lane_pos: np.ndarray, alive: np.ndarray, margin: float = 0.3) -> int:
+    """Lane-index changes with hysteresis; ``lane_pos`` in lane units, (N, T)."""
+    count = 0
+    for row, ok in zip(lane_pos, alive, strict=True):
+        row = row[ok]
+        if row.size == 0:
+            continue
+        cur = np.floor(row[0])
+        for p in row:
+            if p > cur + 1 + margin or p < cur - margin:
+                count += 1
+                cur = np.floor(p)
+    return count
+
+
+def distances(sample: np.ndarray, ref: np.ndarray) -> str:
+    if sample.size == 0 or ref.size == 0:
+        return "n/a"
+    ks = stats.ks_2samp(sample, ref).statistic
+    w1 = stats.wasserstein_distance(sample, ref)
+    return f"{ks:.3f} / {w1:.3g}"
+
+
+def fmt_q(x: np.ndarray) -> str:
+    if x.size == 0:
+        return "n/a"
+    q = np.percentile(x, [5, 50, 95])
+    return f"{q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f}"
+
+
+def learned_drivers(net, fam, n: int, rng) -> dict[str, Any]:
+    """The learned drivers compared: at mu0, and with xi ~ P0 per rollout."""
+    if fam is None:
+        return {"learned (own head)": LearnedDriver(net)}
+    xi_draw = torch.as_tensor(fam.sample(n, rng), dtype=torch.float32)
+    mu0 = torch.as_tensor(fam.mean, dtype=torch.float32)
+    return {
+        "learned mu0": LearnedDriver(net, mu0),
+        "learned xi~P0": LearnedDriver(net, xi_draw),
+    }
+
+
+# ------------------------------------------------------------------ part A
+def part_a(net, fam, n_steps: int, seed: int) -> str:
+    road = Road()
+    win = held_out_windows(n_steps, road)
+    n = len(win)
+    hours = n * n_steps * DT / 3600
+    human_alive = np.ones_like(win.v_f, bool)
+    hv, ha, hj, ha_full, h_ok = kinematics(win.v_f, human_alive)
+    human = {
+        "speed": hv,
+        "accel": ha,
+        "jerk": hj,
+        "gap": win.gap[human_alive],
+        "ttc": ttc_samples(win.gap, win.v_f, win.v_l, human_alive),
+        "offset": win.offset[win.has_lateral].ravel(),
+        "hard": hard_brake_events(ha_full, h_ok) / hours,
+    }
+    drivers = learned_drivers(net, fam, n, np.random.default_rng(seed))
+    # Car following only: MOBIL would overtake the replayed leader.
+    drivers["IDM"] = IDMDriver(
+        IDMParams.full((n, 2), **{**IDM_NORMAL, "lane_change_threshold": 1e3}),
+        road,
+    )
+    results = {}
+    for name, drv in drivers.items():
+        t0 = time.perf_counter()
+        res = replay(win, drv, road, seed=seed)
+        out = {
+            "v": res.v,
+            "v_l": res.v_l,
+            "gap": res.gap,
+            "alive": res.alive,
+            "crash": res.crash,
+            "offroad": res.offroad,
+        }
+        v, a, j, a_full, ok = kinematics(out["v"], out["alive"])
+        lane_pos = (res.offset + (win.lane + 0.5)[:, None] * road.lane_width) / (
+            road.lane_width
+        )
+        lat = win.has_lateral
+        results[name] = {
+            "speed": v,
+            "accel": a,
+            "jerk": j,
+            "gap": out["gap"][out["alive"]],
+            "ttc": ttc_samples(out["gap"], out["v"], out["v_l"], out["alive"]),
+            "offset": res.offset[lat][res.alive[lat]],
+            "hard": hard_brake_events(a_full, ok) / hours,
+            "lc": lane_changes(lane_pos, out["alive"]) / hours,
+            "crash": out["crash"].sum() / hours,
+            "offroad": out["offroad"].sum() / hours,
+            "gap_rmse": float(
+                np.sqrt(np.mean((out["gap"][:, -1] - win.gap[:, -1]) ** 2))
+            ),
+            "seconds": time.perf_counter() - t0,
+        }
+    lines = [
+        f"**A. Car following on held-out NGSIM I-80** ({n} windows of "
+        f"{n_steps * DT:.0f} s, {hours:.2f} vehicle-hours; leader replayed; "
+        "KS / W1 vs human)",
+        "",
+        "| metric | human (held out) | " + " | ".join(results) + " |",
+        "|---|---|" + "---|" * len(results),
+    ]
+    units = {
+        "speed": "m/s",
+        "accel": "m/s^2",
+        "jerk": "m/s^3",
+        "gap": "m",
+        "ttc": "s",
+        "offset": "m",
+    }
+    for key, unit in units.items():
+        label = {
+            "ttc": "TTC (closing only, capped 20 s)",
+            "offset": "lateral offset (lateral-file windows)",
+        }.get(key, key)
+        lines.append(
+            f"| {label} [{unit}] p5/p50/p95 | {fmt_q(human[key])} | "
+            + " | ".join(fmt_q(r[key]) for r in results.values())
+            + " |"
+        )
+        lines.append(
+            f"| {label}: KS / W1 | - | "
+            + " | ".join(distances(r[key], human[key]) for r in results.values())
+            + " |"
+        )
+    lines.append(
+        f"| hard brakes (< -3 m/s^2) [1/veh-h] | {human['hard']:.1f} | "
+        + " | ".join(f"{r['hard']:.1f}" for r in results.values())
+        + " |"
+    )
+    lines.append(
+        "| lane changes [1/veh-h] | 0 (single-lane episodes) | "
+        + " | ".join(f"{r['lc']:.1f}" for r in results.values())
+        + " |"
+    )
+    lines.append(
+        "| collisions with the leader [1/veh-h] | 0 | "
+        + " | ".join(f"{r['crash']:.1f}" for r in results.values())
+        + " |"
+    )
+    lines.append(
+        "| road departures [1/veh-h] | 0 | "
+        + " | ".join(f"{r['offroad']:.1f}" for r in results.values())
+        + " |"
+    )
+    lines.append(
+        f"| RMSE of the gap after {n_steps * DT:.0f} s [m] | 0 | "
+        + " | ".join(f"{r['gap_rmse']:.2f}" for r in results.values())
+        + " |"
+    )
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ part B
+def us101_reference():
+    us = load_us101()
+    s, e = episode_bounds(us.vehicle_id)
+    lcs, hours, speeds, accels = 0, 0.0, [], []
+    for a, b in zip(s, e, strict=True):
+        lat = uniform_filter1d(us.lateral[a:b], 10, mode="nearest") / US101_LANE_WIDTH
+        lcs += lane_changes(lat[None, :], np.ones((1, b - a), bool))
+        hours += (b - a) * DT / 3600
+        # Raw NGSIM speeds are noisy: accelerations from a 1 s moving average.
+        v = uniform_filter1d(us.speed[a:b], 10, mode="nearest")
+        speeds.append(us.speed[a:b])
+        accels.append(np.diff(v) / DT)
+    acc = np.concatenate(accels)
+    hard = (acc < HARD_BRAKE).astype(int)
+    onsets = int(np.sum(np.diff(hard) == 1))
+    return {
+        "speed": np.concatenate(speeds),
+        "accel": acc,
+        "lc": lcs / hours,
+        "hard": onsets / hours,
+        "hours": hours,
+    }
+
+
+def part_b(net, fam, n_scenes: int, seed: int, horizon: float) -> str:
+    road = Road()
+    rng = np.random.default_rng(seed)
+    a_veh = 6
+    init, params = random_highway_scenes(n_scenes, a_veh, road, rng)
+    drivers = learned_drivers(net, fam, n_scenes, rng)
+    drivers["IDM+MOBIL"] = IDMDriver(params, road)
+    human = us101_reference()
+    sim = Simulator(road, SimConfig(horizon=horizon, n_ttc_rays=1))
+    results = {}
+    for name, drv in drivers.items():
+        res = sim.run(
+            init, drv, torch.arange(n_scenes, dtype=torch.int64), record_trace=True
+        )
+        tr = res.trace
+        alive = tr.alive.numpy()[:, :, None].repeat(a_veh, 2)  # (B, T+1, A)
+        v = tr.speed.numpy().transpose(0, 2, 1).reshape(-1, alive.shape[1])
+        al = alive.transpose(0, 2, 1).reshape(-1, alive.shape[1])
+        sv, sa, sj, a_full, ok = kinematics(v, al)
+        hours = al[:, 1:].sum() * DT / 3600
+        y = tr.y.numpy().transpose(0, 2, 1).reshape(-1, alive.shape[1])
+        # Collisions between any two vehicles: onsets of overlap, per vehicle.
+        onsets = 0
+        off_onsets = 0
+        prev = None
+        prev_off = None
+        for k in range(tr.x.shape[1]):
+            st = VehicleState(
+                tr.x[:, k],
+                tr.y[:, k],
+                tr.heading[:, k],
+                tr.speed[:, k],
+                init.length,
+                init.width,
+            )
+            c, s_ = st.cos_sin
+            now = pairwise_overlap(st, c, s_).any(-1) & tr.alive[:, k, None]
+            half = 0.5 * (init.length * s_.abs() + init.width * c.abs())
+            off = ((st.y - half < 0) | (st.y + half > road.width)) & tr.alive[
+                :, k, None
+            ]
+            if prev is not None:
+                onsets += int((now & ~prev).sum())
+                off_onsets += int((off & ~prev_off).sum())
+            prev, prev_off = now, off
+        results[name] = {
+            "speed": sv,
+            "accel": sa,
+            "jerk": sj,
+            "lc": lane_changes(y / road.lane_width, al) / hours,
+            "hard": hard_brake_events(a_full, ok) / hours,
+            "crash": onsets / hours,
+            "offroad": off_onsets / hours,
+            "ego_crash": float(res.crash.float().mean()),
+        }
+    lines = [
+        f"**B. Multi-lane traffic** ({n_scenes} random scenes x {a_veh} vehicles x "
+        f"{horizon:.0f} s; human reference: US-101, {human['hours']:.1f} "
+        "vehicle-hours, raw NGSIM)",
+        "",
+        "| metric | human (US-101) | " + " | ".join(results) + " |",
+        "|---|---|" + "---|" * len(results),
+        "| speed [m/s] p5/p50/p95 | "
+        + fmt_q(human["speed"])
+        + " | "
+        + " | ".join(fmt_q(r["speed"]) for r in results.values())
+        + " |",
+        "| accel [m/s^2] p5/p50/p95 | "
+        + fmt_q(human["accel"])
+        + " | "
+        + " | ".join(fmt_q(r["accel"]) for r in results.values())
+        + " |",
+        "| jerk [m/s^3] p5/p50/p95 | n/a (raw data) | "
+        + " | ".join(fmt_q(r["jerk"]) for r in results.values())
+        + " |",
+        f"| lane changes [1/veh-h] | {human['lc']:.1f} | "
+        + " | ".join(f"{r['lc']:.1f}" for r in results.values())
+        + " |",
+        f"| hard brakes (< -3 m/s^2) [1/veh-h] | {human['hard']:.1f} | "
+        + " | ".join(f"{r['hard']:.1f}" for r in results.values())
+        + " |",
+        "| collisions (any pair, onsets) [1/veh-h] | n/a | "
+        + " | ".join(f"{r['crash']:.1f}" for r in results.values())
+        + " |",
+        "| road departures (onsets) [1/veh-h] | n/a | "
+        + " | ".join(f"{r['offroad']:.1f}" for r in results.values())
+        + " |",
+        "| rollouts whose vehicle 0 crashed [-] | n/a | "
+        + " | ".join(f"{r['ego_crash']:.3f}" for r in results.values())
+        + " |",
+    ]
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ part C
+def part_c(net, fam, n: int, seed: int) -> str:
+    """The bundled scenario with learned environment drivers (ego: IDM+MOBIL)."""
+    from avrisk.agents.idm import IDMPolicy
+    from avrisk.scenario import build_base_distribution, load_spec
+    from avrisk.scenario.builder import (
+        ScenarioSimulator,
+        driver_params,
+        initial_state,
+    )
+    from avrisk.scenario.params import ParamLayout, ScenarioParams
+
+    spec = load_spec("highway_default")
+    ss = ScenarioSimulator(spec)
+    rng = np.random.default_rng(seed)
+    x = build_base_distribution(spec).sample(n, rng)
+    params = ScenarioParams.from_flat(x, ParamLayout.from_spec(spec))
+    state = initial_state(params, spec)
+    idm = driver_params(spec, n)
+    seeds = torch.arange(n, dtype=torch.int64)
+    ego = IDMPolicy(idm, ss.road)
+    drivers = learned_drivers(net, fam, n, rng)
+    rows = {}
+    for name, drv in drivers.items():
+        rows[name] = ss.simulator.run(state, drv, seeds, ego_policy=ego)
+    rows["IDM+MOBIL (bundled)"] = ss.simulator.rollout(state, idm, seeds)
+    lines = [
+        f"**C. Bundled scenario `highway_default`** ({n} draws of the initial "
+        "conditions from P0; ego IDM+MOBIL; environment drivers as named)",
+        "",
+        "| environment drivers | ego crash rate | ego off-road rate | "
+        "min TTC p1 / p10 / p50 [s] | P(f <= 0.3 s) |",
+        "|---|---|---|---|---|",
+    ]
+    for name, res in rows.items():
+        f = res.f.numpy()
+        q = np.percentile(f, [1, 10, 50])
+        lines.append(
+            f"| {name} | {res.crash.float().mean():.4f} | "
+            f"{res.offroad.float().mean():.4f} | "
+            f"{q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} | {np.mean(f <= 0.3):.4f} |"
+        )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--net", default=None, help="driver_net.npz (default: shipped)")
+    parser.add_argument(
+        "--prior",
+        default=None,
+        help="xi_prior.npz (default: shipped); 'none': the network's own head only",
+    )
+    parser.add_argument("--window", type=float, default=15.0, help="window length [s]")
+    parser.add_argument(
+        "--scenes", type=int, default=128, help="traffic scenes (part B)"
+    )
+    parser.add_argument(
+        "--horizon", type=float, default=20.0, help="part B horizon [s]"
+    )
+    parser.add_argument("--seed", type=int, default=2024)
+    parser.add_argument(
+        "--scenario-rollouts",
+        type=int,
+        default=1000,
+        help="part C rollouts of the bundled scenario (0 skips it)",
+    )
+    args = parser.parse_args()
+    torch.manual_seed(args.seed)
+    net = load_driver_net(args.net)
+    fam = None if args.prior == "none" else xi_base_family(load_xi_prior(args.prior))
+    t0 = time.perf_counter()
+    print(part_a(net, fam, round(args.window / DT), args.seed))
+    print()
+    print(part_b(net, fam, args.scenes, args.seed + 1, args.horizon))
+    print()
+    if args.scenario_rollouts > 0:
+        print(part_c(net, fam, args.scenario_rollouts, args.seed + 2))
+        print()
+    print(
+        "_Command: `.venv/bin/python benchmarks/driver_realism.py "
+        f"--scenes {args.scenes} --seed {args.seed}`; "
+        f"{time.perf_counter() - t0:.0f} s, torch "
+        f"{torch.__version__}, {torch.get_num_threads()} threads._"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,77 @@
+import numpy as np
+import torch
+
+from avrisk.agents.idm import IDMDriver, IDMParams
+from avrisk.agents.policy import Action
+from avrisk.learning.dagger import ExpertLabeller
+from avrisk.learning.demonstrations import NO_LANE_CHANGE, SOURCE_IDM
+from avrisk.learning.replay import (
+    CarFollowingWindows,
+    replay,
+    replay_distances,
+)
+from avrisk.sim import Road, SimConfig, Simulator, VehicleState
+
+
+def windows(n=3, steps=30):
+    t = np.arange(steps + 1) * 0.1
+    v_l = np.stack([10 + np.sin(t + k) for k in range(n)])
+    return CarFollowingWindows(
+        v_f=np.full((n, steps + 1), 10.0),
+        v_l=v_l,
+        gap=np.full((n, steps + 1), 20.0),
+        offset=np.zeros((n, steps + 1)),
+        has_lateral=np.array([False, True, True][:n]),
+        len_f=np.full(n, 4.5),
+        len_l=np.full(n, 4.5),
+        width_f=np.full(n, 1.9),
+        lane=np.full(n, 2),
+        heading=np.zeros(n),
+    )
+
+
+def test_a_replayed_leader_follows_its_recorded_speed_profile():
+    road = Road()
+    win = windows()
+    params = IDMParams.full((3, 2), lane_change_threshold=NO_LANE_CHANGE)
+    res = replay(win, IDMDriver(params, road), road)
+    assert res.v.shape == res.gap.shape == (3, 31)
+    assert np.allclose(res.v_l, win.v_l, atol=1e-4)
+    assert not res.crash.any() and res.alive.all()
+    assert np.allclose(res.gap[:, 0], 20.0, atol=1e-4)
+    d = replay_distances(win, res)
+    assert set(d) == {"speed", "accel", "jerk", "gap", "crash_rate", "offset"}
+    assert all(0.0 <= v <= 1.0 for v in d.values())
+
+
+class Constant:
+    """A learner that always brakes gently and steers a little."""
+
+    def init(self, obs):
+        return None
+
+    def act(self, obs, state):
+        full = torch.full_like(obs.state.x, -0.5)
+        return Action(accel=full, steer=torch.full_like(full, 0.01)), None
+
+
+def test_students_follow_the_learner_and_only_they_are_labelled_by_the_expert():
+    road = Road(n_lanes=3)
+    one = [[0.0, 1.85, 0.0, 15.0, 4.8, 1.9], [30.0, 5.55, 0.0, 15.0, 4.8, 1.9]]
+    state = VehicleState.from_rows([one, one])
+    student = torch.tensor([[True, False], [True, False]])
+    expert = IDMDriver(IDMParams.full((2, 2)), road)
+    rec = ExpertLabeller(Constant(), expert, student, every=1)
+    res = Simulator(road, SimConfig(horizon=0.5, n_ttc_rays=4)).run(
+        state, rec, torch.arange(2), record_trace=True
+    )
+    speed = res.trace.speed
+    assert torch.allclose(speed[:, -1, 0], torch.full((2,), 15.0 - 0.25), atol=1e-4)
+    assert not torch.allclose(speed[:, -1, 1], torch.full((2,), 15.0 - 0.25), atol=1e-3)
+    demos = rec.demonstrations(0.3, first_episode=100)
+    assert len(demos) == 2 * 5  # two students, five recorded steps
+    assert set(demos.episode.tolist()) == {100, 102}
+    assert np.all(demos.source == SOURCE_IDM) and np.all(
+        demos.accel_weight == np.float32(0.3)
+    )
+    assert np.all(demos.accel != -0.5)  # labels are the expert's, not the learner's
