@@ -21,9 +21,9 @@ FORBIDDEN = {
         "learning",
         "testing",
     },
-    "sim": {"rare", "pipeline", "distributed", "report", "cli"},
-    "safety": {"rare", "pipeline", "distributed", "report", "cli"},
-    "agents": {"rare", "pipeline", "distributed", "report", "cli"},
+    "sim": {"rare", "pipeline", "distributed", "report", "cli", "learning"},
+    "safety": {"rare", "pipeline", "distributed", "report", "cli", "learning"},
+    "agents": {"rare", "pipeline", "distributed", "report", "cli", "learning"},
 }
 
 
