@@ -34,6 +34,7 @@ from typing import Any, Protocol, runtime_checkable
 import torch
 from torch import Tensor
 
+from avrisk.registry import Registry
 from avrisk.sim.observation import Observation
 from avrisk.sim.tensors import TensorDataclass
 
@@ -122,14 +123,12 @@ class ConstantPolicy:
         ), None
 
 
-_REGISTRY: dict[str, Callable[..., Any]] = {}
+_POLICIES = Registry("policy")
 
 
 def register_policy(name: str, factory: Callable[..., Any]) -> None:
     """Make ``factory(**kwargs)`` available as ``get_policy(name, ...)``."""
-    if name in _REGISTRY:
-        raise ValueError(f"policy {name!r} is already registered")
-    _REGISTRY[name] = factory
+    _POLICIES.register(name, factory)
 
 
 def get_policy(name: str, **kwargs: Any) -> Policy:
@@ -140,11 +139,7 @@ def get_policy(name: str, **kwargs: Any) -> Policy:
     KeyError
         If ``name`` is not registered; the message lists the known names.
     """
-    try:
-        factory = _REGISTRY[name]
-    except KeyError:
-        raise KeyError(f"unknown policy {name!r}; known: {sorted(_REGISTRY)}") from None
-    return factory(**kwargs)
+    return _POLICIES.build(name, **kwargs)
 
 
 def _constant_factory(**kwargs: Any) -> ConstantPolicy:

@@ -19,6 +19,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from torch import Tensor
 
+from avrisk.registry import Registry
 from avrisk.safety.ttc import MinTTC
 from avrisk.sim.state import VehicleState
 
@@ -50,14 +51,12 @@ class SafetyMeasure(Protocol):
         ...
 
 
-_REGISTRY: dict[str, Callable[..., Any]] = {}
+_MEASURES = Registry("safety measure")
 
 
 def register_safety_measure(name: str, factory: Callable[..., Any]) -> None:
     """Make ``factory(**kwargs)`` available as ``get_safety_measure(name, ...)``."""
-    if name in _REGISTRY:
-        raise ValueError(f"safety measure {name!r} is already registered")
-    _REGISTRY[name] = factory
+    _MEASURES.register(name, factory)
 
 
 def get_safety_measure(name: str, **kwargs: Any) -> SafetyMeasure:
@@ -68,13 +67,7 @@ def get_safety_measure(name: str, **kwargs: Any) -> SafetyMeasure:
     KeyError
         If ``name`` is not registered; the message lists the known names.
     """
-    try:
-        factory = _REGISTRY[name]
-    except KeyError:
-        raise KeyError(
-            f"unknown safety measure {name!r}; known: {sorted(_REGISTRY)}"
-        ) from None
-    return factory(**kwargs)
+    return _MEASURES.build(name, **kwargs)
 
 
 register_safety_measure("min_ttc", MinTTC)

@@ -13,7 +13,7 @@ from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
 from avrisk.sim.tensors import TensorDataclass
 
-__all__ = ["LaneFeatures", "Observation", "driver_features", "lane_features"]
+__all__ = ["LaneFeatures", "Observation", "lane_features"]
 
 
 @dataclass(frozen=True)
@@ -124,42 +124,3 @@ class Observation:
     def time(self) -> float:
         """Simulated time of this step [s]."""
         return self.step * self.dt
-
-
-def driver_features(obs: Observation) -> Tensor:
-    """The learned drivers' input vector for every vehicle (paper, appendix B).
-
-    In order: length, width [m]; speed [m/s]; lateral offset [m], heading offset
-    [rad]; distances to the left and right lane boundaries [m]; lane curvature
-    [1/m]; collision, road-departure and reversing indicators (0/1); lidar
-    ranges [m] then range-rates [m/s] (``R`` each).
-
-    Parameters
-    ----------
-    obs : Observation
-        With lidar.
-
-    Returns
-    -------
-    Tensor of shape (B, A, 11 + 2 R)
-    """
-    if obs.lidar is None:
-        raise ValueError("driver_features needs lidar; use n_lidar_beams > 0")
-    s, lane = obs.state, obs.lane
-    scalars = torch.stack(
-        [
-            s.length,
-            s.width,
-            s.speed,
-            lane.lateral_offset,
-            lane.heading_offset,
-            lane.left_marking,
-            lane.right_marking,
-            lane.curvature,
-            obs.collided.to(s.x.dtype),
-            obs.offroad.to(s.x.dtype),
-            obs.reversing.to(s.x.dtype),
-        ],
-        dim=-1,
-    )
-    return torch.cat([scalars, obs.lidar.range, obs.lidar.range_rate], dim=-1)

@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from avrisk.sim import Road, VehicleState
-from avrisk.sim.observation import driver_features, lane_features
+from avrisk.sim.observation import lane_features
 
 
 def test_lane_centres_and_indices_follow_the_right_edge_frame():
@@ -66,17 +66,3 @@ def test_lane_features_measure_offsets_and_distances_from_the_lane():
     assert f.right_marking.item() == pytest.approx(1.0)
     assert f.left_edge.item() == pytest.approx(7.0)
     assert f.right_edge.item() == pytest.approx(5.0)
-
-
-def test_driver_features_have_the_papers_layout():
-    from avrisk.sim import SimConfig, Simulator
-
-    sim = Simulator(Road(n_lanes=3), SimConfig(n_lidar_beams=20))
-    s = VehicleState.from_rows(
-        [[0.0, 5.0, 0.0, 10.0, 4.0, 2.0], [20.0, 5.0, 0.0, 10.0, 4.0, 2.0]]
-    )
-    obs = sim.observe(s, torch.zeros(1, dtype=torch.int64))
-    feats = driver_features(obs)
-    assert feats.shape == (1, 2, 11 + 40)
-    assert feats[0, 0, 0].item() == 4.0 and feats[0, 0, 2].item() == 10.0
-    assert feats[0, 0, 11].item() == pytest.approx(18.0)  # beam 0 range

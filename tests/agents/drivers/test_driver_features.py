@@ -11,7 +11,6 @@ from avrisk.agents.drivers.features import (
     features_from_observation,
 )
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
-from avrisk.sim.observation import driver_features
 
 
 def observe(rows, road, **config):
@@ -71,12 +70,17 @@ def test_indicators_are_one_for_a_crashed_reversing_vehicle_off_the_road():
         assert f[FEATURE_INDEX[name]].item() == 1.0, name
 
 
-def test_simulator_features_equal_the_simulators_own_driver_features():
-    road = Road()
-    obs = observe(
-        [[0.0, 5.0, 0.05, 20.0, 4.8, 1.9], [20.0, 9.0, -0.02, 25.0, 12.0, 2.5]], road
+def test_driver_features_have_the_papers_layout():
+
+    sim = Simulator(Road(n_lanes=3), SimConfig(n_lidar_beams=20))
+    s = VehicleState.from_rows(
+        [[0.0, 5.0, 0.0, 10.0, 4.0, 2.0], [20.0, 5.0, 0.0, 10.0, 4.0, 2.0]]
     )
-    assert torch.equal(features_from_observation(obs), driver_features(obs))
+    obs = sim.observe(s, torch.zeros(1, dtype=torch.int64))
+    feats = features_from_observation(obs)
+    assert feats.shape == (1, 2, 11 + 40)
+    assert feats[0, 0, 0].item() == 4.0 and feats[0, 0, 2].item() == 10.0
+    assert feats[0, 0, 11].item() == pytest.approx(18.0)  # beam 0 range
 
 
 def test_assembly_rejects_a_lidar_with_another_number_of_beams():
