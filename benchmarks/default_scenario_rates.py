@@ -6,11 +6,11 @@ hand-made proposal that shifts the four coordinates that matter (``--shifted``),
 and/or the cross-entropy method (``avrisk.rare.cross_entropy``, ``--ce``).
 Prints a markdown table and draws ``p_gamma`` against ``gamma``: the naive
 empirical curve with its 95% Clopper-Pearson band, and the importance-sampling
-estimates with their 95% intervals. This is how the bundled ``highway_default``
-scenario was calibrated to have ``p_gamma`` between 1e-6 and 1e-3 for gamma in
-0.1-0.3 s.
+estimates with their 95% intervals. A tool for calibrating a scenario's
+rarity; the bundled ``highway_default`` is calibrated in BENCHMARKS.md by a
+300,000-rollout naive run and ``benchmarks/ce_vs_naive.py``.
 
-Usage (the calibration runs; one CPU thread each, a few minutes each)::
+Usage (one CPU thread each, a few minutes each)::
 
     .venv/bin/python benchmarks/default_scenario_rates.py --naive 20000 \
         --seed 41 --threads 1 --figure naive.png

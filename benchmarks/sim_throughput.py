@@ -1,7 +1,9 @@
 """Simulator throughput: avrisk's batched simulator vs highway-env, one CPU thread.
 
 For the bundled default scenario (6 vehicles, 6 lanes, 20-beam lidar drivers,
-360 TTC rays, dt = 0.1 s, horizon 10 s) and each batch size, report
+dt = 0.1 s, horizon 10 s), each safety measure (``--measures``: the exact box
+TTC of the default scenario, and the paper's ray TTC with 360 rays) and each
+batch size, report
 
 * scenario-steps per second: simulated (rollout, step) pairs per wall second;
 * real-time factor: simulated seconds per wall second (= steps/s * dt);
@@ -17,6 +19,9 @@ peak-memory figures do not leak between batch sizes. Usage::
 
     .venv/bin/python benchmarks/sim_throughput.py                 # full table
     .venv/bin/python benchmarks/sim_throughput.py --batch-sizes 1,64 --quick
+
+With ``AVRISK_COMPILE=1`` in the environment the avrisk rows use
+``torch.compile`` (the ``mode`` column says which).
 """
 
 from __future__ import annotations
@@ -60,14 +65,20 @@ def _set_one_thread() -> None:
 
 
 # -------------------------------------------------------------------- workers
-def worker_avrisk(batch_size: int, scenario: str, min_seconds: float) -> dict:
+def worker_avrisk(
+    batch_size: int, scenario: str, measure: str, min_seconds: float
+) -> dict:
     """Time rollouts of ``batch_size`` scenarios; returns a JSON-able dict."""
     _set_one_thread()
     from avrisk.rare.problem import chunk_rng, sample_seeds
     from avrisk.scenario import build_base_distribution, load_spec
     from avrisk.scenario.builder import ScenarioSimulator
+    from avrisk.scenario.spec import spec_from_dict
+    from avrisk.sim.simulator import compile_requested
 
-    spec = load_spec(scenario)
+    raw = load_spec(scenario).model_dump(mode="json")
+    raw["safety"]["measure"] = measure
+    spec = spec_from_dict(raw)
     sim = ScenarioSimulator(spec)
     p0 = build_base_distribution(spec)
     x = p0.sample(batch_size, chunk_rng(0, 0, 0))
@@ -89,6 +100,8 @@ def worker_avrisk(batch_size: int, scenario: str, min_seconds: float) -> dict:
     wall = time.perf_counter() - start
     return {
         "sim": "avrisk",
+        "mode": "compiled" if compile_requested(None) else "eager",
+        "measure": measure,
         "batch_size": batch_size,
         "repeats": repeats,
         "steps": steps,
@@ -161,19 +174,21 @@ def _run_worker(common: list[str], worker: list[str]) -> dict:
 
 def _table(rows: list[dict]) -> str:
     lines = [
-        "| simulator | batch | scenario-steps/s | real-time factor | peak memory [MiB] "
-        "| MiB per rollout |",
-        "|---|---:|---:|---:|---:|---:|",
+        "| simulator | TTC measure | batch | scenario-steps/s | real-time factor "
+        "| peak memory [MiB] | MiB per rollout |",
+        "|---|---|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
         if "skipped" in r:
-            lines.append(f"| {r['sim']} | - | skipped: {r['skipped']} | | | |")
+            lines.append(f"| {r['sim']} | | - | skipped: {r['skipped']} | | | |")
             continue
         sps = r["steps"] / r["wall_s"]
         rtf = sps * r["dt"]
         per = r["peak_mib"] / r["batch_size"]
+        sim = f"{r['sim']} ({r['mode']})" if "mode" in r else r["sim"]
         lines.append(
-            f"| {r['sim']} | {r['batch_size']} | {sps:,.0f} | {rtf:,.0f}x | "
+            f"| {sim} | {r.get('measure', '-')} | {r['batch_size']} | {sps:,.0f} "
+            f"| {rtf:,.0f}x | "
             f"{r['peak_mib']:,.1f} | {per:.3f} |"
         )
     return "\n".join(lines)
@@ -183,6 +198,11 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batch-sizes", default="1,64,1024,8192")
     parser.add_argument("--scenario", default="highway_default")
+    parser.add_argument(
+        "--measures",
+        default="min_box_ttc,min_ttc",
+        help="Safety measures to time, comma-separated (registered names).",
+    )
     parser.add_argument(
         "--min-seconds", type=float, default=3.0, help="Least timed wall time per row."
     )
@@ -198,7 +218,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.worker is not None:
         kind, *rest = args.worker
         if kind == "avrisk":
-            result = worker_avrisk(int(rest[0]), args.scenario, min_s)
+            result = worker_avrisk(int(rest[0]), args.scenario, rest[1], min_s)
         else:
             result = worker_highway_env(min_s)
         print(json.dumps(result))
@@ -206,9 +226,10 @@ def main(argv: list[str] | None = None) -> None:
 
     common = ["--scenario", args.scenario, "--min-seconds", str(min_s)]
     rows = []
-    for b in (int(s) for s in args.batch_sizes.split(",")):
-        print(f"avrisk batch {b} ...", file=sys.stderr, flush=True)
-        rows.append(_run_worker(common, ["avrisk", str(b)]))
+    for measure in args.measures.split(","):
+        for b in (int(s) for s in args.batch_sizes.split(",")):
+            print(f"avrisk {measure} batch {b} ...", file=sys.stderr, flush=True)
+            rows.append(_run_worker(common, ["avrisk", str(b), measure]))
     if not args.no_highway_env:
         print("highway-env ...", file=sys.stderr, flush=True)
         rows.append(_run_worker(common, ["highway-env"]))

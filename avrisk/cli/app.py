@@ -8,6 +8,8 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_show_locals=False,
+    # Plain help text: units such as "[s]" must not be read as Rich markup.
+    rich_markup_mode=None,
 )
 
 

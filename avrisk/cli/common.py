@@ -11,8 +11,10 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-#: Diagnostics and progress go to stderr; results to stdout.
+#: Diagnostics and progress go to stderr; results to stdout, in tables at
+#: least 110 columns wide so that they do not wrap when piped to a file.
 err_console = Console(stderr=True)
+out_console = Console(width=max(Console().width, 110))
 
 
 class CliError(Exception):

@@ -53,7 +53,9 @@ def demo(
         Path("runs/demo"), help="Run directories and report of the scenario part."
     ),
     rollouts: int = typer.Option(
-        4000, min=0, help="Rollouts per method on the default scenario (0: skip)."
+        10_000,
+        min=0,
+        help="Rollouts per method on the default scenario (0: skip).",
     ),
 ) -> None:
     """Estimate known rare-event probabilities with naive MC and cross-entropy IS.
@@ -109,11 +111,12 @@ def _scenario_part(console: Console, out: Path, rollouts: int, seed: int) -> Non
     from avrisk.cli.run import EXPECTED, compare_runs
     from avrisk.pipeline import RunSettings
 
-    n_iter, n_per_iter = 4, rollouts // 8
+    # Half the budget searches (5 iterations), half is the final stage.
+    n_iter, n_per_iter = 5, rollouts // 10
     ce = RunSettings(
         method="ce",
-        gamma=0.3,
-        gamma_test=(0.2, 0.5, 1.0),
+        gamma=0.1,
+        gamma_test=(0.2, 0.3, 0.5, 1.0),
         rho=0.1,
         n_per_iter=n_per_iter,
         n_iter=n_iter,

@@ -14,17 +14,18 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from avrisk.cli.app import app
-from avrisk.cli.common import CliError, err_console, user_errors
+from avrisk.cli.common import CliError, err_console, out_console, user_errors
 from avrisk.cli.progress import RichRunMonitor
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
 from avrisk.pipeline.objective import SimulationObjective
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.cross_entropy import SELECTION_RULES
 from avrisk.report.html import write_report
+from avrisk.report.plots import comparison_rows
 from avrisk.scenario import ScenarioSpecError, build_base_distribution, load_spec
 from avrisk.scenario.spec import spec_from_dict
 
@@ -32,7 +33,6 @@ EXPECTED = (ScenarioSpecError, RunDirectoryError, InvalidOutputError)
 DEFAULT_SCENARIO = "highway_default"
 COMPARE_PARTS = ("ce", "naive", "reference")
 
-out_console = Console()
 
 Scenario = Annotated[
     str,
@@ -98,7 +98,7 @@ def _execute(
 def _print_summary(runs: list[tuple[str, RunDirectory]]) -> None:
     table = Table(title="P(min TTC <= gamma)")
     for col in ("run", "gamma [s]", "p", "stderr", "95% CI", "hits", "ESS", "rollouts"):
-        table.add_column(col, justify="left" if col == "run" else "right")
+        table.add_column(escape(col), justify="left" if col == "run" else "right")
     for label, run_dir in runs:
         est = run_dir.summary()["estimate"]
         for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
@@ -227,7 +227,47 @@ def compare_runs(
     ]
     _print_summary(runs)
     reference = runs[2][1] if reference_n else None
+    _print_ratios(runs[0][1], runs[1][1], reference)
     return _report(out, runs, objective, failures, reference)
+
+
+def _print_ratios(
+    ce: RunDirectory, naive: RunDirectory, reference: RunDirectory | None
+) -> None:
+    """CE against naive MC at the same budget, per threshold (paper's Fig. 2-3)."""
+    naive_hits = {
+        g["gamma"]: g["n_hits"] for g in naive.summary()["estimate"]["by_gamma"]
+    }
+    rows = comparison_rows(
+        ce.summary()["estimate"],
+        reference.summary()["estimate"] if reference is not None else None,
+    )
+    table = Table(
+        title="CE against naive Monte Carlo with the same number of rollouts",
+        caption="Expected naive hits and variance p(1-p)/n use p from the "
+        + ("naive reference run." if reference is not None else "CE estimate."),
+    )
+    for col in (
+        "gamma [s]",
+        "p used",
+        "CE hits",
+        "naive hits (seen)",
+        "naive hits (expected)",
+        "rare-event ratio",
+        "variance ratio",
+    ):
+        table.add_column(escape(col), justify="right")
+    for row in rows:
+        table.add_row(
+            f"{row['gamma']:g}",
+            f"{row['p']:.3g}",
+            str(row["ce_hits"]),
+            str(naive_hits.get(row["gamma"], "")),
+            f"{row['naive_hits_expected']:.1f}",
+            f"{row['rare_event_ratio']:.1f}x",
+            f"{row['variance_ratio']:.1f}x",
+        )
+    out_console.print(table)
 
 
 @app.command()

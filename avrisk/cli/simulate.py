@@ -23,7 +23,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import typer
-from rich.console import Console
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -36,7 +35,7 @@ from rich.table import Table
 
 import avrisk
 from avrisk.cli.app import app
-from avrisk.cli.common import CliError, err_console, user_errors
+from avrisk.cli.common import CliError, err_console, out_console, user_errors
 from avrisk.pipeline.objective import EVENT_COLUMNS
 from avrisk.pipeline.store import write_parquet_atomic
 from avrisk.rare import RareEventProblem, StageBatch, run_stage
@@ -58,8 +57,6 @@ META_SCENARIO = b"avrisk.scenario"
 META_RUN = b"avrisk.run"
 
 _RESULT_COLUMNS = ("log_p0", "f", "crash", "offroad", "reversing", "steps")
-
-out_console = Console()
 
 
 # ----------------------------------------------------------------------- core

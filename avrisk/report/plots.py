@@ -30,6 +30,11 @@ def comparison_rows(
 ) -> list[dict[str, float]]:
     """Per test threshold: CE hits, expected naive hits and the two ratios.
 
+    The comparison is at an equal budget: naive Monte Carlo with as many
+    rollouts as CE used in all (``n_evals``, search iterations included),
+    against CE's final-stage hits and standard error. Both ratios are thus
+    conservative for CE: the hits of its search iterations are not counted.
+
     Parameters
     ----------
     ce : dict
@@ -49,7 +54,7 @@ def comparison_rows(
     for g in ce["by_gamma"]:
         r = ref.get(g["gamma"])
         p = r["p"] if r is not None and r["n_hits"] > 0 else g["p"]
-        n = g["n_samples"]
+        n = ce["n_evals"]
         naive_hits = n * p
         naive_var = p * (1 - p) / n
         stderr = g["stderr"] or 0.0

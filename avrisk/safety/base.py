@@ -20,6 +20,7 @@ from typing import Any, Protocol, runtime_checkable
 from torch import Tensor
 
 from avrisk.registry import Registry
+from avrisk.safety.box_ttc import MinBoxTTC
 from avrisk.safety.ttc import MinTTC
 from avrisk.sim.state import VehicleState
 
@@ -31,6 +32,9 @@ class SafetyMeasure(Protocol):
     """What the simulator needs of a safety measure (see module docstring)."""
 
     name: str
+    #: Primitive geometric tests per (ego, other vehicle) pair and instant; the
+    #: simulator sizes its eager batch slices by it (cache-sized temporaries).
+    tests_per_pair: int
 
     def instant(
         self, state: VehicleState, cos: Tensor | None = None, sin: Tensor | None = None
@@ -71,3 +75,4 @@ def get_safety_measure(name: str, **kwargs: Any) -> SafetyMeasure:
 
 
 register_safety_measure("min_ttc", MinTTC)
+register_safety_measure("min_box_ttc", MinBoxTTC)

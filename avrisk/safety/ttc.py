@@ -29,6 +29,7 @@ import math
 import torch
 from torch import Tensor
 
+from avrisk.safety.running_min import RunningMin
 from avrisk.sim.geometry import min_argmin
 from avrisk.sim.lidar import beam_directions, relative_velocity, scan_boxes
 from avrisk.sim.state import VehicleState
@@ -103,7 +104,7 @@ def ray_ttc(
     return ttc.amin(dim=-1)
 
 
-class MinTTC:
+class MinTTC(RunningMin):
     """Safety measure ``f``: minimum ray TTC over rays and time [s].
 
     Parameters
@@ -142,6 +143,8 @@ class MinTTC:
         if not max_range > 0:
             raise ValueError(f"max_range must be > 0 [m]; got {max_range}")
         self.n_rays = n_rays
+        #: Ray-box tests per (ego, other) pair and instant (sizes eager slices).
+        self.tests_per_pair = n_rays
         self.max_range = max_range
         self.ray_cos, self.ray_sin = beam_directions(n_rays, dtype=dtype, device=device)
 
@@ -157,15 +160,3 @@ class MinTTC:
         ray_cos = self.ray_cos.to(device=state.x.device, dtype=state.x.dtype)
         ray_sin = self.ray_sin.to(device=state.x.device, dtype=state.x.dtype)
         return ray_ttc(state, cos, sin, ray_cos, ray_sin, self.max_range)
-
-    def init(self, value: Tensor) -> Tensor:
-        """Running value from the TTC at ``t = 0``, shape (B,)."""
-        return value
-
-    def update(self, carry: Tensor, value: Tensor, alive: Tensor) -> Tensor:
-        """Fold in the TTC of a new step where the rollout is still ``alive`` (B,)."""
-        return torch.where(alive, torch.minimum(carry, value), carry)
-
-    def finalize(self, carry: Tensor) -> Tensor:
-        """``f`` of every rollout [s], shape (B,)."""
-        return carry

@@ -20,6 +20,7 @@ import torch
 from numpy.typing import ArrayLike, NDArray
 
 from avrisk.agents.idm import IDMParams
+from avrisk.safety import SafetyMeasure, get_safety_measure
 from avrisk.scenario.params import ParamLayout, ScenarioParams
 from avrisk.scenario.spec import ScenarioSpec
 from avrisk.sim.road import Road
@@ -58,6 +59,24 @@ def sim_config_from_spec(spec: ScenarioSpec) -> SimConfig:
         lidar_range=sim.lidar_range,
         n_ttc_rays=spec.safety.n_rays,
     )
+
+
+def safety_measure_from_spec(
+    spec: ScenarioSpec,
+    *,
+    device: str | torch.device = "cpu",
+    dtype: torch.dtype = torch.float32,
+) -> SafetyMeasure:
+    """The scenario's safety measure ``f`` (ray TTC takes its ray count)."""
+    safety = spec.safety
+    if safety.measure == "min_ttc":
+        return get_safety_measure(
+            "min_ttc",
+            n_rays=safety.n_rays,
+            device=device,
+            dtype=dtype,
+        )
+    return get_safety_measure(safety.measure)
 
 
 def initial_state(
@@ -180,7 +199,13 @@ class ScenarioSimulator:
         self.config = sim_config_from_spec(spec)
         self.device = torch.device(device)
         self.dtype = dtype
-        self.simulator = Simulator(self.road, self.config, device=device, dtype=dtype)
+        self.simulator = Simulator(
+            self.road,
+            self.config,
+            device=device,
+            dtype=dtype,
+            measure=safety_measure_from_spec(spec, device=device, dtype=dtype),
+        )
 
     @property
     def n_steps(self) -> int:

@@ -323,13 +323,24 @@ class SimulationSpec(_Model):
 
 
 class SafetySpec(_Model):
-    """The safety measure ``f``: minimum time-to-collision from the ego centre."""
+    """The safety measure ``f``: minimum time-to-collision [s] over the rollout.
 
-    measure: Literal["min_ttc"] = Field(
-        "min_ttc", description="Safety measure; 'min_ttc' (paper, appendix A)."
+    ``min_ttc`` is the paper's ray TTC from the ego centre (appendix A);
+    ``min_box_ttc`` the exact constant-velocity TTC between the vehicle
+    rectangles, which does not count vehicles sliding past parallel in the next
+    lane as near-collisions (see :mod:`avrisk.safety.box_ttc`).
+    """
+
+    measure: Literal["min_ttc", "min_box_ttc"] = Field(
+        "min_ttc",
+        description="Safety measure: 'min_ttc' (ray TTC, paper appendix A) or "
+        "'min_box_ttc' (exact TTC between the vehicle rectangles).",
     )
     n_rays: int = Field(
-        360, ge=4, le=4096, description="Rays cast from the ego centre [-]."
+        360,
+        ge=4,
+        le=4096,
+        description="Rays cast from the ego centre [-] (min_ttc only).",
     )
 
 

@@ -333,8 +333,8 @@ class Simulator:
         self.compile = compile_requested(compile)
         self._compiled_acts: dict[type, Any] = {}
         self._move = self._move_impl
-        n_rays, n_beams = config.n_ttc_rays, config.n_lidar_beams
-        self._ttc = _in_chunks(self.measure.instant, lambda a: (a - 1) * n_rays)
+        per_pair, n_beams = self.measure.tests_per_pair, config.n_lidar_beams
+        self._ttc = _in_chunks(self.measure.instant, lambda a: (a - 1) * per_pair)
         self._scan = _in_chunks(self._scan_impl, lambda a: a * (a - 1) * n_beams)
         if compile:
             # Three graphs per step plus the driver's (see _driver_act), each

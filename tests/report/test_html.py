@@ -85,16 +85,19 @@ def test_failures_are_ranked_by_their_likelihood_under_p0(runs):
     assert log_p0[0] == table["log_p0"].to_numpy()[hit].max()
 
 
-def test_comparison_ratios_use_expected_naive_hits_at_the_same_n(runs):
+def test_comparison_ratios_are_against_naive_mc_with_ces_whole_budget(runs):
     _, dirs = runs
     ce = dirs[0][1].summary()["estimate"]
+    n = ce["n_evals"]  # search iterations and final stage together
+    assert n > ce["by_gamma"][0]["n_samples"]
     rows = comparison_rows(ce)
     for row, g in zip(
         rows, sorted(ce["by_gamma"], key=lambda g: g["gamma"]), strict=True
     ):
-        assert row["naive_hits_expected"] == pytest.approx(g["n_samples"] * g["p"])
-        assert row["rare_event_ratio"] == pytest.approx(
-            g["n_hits"] / (g["n_samples"] * g["p"])
+        assert row["naive_hits_expected"] == pytest.approx(n * g["p"])
+        assert row["rare_event_ratio"] == pytest.approx(g["n_hits"] / (n * g["p"]))
+        # variance_reduction compares with naive MC of the final stage's size.
+        assert row["variance_ratio"] == pytest.approx(
+            g["variance_reduction"] * g["n_samples"] / n
         )
-        assert row["variance_ratio"] == pytest.approx(g["variance_reduction"])
-        assert row["rare_event_ratio"] > 10 and row["variance_ratio"] > 10
+        assert row["rare_event_ratio"] > 5 and row["variance_ratio"] > 5

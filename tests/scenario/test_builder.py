@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import torch
 
+from avrisk.safety import MinBoxTTC, MinTTC
 from avrisk.scenario import ParamLayout, ScenarioParams, load_spec, spec_from_dict
 from avrisk.scenario.builder import (
     ScenarioSimulator,
@@ -77,6 +78,39 @@ def test_the_static_pieces_follow_the_spec(spec):
         24,
         20,
     )
+
+
+@pytest.mark.parametrize(
+    ("safety", "kind", "n_rays"),
+    [
+        ({"measure": "min_ttc", "n_rays": 24}, MinTTC, 24),
+        ({"measure": "min_box_ttc"}, MinBoxTTC, None),
+    ],
+)
+def test_the_spec_chooses_the_safety_measure(spec, safety, kind, n_rays):
+    raw = spec.model_dump(mode="json")
+    raw["safety"] = safety
+    sim = ScenarioSimulator(spec_from_dict(raw))
+    assert type(sim.simulator.measure) is kind
+    assert getattr(sim.simulator.measure, "n_rays", None) == n_rays
+
+
+def test_a_parallel_pass_is_a_near_collision_only_for_the_ray_measure(spec):
+    # The "slow" truck one lane left, its centre level with the ego, which
+    # passes it 15 m/s faster with both headings straight: the rectangles never
+    # meet, but rays slanted across the truck's side see it approach.
+    raw = spec.model_dump(mode="json")
+    layout = ParamLayout.from_spec(spec)
+    x = np.zeros((1, layout.dim))
+    values = {"veh0.s": 100.0, "veh1.s": 70.0, "veh0.speed": 20.0, "veh1.speed": 5.0}
+    for name, value in values.items():
+        x[0, layout.index(name)] = value
+    f = {}
+    for measure in ("min_ttc", "min_box_ttc"):
+        raw["safety"] = {"measure": measure, "n_rays": 360}
+        f[measure] = ScenarioSimulator(spec_from_dict(raw)).min_ttc(x, np.zeros(1))[0]
+    assert f["min_box_ttc"] == np.inf
+    assert f["min_ttc"] < 1.0
 
 
 def test_a_rollout_of_the_bundled_default_is_batch_independent():
