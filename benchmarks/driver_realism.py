@@ -51,12 +51,12 @@ from avrisk.learning.ngsim import (
     load_i80_pairs,
     load_us101,
 )
-from avrisk.learning.prior import xi_base_family
 from avrisk.learning.replay import (
     CarFollowingWindows,
     car_following_windows,
     replay,
 )
+from avrisk.scenario import xi_base_family
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 from avrisk.sim.collision import pairwise_overlap
 

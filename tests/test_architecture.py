@@ -24,6 +24,7 @@ FORBIDDEN = {
     "sim": {"rare", "pipeline", "distributed", "report", "cli", "learning"},
     "safety": {"rare", "pipeline", "distributed", "report", "cli", "learning"},
     "agents": {"rare", "pipeline", "distributed", "report", "cli", "learning"},
+    "scenario": {"pipeline", "distributed", "report", "cli", "learning"},
 }
 
 

@@ -311,14 +311,26 @@ class IDMDriver:
     wheelbase_fraction : float, default=0.6
         Wheelbase over length of the vehicles [-], as in the simulator's
         bicycle model (used by the steering controller).
+    drives : Tensor of bool, shape (A,), optional
+        The vehicles this model drives; default all. The others are driven by
+        another model (:class:`~avrisk.agents.mixed.MixedDriver`): IDM+MOBIL
+        sees them in the lane they are in, never changing lanes, and their
+        actions here are computed but not used. Their ``params`` are how MOBIL
+        predicts their reactions.
     """
 
     def __init__(
-        self, params: IDMParams, road: Road, *, wheelbase_fraction: float = 0.6
+        self,
+        params: IDMParams,
+        road: Road,
+        *,
+        wheelbase_fraction: float = 0.6,
+        drives: Tensor | None = None,
     ):
         self.params = params
         self.road = road
         self.wheelbase_fraction = wheelbase_fraction
+        self.drives = drives
 
     def init(self, obs: Observation) -> IDMState:
         """Every vehicle keeps the lane it starts in, ready to decide."""
@@ -336,6 +348,9 @@ class IDMDriver:
         n = s.n_vehicles
         lane = self.road.lane_index(s.y)
         target = state.target_lane
+        if self.drives is not None:
+            # Another model's vehicles occupy only their lane (see __init__).
+            target = torch.where(self.drives, target, lane)
         # Queries per vehicle: own lane, target lane, left lane, right lane.
         query = torch.stack([lane, target, lane + 1, lane - 1], dim=-1)  # (B, A, 4)
 

@@ -40,5 +40,6 @@ def main() -> None:
     import avrisk.cli.demo  # noqa: F401
     import avrisk.cli.run  # noqa: F401
     import avrisk.cli.simulate  # noqa: F401
+    import avrisk.cli.train_drivers  # noqa: F401
 
     app()

@@ -14,8 +14,6 @@ Modules (import them directly; this package imports nothing heavy on load):
   ensemble of heads, :func:`~avrisk.learning.train.train_drivers`;
 * :mod:`~avrisk.learning.glasso` -- Ledoit-Wolf + graphical lasso fit of a
   sparse precision;
-* :mod:`~avrisk.learning.prior` -- the fitted ``xi ~ N(mu0, Sigma0)`` as the
-  engine's :class:`~avrisk.rare.FixedCovNormal`.
 
 What the data can and cannot teach
 ----------------------------------

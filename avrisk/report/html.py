@@ -19,6 +19,7 @@ import pyarrow.compute as pc
 
 from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
 from avrisk.report.plots import comparison_rows, plot_ce_trajectory, plot_comparison
+from avrisk.scenario.params import XI_PREFIX
 
 #: Sections of the report, in order (a golden list for tests).
 SECTIONS = ("runs", "comparison", "failures", "settings")
@@ -201,7 +202,12 @@ def _failure_view(
 ) -> dict[str, Any]:
     skip = set(BOOKKEEPING + DENSITIES)
     shown = [n for n in names if n in row] or [n for n in row if n not in skip]
+    # The driver network's hundreds of weights are no reading for a person.
+    n_xi = sum(n.startswith(XI_PREFIX) for n in shown)
+    shown = [n for n in shown if not n.startswith(XI_PREFIX)]
     params = ", ".join(f"{n}={row[n]:.3g}" for n in shown if isinstance(row[n], float))
+    if n_xi:
+        params += f" (and {n_xi} driver-network weights {XI_PREFIX}*)"
     return {
         "f": row["f"],
         "crash": bool(row.get("crash", False)),

@@ -1,14 +1,19 @@
 """Scenario sampler: the YAML spec, the base distribution ``P0`` and named ``X``.
 
 * :func:`load_spec` -- read and validate a scenario (a file or a bundled name);
-* :func:`build_base_distribution` -- ``P0`` as an :class:`avrisk.rare.Product`;
+* :func:`build_base_distribution` -- ``P0`` as an :class:`avrisk.rare.Product`
+  (:func:`xi_base_family`: its learned-driver block);
 * :class:`ParamLayout`, :class:`ScenarioParams` -- flat ``X`` (B, D) <-> named
   per-vehicle parameters;
 * :mod:`avrisk.scenario.builder` -- to the simulator's inputs and rollouts
   (imported on demand: it needs :mod:`avrisk.sim`).
 """
 
-from avrisk.scenario.base_distribution import build_base_distribution, marginal_family
+from avrisk.scenario.base_distribution import (
+    build_base_distribution,
+    marginal_family,
+    xi_base_family,
+)
 from avrisk.scenario.params import FIELD_UNITS, ParamLayout, ScenarioParams
 from avrisk.scenario.spec import (
     MAX_SPEC_BYTES,
@@ -33,4 +38,5 @@ __all__ = [
     "load_spec",
     "marginal_family",
     "spec_from_dict",
+    "xi_base_family",
 ]

@@ -8,16 +8,26 @@ Each vehicle slot contributes four independent scaled-Beta coordinates
     W_j ~ scale_w Beta(a, b) + lo_w      from the lane heading [deg]
     V_j ~ scale_v Beta(a, b) + lo_v      initial speed [m/s]
 
-in the column order of :class:`avrisk.scenario.params.ParamLayout`. The
-learned-driver block ``xi ~ N(mu0, Sigma0)`` will be appended as one more block
-of the product when learned drivers land.
+in the column order of :class:`avrisk.scenario.params.ParamLayout`. A scenario
+with learned drivers appends one more block, the driver network's last layer
+(paper, Sec. 5 and appendix B)::
+
+    xi ~ N(mu0, Sigma0)                  in R^404, one draw per rollout
+
+with the ensemble mean ``mu0`` and the sparse graphical-lasso precision
+``Sigma0^-1`` of the shipped driver model (:func:`xi_base_family`).
 """
 
 from __future__ import annotations
 
-from avrisk.rare import Product, ScaledBeta
+from typing import TYPE_CHECKING
+
+from avrisk.rare import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
 from avrisk.scenario.params import ParamLayout
 from avrisk.scenario.spec import VEHICLE_FIELDS, MarginalSpec, ScenarioSpec
+
+if TYPE_CHECKING:
+    from avrisk.agents.drivers.store import XiPrior
 
 
 def marginal_family(marginal: MarginalSpec) -> ScaledBeta:
@@ -41,6 +51,38 @@ def marginal_family(marginal: MarginalSpec) -> ScaledBeta:
     )
 
 
+def xi_base_family(
+    prior: XiPrior | None = None, *, max_shift: float | None = 0.01
+) -> FixedCovNormal:
+    """The ``xi`` block of ``P0`` with its sparse precision.
+
+    Parameters
+    ----------
+    prior : XiPrior, optional
+        Default the shipped one (:func:`avrisk.agents.drivers.load_xi_prior`).
+    max_shift : float or None, default=0.01
+        CE search box half-width around ``mu0`` (paper); None for no box.
+
+    Returns
+    -------
+    avrisk.rare.FixedCovNormal
+        Dimension ``XI_DIM = 404``; the precision is kept sparse.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> fam = xi_base_family()
+    >>> fam.dim, fam.sample(2, np.random.default_rng(0)).shape
+    (404, (2, 404))
+    """
+    if prior is None:
+        # Imported here: the driver package needs torch (see ParamLayout.from_spec).
+        from avrisk.agents.drivers.store import load_xi_prior
+
+        prior = load_xi_prior()
+    return FixedCovNormal(prior.mean, precision=prior.precision, max_shift=max_shift)
+
+
 def build_base_distribution(spec: ScenarioSpec) -> Product:
     """Build ``P0`` for a scenario.
 
@@ -52,9 +94,11 @@ def build_base_distribution(spec: ScenarioSpec) -> Product:
     -------
     avrisk.rare.Product
         ``4 A`` one-dimensional :class:`~avrisk.rare.ScaledBeta` blocks in the
-        column order of ``ParamLayout.from_spec(spec)``; ``dim == layout.dim``.
-        ``sample(n, rng)`` gives ``X`` of shape (n, D); ``log_prob(X)`` gives
-        ``log p0`` of shape (n,) [log of 1 / (m m deg m/s) per vehicle].
+        column order of ``ParamLayout.from_spec(spec)``, then, if the scenario
+        has learned drivers, the 404-dimensional :func:`xi_base_family`;
+        ``dim == layout.dim``. ``sample(n, rng)`` gives ``X`` of shape (n, D);
+        ``log_prob(X)`` gives ``log p0`` of shape (n,) [log of 1 / (m m deg
+        m/s) per vehicle, plus the log-density of ``xi``].
 
     Examples
     --------
@@ -66,11 +110,13 @@ def build_base_distribution(spec: ScenarioSpec) -> Product:
     >>> p0.sample(3, np.random.default_rng(0)).shape
     (3, 24)
     """
-    blocks = [
+    blocks: list[ExponentialFamily] = [
         marginal_family(getattr(spec.initial_for(j), name))
         for j in range(spec.n_vehicles)
         for name in VEHICLE_FIELDS
     ]
+    if spec.has_learned_drivers:
+        blocks.append(xi_base_family())
     p0 = Product(blocks)
     layout = ParamLayout.from_spec(spec)
     if p0.dim != layout.dim:  # pragma: no cover - guards the two orderings

@@ -9,6 +9,15 @@ This is the thin adapter between :mod:`avrisk.scenario` and :mod:`avrisk.sim`:
   (slot 0 carries the ego policy's parameters);
 * :class:`ScenarioSimulator` -- all of the above bound together: flat ``X``
   (B, D) and seeds (B,) in, ``RolloutResult`` out.
+
+Drivers: every vehicle of a rollout is driven in one batched pass by IDM+MOBIL
+(:class:`~avrisk.agents.idm.IDMDriver`), by the learned driver network with
+the rollout's own ``xi`` (:class:`~avrisk.agents.drivers.LearnedDriver`, one
+``xi`` row of ``X`` shared by all learned drivers of the rollout), or, when a
+scenario has both, by a per-vehicle mix of the two
+(:class:`~avrisk.agents.mixed.MixedDriver`). An ego with an IDM+MOBIL policy
+is one more IDM+MOBIL vehicle (slot 0); the ``lidar_imitation`` ego is the
+registered ego policy of that name, which replaces slot 0's action.
 """
 
 from __future__ import annotations
@@ -19,10 +28,19 @@ import numpy as np
 import torch
 from numpy.typing import ArrayLike, NDArray
 
-from avrisk.agents.idm import IDMParams
+from avrisk.agents import (
+    DriverModel,
+    IDMDriver,
+    IDMParams,
+    LearnedDriver,
+    MixedDriver,
+    Policy,
+    get_policy,
+)
+from avrisk.agents.drivers import DriverNet, load_driver_net
 from avrisk.safety import SafetyMeasure, get_safety_measure
 from avrisk.scenario.params import ParamLayout, ScenarioParams
-from avrisk.scenario.spec import ScenarioSpec
+from avrisk.scenario.spec import IDM_MOBIL, ScenarioSpec
 from avrisk.sim.road import Road
 from avrisk.sim.simulator import RolloutResult, SimConfig, Simulator
 from avrisk.sim.state import VehicleState
@@ -155,7 +173,9 @@ def driver_params(
     -------
     IDMParams
         Each field a tensor of shape (B, A) in the units of
-        :class:`~avrisk.scenario.spec.IDMSpec`.
+        :class:`~avrisk.scenario.spec.IDMSpec`; a learned driver's slot holds
+        the defaults (MOBIL's model of it), as does the slot of an ego that is
+        not ``idm_mobil``.
     """
     per_slot = [spec.driver_for(j) for j in range(spec.n_vehicles)]
     fields = {}
@@ -184,6 +204,11 @@ class ScenarioSimulator:
     road : avrisk.sim.road.Road
     config : avrisk.sim.simulator.SimConfig
     simulator : avrisk.sim.simulator.Simulator
+    net : DriverNet or None
+        The shipped driver network (on ``device``) when a learned driver or
+        the ``lidar_imitation`` ego needs it.
+    ego_policy : Policy or None
+        The ego policy when it is not IDM+MOBIL (slot 0 of the drivers).
     """
 
     def __init__(
@@ -205,6 +230,18 @@ class ScenarioSimulator:
             device=device,
             dtype=dtype,
             measure=safety_measure_from_spec(spec, device=device, dtype=dtype),
+        )
+        idm_ego = spec.ego.policy == IDM_MOBIL
+        # Per slot (A,): driven by the driver network / by IDM+MOBIL.
+        self._learned = torch.tensor(spec.learned_slots, device=self.device)
+        self._idm = ~self._learned
+        self._idm[0] = idm_ego
+        needs_net = bool(self._learned.any()) or not idm_ego
+        self.net: DriverNet | None = (
+            load_driver_net().to(self.device) if needs_net else None
+        )
+        self.ego_policy: Policy | None = (
+            None if idm_ego else get_policy(spec.ego.policy, net=self.net)
         )
 
     @property
@@ -240,13 +277,44 @@ class ScenarioSimulator:
                 f"got {tuple(seeds_t.shape)}"
             )
         state = initial_state(params, self.spec, device=self.device, dtype=self.dtype)
-        drivers = driver_params(
-            self.spec, params.batch_size, device=self.device, dtype=self.dtype
-        )
         with torch.no_grad():
-            return self.simulator.rollout(
-                state, drivers, seeds_t, record_trace=record_trace
+            return self.simulator.run(
+                state,
+                self.drivers(params),
+                seeds_t,
+                ego_policy=self.ego_policy,
+                record_trace=record_trace,
             )
+
+    def drivers(self, params: ScenarioParams) -> DriverModel:
+        """The driver model of a batch: IDM+MOBIL, learned, or a per-vehicle mix.
+
+        Parameters
+        ----------
+        params : ScenarioParams
+            The batch; the learned drivers of rollout ``b`` use ``params.xi[b]``.
+
+        Returns
+        -------
+        DriverModel
+            Acts for every vehicle, fields of shape (B, A).
+        """
+        learned = None
+        if bool(self._learned.any()):
+            assert self.net is not None
+            xi = torch.from_numpy(np.ascontiguousarray(params.xi))
+            learned = LearnedDriver(self.net, xi)
+            if not bool(self._idm.any()):
+                return learned
+        idm = IDMDriver(
+            driver_params(
+                self.spec, params.batch_size, device=self.device, dtype=self.dtype
+            ).validate(),
+            self.road,
+            wheelbase_fraction=self.config.wheelbase_fraction,
+            drives=None if bool(self._idm.all()) else self._idm,
+        )
+        return idm if learned is None else MixedDriver(idm, learned, self._learned)
 
     def min_ttc(self, x: ArrayLike, seeds: ArrayLike) -> NDArray[np.float64]:
         """Minimum time-to-collision of each rollout [s], shape (B,), float64."""

@@ -2,8 +2,9 @@
 
 The estimation engine sees one scenario realisation as a flat float64 row of
 length ``D``; everything else sees it by name. The layout is vehicle-major,
-four coordinates per vehicle, then the learned-driver block ``xi`` (empty
-until learned drivers land)::
+four coordinates per vehicle, then the learned-driver block ``xi`` (the
+``Dxi = 404`` numbers of the driver network's last layer, in the order of
+:mod:`avrisk.agents.drivers.xi`; empty when no vehicle is a learned driver)::
 
     veh0.s, veh0.t, veh0.heading, veh0.speed, veh1.s, ..., veh{A-1}.speed,
     xi.0, ..., xi.{Dxi-1}
@@ -36,6 +37,10 @@ FloatArray = NDArray[np.float64]
 
 #: Unit of each per-vehicle coordinate, as stored in ``X`` and in Parquet.
 FIELD_UNITS: dict[str, str] = {"s": "m", "t": "m", "heading": "deg", "speed": "m/s"}
+
+
+#: Prefix of the driver-network columns ``xi.K`` of ``X``.
+XI_PREFIX = "xi."
 
 
 @dataclass(frozen=True)
@@ -80,14 +85,24 @@ class ParamLayout:
 
     @classmethod
     def from_spec(cls, spec: ScenarioSpec) -> ParamLayout:
-        """The layout of a scenario's ``X``."""
-        return cls(n_vehicles=spec.n_vehicles)
+        """The layout of a scenario's ``X``.
+
+        ``xi_dim`` is ``XI_DIM = 404`` when any vehicle is a learned driver
+        (:attr:`ScenarioSpec.has_learned_drivers`), else 0.
+        """
+        if not spec.has_learned_drivers:
+            return cls(n_vehicles=spec.n_vehicles)
+        # Imported here: the driver network needs torch, which scenarios
+        # without learned drivers do not load.
+        from avrisk.agents.drivers.xi import XI_DIM
+
+        return cls(n_vehicles=spec.n_vehicles, xi_dim=XI_DIM)
 
     @cached_property
     def columns(self) -> tuple[str, ...]:
         """Column names ``vehJ.<field>`` then ``xi.K``, length ``D``."""
         veh = [f"veh{j}.{f}" for j in range(self.n_vehicles) for f in VEHICLE_FIELDS]
-        return tuple(veh + [f"xi.{k}" for k in range(self.xi_dim)])
+        return tuple(veh + [f"{XI_PREFIX}{k}" for k in range(self.xi_dim)])
 
     @property
     def dim(self) -> int:

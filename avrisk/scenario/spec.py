@@ -13,11 +13,16 @@ measure. Example (the bundled ``highway_default`` is the full one)::
       heading: {lo: -3.6,  scale: 7.2}      # W ~ 7.2 Beta(2,2) - 3.6  [deg]
       speed:   {lo: 10.0,  scale: 10.0}     # V ~ 10 Beta(2,2) + 10   [m/s]
     drivers:
-      normal: {desired_speed: 25.0}
+      normal: {desired_speed: 25.0}         # IDM+MOBIL (model: idm_mobil)
+      human: {model: learned}               # the learned driver network
     ego: {policy: idm_mobil, params: {desired_speed: 28.0}}
     vehicles:
       - {lane: 2, offset: 0.0}              # the ego
       - {lane: 2, offset: 50.0, driver: normal}
+      - {lane: 3, offset: 20.0, driver: human}
+
+A scenario with any ``learned`` driver adds the network's last layer ``xi``
+(one draw per rollout, shared by all its learned drivers) to the sample ``X``.
 
 Files are read with ``yaml.safe_load``; unknown keys are rejected and every
 error names the field, the allowed range and the value given.
@@ -30,7 +35,7 @@ import math
 import re
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -40,8 +45,10 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    SerializerFunctionWrapHandler,
     ValidationError,
     field_validator,
+    model_serializer,
     model_validator,
 )
 
@@ -250,22 +257,90 @@ class IDMSpec(_Model):
     )
 
 
-class DriverSpec(IDMSpec):
-    """An environment driver type: a driver model and its parameters."""
+#: The choice (driver model, ego policy) that takes IDM+MOBIL parameters.
+IDM_MOBIL = "idm_mobil"
 
-    model: Literal["idm_mobil"] = Field(
-        "idm_mobil",
-        description="Driver model; 'idm_mobil' for now (learned drivers later).",
+
+def _refuse_idm_fields(spec: BaseModel, selector: str, fields: Iterable[str]) -> None:
+    """Reject IDM+MOBIL parameters given with a ``selector`` other than idm_mobil."""
+    choice = getattr(spec, selector)
+    given = sorted(spec.model_fields_set & set(fields))
+    if choice != IDM_MOBIL and given:
+        raise ValueError(
+            f"{selector} {choice!r} takes no IDM+MOBIL parameters; remove "
+            f"{', '.join(given)}"
+        )
+
+
+def _without_idm_fields(
+    spec: BaseModel, selector: str, fields: Iterable[str], data: dict[str, Any]
+) -> dict[str, Any]:
+    """``data`` (a dump of ``spec``) without the unused IDM+MOBIL parameters."""
+    if getattr(spec, selector) == IDM_MOBIL:
+        return data
+    return {k: v for k, v in data.items() if k not in set(fields)}
+
+
+class DriverSpec(IDMSpec):
+    """An environment driver type: a driver model and its parameters.
+
+    ``model: idm_mobil`` drives with IDM+MOBIL and the parameters of
+    :class:`IDMSpec`. ``model: learned`` drives with the shipped driver network
+    (:mod:`avrisk.agents.drivers`, imitation-learned from NGSIM) and takes no
+    parameters: its last layer ``xi`` is part of the random sample ``X``, one
+    draw per rollout shared by every learned driver of the rollout. IDM+MOBIL
+    neighbours predict a learned driver's reactions (MOBIL) with the
+    :class:`IDMSpec` defaults.
+    """
+
+    model: Literal["idm_mobil", "learned"] = Field(
+        IDM_MOBIL,
+        description="Driver model: 'idm_mobil' (IDM car following + MOBIL lane "
+        "changes) or 'learned' (the imitation-learned driver network).",
     )
+
+    @model_validator(mode="after")
+    def _idm_fields_for_idm_only(self) -> DriverSpec:
+        _refuse_idm_fields(self, "model", IDMSpec.model_fields)
+        return self
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        return _without_idm_fields(self, "model", IDMSpec.model_fields, handler(self))
+
+    @property
+    def learned(self) -> bool:
+        """Whether the driver network drives (``model: learned``)."""
+        return self.model == "learned"
 
 
 class EgoSpec(_Model):
-    """The ego policy under test (vehicle slot 0)."""
+    """The ego policy under test (vehicle slot 0).
 
-    policy: Literal["idm_mobil"] = Field(
-        "idm_mobil", description="Ego policy; 'idm_mobil' for now."
+    ``idm_mobil`` drives with IDM+MOBIL and ``params``; ``lidar_imitation`` is
+    the paper's non-vision ego, the shipped driver network on the ego's own
+    lidar and lane features with its trained shared last layer and its mean
+    action (:class:`avrisk.agents.drivers.LearnedEgoPolicy`), and takes no
+    ``params``.
+    """
+
+    policy: Literal["idm_mobil", "lidar_imitation"] = Field(
+        IDM_MOBIL,
+        description="Ego policy: 'idm_mobil' (IDM+MOBIL with 'params') or "
+        "'lidar_imitation' (the learned lidar-based imitation policy).",
     )
-    params: IDMSpec = Field(IDMSpec(), description="Parameters of the ego policy.")
+    params: IDMSpec = Field(
+        IDMSpec(), description="Parameters of the idm_mobil ego policy."
+    )
+
+    @model_validator(mode="after")
+    def _params_for_idm_only(self) -> EgoSpec:
+        _refuse_idm_fields(self, "policy", ("params",))
+        return self
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        return _without_idm_fields(self, "policy", ("params",), handler(self))
 
 
 class VehicleSlotSpec(_Model):
@@ -472,7 +547,7 @@ class ScenarioSpec(_Model):
         )
 
     def driver_for(self, slot: int) -> IDMSpec:
-        """The IDM+MOBIL parameters that drive slot ``slot`` (ego's for slot 0).
+        """The driver of slot ``slot``: its type, or the ego's IDM parameters.
 
         Parameters
         ----------
@@ -482,13 +557,31 @@ class ScenarioSpec(_Model):
         Returns
         -------
         IDMSpec
+            ``ego.params`` for slot 0, else the slot's :class:`DriverSpec`.
         """
-        if slot == 0:
-            return self.ego.params
+        return self.ego.params if slot == 0 else self._driver_type(slot)
+
+    def _driver_type(self, slot: int) -> DriverSpec:
+        """The driver type of environment slot ``slot >= 1``."""
         name = self.vehicles[slot].driver
         if name is None:
             (name,) = self.drivers
         return self.drivers[name]
+
+    @property
+    def learned_slots(self) -> tuple[bool, ...]:
+        """Per slot, whether the learned driver network drives it.
+
+        Slot 0 is always False: the ego is driven by ``ego.policy``.
+        """
+        return (False,) + tuple(
+            self._driver_type(j).learned for j in range(1, self.n_vehicles)
+        )
+
+    @property
+    def has_learned_drivers(self) -> bool:
+        """Whether any environment vehicle is a learned driver (``X`` has ``xi``)."""
+        return any(self.learned_slots)
 
     def to_yaml(self) -> str:
         """The resolved spec as YAML text (loads back to an equal spec)."""

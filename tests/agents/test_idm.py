@@ -3,7 +3,7 @@ import math
 import pytest
 import torch
 
-from avrisk.agents import ConstantPolicy, IDMDriver, IDMParams
+from avrisk.agents import ConstantPolicy, IDMDriver, IDMParams, IDMState
 from avrisk.agents.idm import LANE_CHANGE_DELAY, idm_acceleration
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 
@@ -70,6 +70,26 @@ def test_mobil_changes_to_a_free_lane_to_pass_a_slow_leader():
     assert memory.target_lane[0, 0].item() == 1
     assert action.steer[0, 0].item() > 0  # turning left, towards lane 1
     assert memory.since_change[0, 0].item() == 0
+
+
+def test_a_vehicle_another_model_drives_occupies_only_the_lane_it_is_in():
+    # Vehicle 1, ahead in lane 0, carries a lane-change target into lane 1
+    # (the ego's). Driven by IDM it occupies both lanes and the ego brakes;
+    # driven by another model it is only in lane 0 and the ego's road is free.
+    sim = Simulator(ROAD, SimConfig(), dtype=F64)
+    state = VehicleState.from_rows(
+        [[0.0, 6.0, 0.0, 25.0, *SIZE], [15.0, 2.0, 0.0, 10.0, *SIZE]], dtype=F64
+    )
+    obs = sim.observe(state, torch.zeros(1, dtype=torch.int64))
+    params = IDMParams.full(state.shape, dtype=F64, desired_speed=30.0)
+
+    def ego_accel(drives):
+        driver = IDMDriver(params, ROAD, drives=drives)
+        memory = driver.init(obs)
+        merging = IDMState(torch.tensor([[1, 1]]), memory.since_change)
+        return driver.act(obs, merging)[0].accel[0, 0].item()
+
+    assert ego_accel(None) < 0 < ego_accel(torch.tensor([True, False]))
 
 
 def test_mobil_stays_when_the_new_follower_would_have_to_brake_hard():

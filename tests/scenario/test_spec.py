@@ -32,6 +32,17 @@ def _error(data: dict) -> str:
     return str(info.value)
 
 
+def test_the_bundled_learned_scenario_has_the_default_road_and_slots():
+    default, learned = load_spec("highway_default"), load_spec("highway_learned")
+    assert {"highway_default", "highway_learned"} <= set(bundled_scenarios())
+    assert learned.road == default.road and learned.simulation == default.simulation
+    assert learned.initial_conditions == default.initial_conditions
+    slots = [v.model_copy(update={"driver": None}) for v in learned.vehicles]
+    assert slots == [v.model_copy(update={"driver": None}) for v in default.vehicles]
+    assert learned.learned_slots == (False,) + (True,) * 5
+    assert learned.ego.policy == "lidar_imitation"
+
+
 def test_the_bundled_default_loads_by_name_with_the_papers_marginals():
     spec = load_spec("highway_default")
     assert "highway_default" in bundled_scenarios()
@@ -63,6 +74,31 @@ def test_defaults_fill_in_the_papers_values():
     assert spec.driver_for(0) == spec.ego.params
 
 
+def test_learned_drivers_and_the_lidar_ego_take_no_idm_parameters():
+    data = _minimal() | {
+        "drivers": {"calm": {"desired_speed": 20.0}, "human": {"model": "learned"}},
+        "ego": {"policy": "lidar_imitation"},
+    }
+    data["vehicles"][1]["driver"] = "human"
+    data["vehicles"][2]["driver"] = "calm"
+    spec = spec_from_dict(data)
+    assert spec.learned_slots == (False, True, False) and spec.has_learned_drivers
+    assert not spec_from_dict(_minimal()).has_learned_drivers
+    dumped = yaml.safe_load(spec.to_yaml())
+    assert dumped["drivers"]["human"] == {"model": "learned"}
+    assert dumped["ego"] == {"policy": "lidar_imitation"}
+    assert dumped["drivers"]["calm"]["desired_speed"] == 20.0
+    assert spec_from_dict(dumped) == spec
+
+    data["drivers"]["human"]["desired_speed"] = 20.0
+    message = _error(data)
+    assert "drivers.human: model 'learned' takes no IDM+MOBIL parameters" in message
+    assert "remove desired_speed" in message
+    data["drivers"]["human"] = {"model": "learned"}
+    data["ego"]["params"] = {"desired_speed": 20.0}
+    assert "ego: policy 'lidar_imitation' takes no IDM+MOBIL parameters" in _error(data)
+
+
 def test_a_slot_override_replaces_only_the_named_marginal():
     data = _minimal()
     data["vehicles"][1]["initial"] = {"speed": {"lo": 5.0, "scale": 2.0}}
@@ -85,6 +121,8 @@ def test_a_slot_override_replaces_only_the_named_marginal():
         ({"safety": {"measure": "distance"}}, "safety.measure"),
         ({"ego": {"params": {"desired_speed": -1}}}, "ego.params.desired_speed"),
         ({"drivers": {"default": {"politeness": 2}}}, "drivers.default.politeness"),
+        ({"drivers": {"default": {"model": "gail"}}}, "drivers.default.model"),
+        ({"ego": {"policy": "pilotnet"}}, "ego.policy"),
         (
             {"initial_conditions": {"speed": {"lo": 10, "scale": 0}}},
             "initial_conditions.speed.scale",

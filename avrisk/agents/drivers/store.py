@@ -11,7 +11,7 @@ Two small files in ``avrisk/data/drivers/`` (written by
   to, and the fit's metadata (JSON).
 
 ``xi ~ N(mu0, Sigma0)`` is the learned-driver block of the base distribution;
-:func:`avrisk.learning.prior.xi_base_family` turns an :class:`XiPrior` into the
+:func:`avrisk.scenario.xi_base_family` turns an :class:`XiPrior` into the
 engine's ``FixedCovNormal`` (the agents layer does not import the engine).
 """
 

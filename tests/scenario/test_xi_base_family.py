@@ -1,10 +1,12 @@
+"""The learned-driver block of P0: the shipped xi prior as a FixedCovNormal."""
+
 import numpy as np
 from scipy import sparse
 
 from avrisk.agents.drivers.store import XiPrior
 from avrisk.agents.drivers.xi import XI_DIM
-from avrisk.learning.prior import xi_base_family
 from avrisk.rare import FixedCovNormal
+from avrisk.scenario import xi_base_family
 
 
 def test_the_xi_prior_becomes_a_fixed_covariance_normal_with_the_papers_box(rng):

@@ -1,0 +1,206 @@
+"""``avrisk train-drivers``: retrain the learned drivers and their ``xi`` prior.
+
+Runs :func:`avrisk.learning.train.train_drivers` on the NGSIM data (behaviour
+cloning, DAgger, the bootstrap ensemble of heads, the graphical-lasso prior of
+``xi``; about two to ten minutes on two cores) with one torch thread, so that
+the same seed, data and machine give the same files, and writes into
+``--out``::
+
+    driver_net.npz          the driver network (avrisk.agents.drivers.DriverNet)
+    xi_prior.npz            xi ~ N(mu0, Sigma0): mean, sparse precision, heads
+    training_report.json    what the run did and measured
+
+Files of those names already in ``--out`` are replaced. The shipped driver
+model (``avrisk/data/drivers/``, which the bundled scenarios use) is replaced
+only when ``--out`` names that folder.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+)
+from rich.table import Column
+
+from avrisk.agents.drivers.store import (
+    DRIVER_NET_FILE,
+    XI_PRIOR_FILE,
+    default_drivers_dir,
+)
+from avrisk.cli.app import app
+from avrisk.cli.common import CliError, err_console, out_console, user_errors
+from avrisk.learning.ngsim import I80_LATERAL_FILE, I80_PAIRS_FILE, ngsim_dir
+
+if TYPE_CHECKING:
+    from avrisk.learning.train import TrainEvent
+
+#: Where ``train-drivers`` writes by default (not the shipped model).
+DEFAULT_OUT = Path("runs") / "drivers"
+
+#: What :func:`avrisk.learning.train.train_drivers` writes.
+OUTPUT_FILES = (DRIVER_NET_FILE, XI_PRIOR_FILE, "training_report.json")
+
+#: Stages of the training, as reported by its progress events, for people.
+STAGE_LABELS = {
+    "data": "demonstrations",
+    "trunk": "behaviour cloning",
+    "noise": "sampling noise",
+    "dagger": "DAgger rounds",
+    "heads": "bootstrap heads",
+    "prior": "xi prior",
+}
+
+#: Metrics shown on a stage's line, when its events carry them.
+SHOWN_METRICS = (
+    "train_rows",
+    "val_rows",
+    "rows_added",
+    "train_loss",
+    "val/loss",
+    "rho_accel",
+    "c_accel",
+    "c_steer",
+    "sparsity",
+    "alpha",
+)
+
+
+@contextmanager
+def training_progress(console: Console) -> Iterator[Callable[[TrainEvent], None]]:
+    """One bar per training stage; yields the callback for ``train_drivers``.
+
+    Each event sets its stage's bar to ``step / total`` and shows the stage's
+    key metrics (:data:`SHOWN_METRICS`).
+    """
+    # Metrics last: a narrow terminal cuts them, not the bar or the count.
+    columns = (
+        TextColumn("[bold]{task.description}"),
+        BarColumn(bar_width=10, table_column=Column(min_width=10)),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(table_column=Column(min_width=7)),
+        TextColumn(
+            "{task.fields[metrics]}",
+            table_column=Column(no_wrap=True, overflow="ellipsis"),
+        ),
+    )
+    with Progress(*columns, console=console) as progress:
+        tasks: dict[str, TaskID] = {}
+
+        def update(event: TrainEvent) -> None:
+            if event.stage not in tasks:
+                label = STAGE_LABELS.get(event.stage, event.stage)
+                tasks[event.stage] = progress.add_task(
+                    label, total=event.total, metrics=""
+                )
+            metrics = " ".join(
+                f"{name}={_number(event.metrics[name])}"
+                for name in SHOWN_METRICS
+                if name in event.metrics
+            )
+            progress.update(
+                tasks[event.stage],
+                completed=event.step,
+                total=event.total,
+                metrics=escape(metrics),
+            )
+
+        yield update
+
+
+def _data_folder(data_dir: Path | None) -> Path:
+    """The NGSIM folder to train on, checked to hold the files training reads."""
+    try:
+        folder = ngsim_dir(data_dir)
+    except FileNotFoundError as exc:
+        raise CliError(f"{exc} (--data-dir)") from None
+    missing = [
+        f for f in (I80_PAIRS_FILE, I80_LATERAL_FILE) if not (folder / f).is_file()
+    ]
+    if missing:
+        raise CliError(
+            f"NGSIM folder {folder} lacks {', '.join(missing)}; --data-dir must "
+            "name the folder holding the project's NGSIM files (see its SOURCE.md)"
+        )
+    return folder
+
+
+def _check_writable(out: Path) -> None:
+    """Create ``out`` and write a scratch file there, before minutes of training."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise CliError(f"cannot write to --out {out}: {reason}") from None
+
+
+def _number(value: float) -> str:
+    """Counts with thousands separators, other values to 4 significant digits."""
+    return f"{value:,.0f}" if float(value).is_integer() else f"{value:.4g}"
+
+
+def _size(n_bytes: int) -> str:
+    return f"{n_bytes / 1024:,.0f} kB" if n_bytes >= 1024 else f"{n_bytes} B"
+
+
+@app.command("train-drivers")
+def train_drivers_command(
+    seed: Annotated[int, typer.Option(min=0, help="Seeds the whole training.")] = 0,
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            help="Folder for driver_net.npz, xi_prior.npz and training_report.json "
+            "(created; files of those names are replaced).",
+        ),
+    ] = DEFAULT_OUT,
+    data_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--data-dir",
+            help="NGSIM folder; default $AVRISK_NGSIM_DIR, else the project's copy.",
+        ),
+    ] = None,
+) -> None:
+    """Retrain the learned drivers and their xi prior from NGSIM data.
+
+    The bundled scenarios keep using the shipped model in avrisk/data/drivers
+    unless --out names that folder.
+    """
+    with user_errors(OSError):
+        folder = _data_folder(data_dir)
+        _check_writable(out)
+        if os.path.samefile(out, default_drivers_dir()):
+            err_console.print(
+                f"[yellow]warning:[/] replacing the shipped driver model in "
+                f"{escape(str(out))}",
+                highlight=False,
+            )
+        # Imported here: training pulls in scikit-learn, which no other
+        # command needs at start-up.
+        from avrisk.learning import train
+
+        with training_progress(err_console) as progress:
+            train.train_drivers(seed, out, data_dir=folder, progress=progress)
+        written = ", ".join(
+            f"{name} ({_size((out / name).stat().st_size)})" for name in OUTPUT_FILES
+        )
+        out_console.print(
+            f"wrote {escape(written)} to {escape(str(out))}", highlight=False
+        )

@@ -1,0 +1,69 @@
+"""``avrisk train-drivers`` through the Typer app."""
+
+import functools
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+import avrisk.cli.train_drivers  # noqa: F401  (registers the command)
+import avrisk.learning.train as training
+from avrisk.agents.drivers import XiPrior, load_driver_net
+from avrisk.agents.drivers.store import default_drivers_dir
+from avrisk.cli.app import app
+
+runner = CliRunner()
+
+
+def _train(*args):
+    return runner.invoke(app, ["train-drivers", *args])
+
+
+@pytest.mark.slow
+def test_train_drivers_writes_the_model_files_and_names_them(
+    tmp_path, fake_ngsim, tiny_train_config, monkeypatch
+):
+    shipped = {p.name: p.stat().st_mtime_ns for p in default_drivers_dir().iterdir()}
+    monkeypatch.setattr(
+        training,
+        "train_drivers",
+        functools.partial(training.train_drivers, config=tiny_train_config),
+    )
+    out = tmp_path / "new" / "drivers"
+    result = _train("--seed", "2", "--out", str(out), "--data-dir", str(fake_ngsim))
+    assert result.exit_code == 0, result.output
+    net = load_driver_net(out / "driver_net.npz")
+    assert net.default_xi.shape == (404,)
+    assert XiPrior.load(out / "xi_prior.npz").members.shape == (3, 404)
+    assert json.loads((out / "training_report.json").read_text())["seed"] == 2
+    for name in ("driver_net.npz", "xi_prior.npz", "training_report.json"):
+        assert name in result.output
+    assert "kB" in result.output and "wrote" in result.output
+    for stage in ("behaviour cloning", "DAgger rounds", "bootstrap heads", "xi prior"):
+        assert stage in result.output
+    assert "val/loss=" in result.output
+    after = {p.name: p.stat().st_mtime_ns for p in default_drivers_dir().iterdir()}
+    assert after == shipped
+
+
+def test_a_missing_data_folder_is_a_one_line_error(tmp_path):
+    result = _train("--data-dir", str(tmp_path / "nowhere"), "--out", str(tmp_path))
+    assert result.exit_code == 2 and result.output.count("\n") == 1
+    assert "error: NGSIM folder" in result.output and "does not exist" in result.output
+
+
+def test_a_data_folder_without_the_ngsim_files_is_a_one_line_error(tmp_path):
+    result = _train("--data-dir", str(tmp_path), "--out", str(tmp_path / "out"))
+    assert result.exit_code == 2
+    assert "lacks i80_cf_pairs.csv.gz" in result.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_out_path_that_cannot_be_a_folder_is_refused_before_training(
+    tmp_path, fake_ngsim
+):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    result = _train("--data-dir", str(fake_ngsim), "--out", str(blocker / "drivers"))
+    assert result.exit_code == 2 and result.output.count("\n") == 1
+    assert "error: cannot write to --out" in result.output

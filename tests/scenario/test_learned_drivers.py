@@ -1,0 +1,146 @@
+"""Scenarios driven by the learned driver network and the lidar_imitation ego."""
+
+import numpy as np
+import pytest
+import torch
+
+from avrisk.agents.drivers import XI_DIM, LearnedEgoPolicy, load_xi_prior
+from avrisk.rare import FixedCovNormal, ScaledBeta
+from avrisk.rare.problem import chunk_rng, sample_seeds
+from avrisk.scenario import (
+    ParamLayout,
+    build_base_distribution,
+    load_spec,
+    spec_from_dict,
+)
+from avrisk.scenario.builder import ScenarioSimulator
+
+
+def shortened(name, horizon):
+    """A bundled scenario cut to ``horizon`` seconds (fast tests)."""
+    spec = load_spec(name)
+    return spec.model_copy(
+        update={"simulation": spec.simulation.model_copy(update={"horizon": horizon})}
+    )
+
+
+def traffic(models, ego="idm_mobil", horizon=1.0):
+    """Four vehicles on three lanes; ``models`` names the three drivers' models."""
+    lanes = (1, 0, 2)
+    return spec_from_dict(
+        {
+            "name": "mix",
+            "road": {"n_lanes": 3},
+            "drivers": {
+                "idm": {"desired_speed": 20.0},
+                "learned": {"model": "learned"},
+            },
+            "ego": {"policy": ego},
+            "vehicles": [
+                {"lane": 1, "offset": 0.0},
+                *(
+                    {"lane": lane, "offset": 50.0 * (lane == 1), "driver": m}
+                    for lane, m in zip(lanes, models, strict=True)
+                ),
+            ],
+            "simulation": {"horizon": horizon},
+            "safety": {"measure": "min_box_ttc"},
+        }
+    )
+
+
+def sample(spec, n, seed=0):
+    x = build_base_distribution(spec).sample(n, chunk_rng(seed, 0, 0))
+    return x, sample_seeds(seed, 0, np.arange(n))
+
+
+def frames(spec, x, seeds):
+    """Recorded positions and speeds, (B, T+1, A) each, and the result."""
+    result = ScenarioSimulator(spec).rollout(x, seeds, record_trace=True)
+    trace = result.trace
+    return torch.stack([trace.x, trace.y, trace.speed]), result
+
+
+def test_the_learned_scenario_appends_one_xi_block_to_x():
+    layout = ParamLayout.from_spec(load_spec("highway_learned"))
+    assert layout.xi_dim == XI_DIM == 404
+    assert layout.dim == 24 + 404 and len(layout.columns) == layout.dim
+    assert layout.columns[23:26] == ("veh5.speed", "xi.0", "xi.1")
+    assert layout.columns[-1] == "xi.403" and layout.unit("xi.403") == "-"
+    assert layout.xi_slice == slice(24, 428)
+    default = ParamLayout.from_spec(load_spec("highway_default"))
+    assert (default.dim, default.xi_dim) == (24, 0)
+
+
+def test_p0_of_the_learned_scenario_ends_with_the_shipped_xi_prior():
+    spec = load_spec("highway_learned")
+    p0 = build_base_distribution(spec)
+    assert p0.dim == 428 and len(p0.blocks) == 25
+    assert all(isinstance(b, ScaledBeta) for b in p0.blocks[:24])
+    xi = p0.blocks[-1]
+    assert isinstance(xi, FixedCovNormal) and xi.dim == XI_DIM
+    np.testing.assert_array_equal(xi.mean, load_xi_prior().mean)
+    x = p0.sample(6, np.random.default_rng(0))
+    assert x.shape == (6, 428)
+    log_p0 = p0.log_prob(x)
+    assert log_p0.shape == (6,) and np.isfinite(log_p0).all()
+    np.testing.assert_allclose(
+        log_p0 - xi.log_prob(x[:, 24:]),
+        build_base_distribution(load_spec("highway_default")).log_prob(x[:, :24]),
+    )
+
+
+def test_a_learned_rollout_depends_only_on_its_own_row_and_seed():
+    spec = shortened("highway_learned", 1.5)
+    x, seeds = sample(spec, 5)
+    together, result = frames(spec, x, seeds)
+    alone, _ = frames(spec, x[3:4], seeds[3:4])
+    assert torch.equal(together[:, 3], alone[:, 0])
+    again, _ = frames(spec, x[[3, 0]], seeds[[3, 0]])
+    assert torch.equal(together[:, [3, 0]], again)
+    assert result.f.shape == (5,) and result.steps.tolist() == [15] * 5
+
+
+def test_the_seed_and_xi_each_change_a_learned_rollout():
+    spec = shortened("highway_learned", 1.0)
+    x, seeds = sample(spec, 2)
+    base, _ = frames(spec, x[:1], seeds[:1])
+    other_seed, _ = frames(spec, x[:1], seeds[1:2])
+    other_xi = x[:1].copy()
+    other_xi[0, 24:] = x[1, 24:]
+    other_x, _ = frames(spec, other_xi, seeds[:1])
+    env = slice(1, None)  # vehicles 1..5: the learned drivers
+    assert not torch.equal(base[:, :, :, env], other_seed[:, :, :, env])
+    assert not torch.equal(base[:, :, :, env], other_x[:, :, :, env])
+
+
+def test_mixed_traffic_gives_each_vehicle_the_action_of_its_own_model():
+    # After one step every vehicle has moved by its own first action, taken on
+    # the same initial observation: the mix must match the pure scenarios.
+    mixed = traffic(["idm", "learned", "idm"], horizon=0.1)
+    x, seeds = sample(mixed, 3)
+    got, _ = frames(mixed, x, seeds)
+    all_idm, _ = frames(traffic(["idm"] * 3, horizon=0.1), x[:, :16], seeds)
+    all_learned, _ = frames(traffic(["learned"] * 3, horizon=0.1), x, seeds)
+    assert torch.equal(got[..., [0, 1, 3]], all_idm[..., [0, 1, 3]])
+    assert torch.equal(got[..., 2], all_learned[..., 2])
+    assert not torch.equal(all_idm[..., 2], all_learned[..., 2])
+
+
+def test_mixed_traffic_with_the_lidar_ego_is_batch_independent():
+    spec = traffic(["learned", "idm", "learned"], ego="lidar_imitation")
+    x, seeds = sample(spec, 4, seed=1)
+    together, result = frames(spec, x, seeds)
+    alone, _ = frames(spec, x[2:3], seeds[2:3])
+    assert torch.equal(together[:, 2], alone[:, 0])
+    assert result.steps.min().item() >= 1
+
+
+@pytest.mark.parametrize("models", [["idm"] * 3, ["learned"] * 3])
+def test_the_lidar_ego_drives_on_its_mean_action_whatever_the_seed(models):
+    spec = traffic(models, ego="lidar_imitation", horizon=0.1)
+    x, seeds = sample(spec, 1)
+    first, _ = frames(spec, np.repeat(x, 2, axis=0), np.array([seeds[0], 12345]))
+    assert torch.equal(first[:, 0, :, 0], first[:, 1, :, 0])
+    sim = ScenarioSimulator(spec)
+    assert isinstance(sim.ego_policy, LearnedEgoPolicy)
