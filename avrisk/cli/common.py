@@ -11,10 +11,12 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-#: Diagnostics and progress go to stderr; results to stdout, in tables at
-#: least 110 columns wide so that they do not wrap when piped to a file.
-err_console = Console(stderr=True)
-out_console = Console(width=max(Console().width, 110))
+#: Diagnostics and progress go to stderr; results to stdout. Both are at least
+#: 110 columns wide so that tables and progress lines do not wrap or get cut
+#: when piped to a file (Rich assumes 80 columns there).
+_WIDTH = max(Console().width, 110)
+err_console = Console(stderr=True, width=_WIDTH)
+out_console = Console(width=_WIDTH)
 
 
 class CliError(Exception):

@@ -14,6 +14,10 @@ Modules (import them directly; this package imports nothing heavy on load):
   ensemble of heads, :func:`~avrisk.learning.train.train_drivers`;
 * :mod:`~avrisk.learning.glasso` -- Ledoit-Wolf + graphical lasso fit of a
   sparse precision;
+* :mod:`~avrisk.learning.gail` -- GAIL with PPO: fine-tunes the acceleration
+  head of a trained network in replays of human car following (not part of
+  :func:`~avrisk.learning.train.train_drivers`; the shipped weights are BC +
+  DAgger);
 
 What the data can and cannot teach
 ----------------------------------
@@ -37,7 +41,15 @@ Not done (the paper's method)
 -----------------------------
 The paper trains its generators with model-based GAIL (Baram et al. 2017): a
 discriminator reward made differentiable through a learned forward model.
-Here the generators are trained by behaviour cloning with DAgger; neither GAIL
-nor model-based GAIL is implemented. The ensemble is one trunk with ``m``
-bootstrap heads (DESIGN.md §4), not ``m`` independently trained generators.
+Model-based GAIL is not implemented. The shipped generators are trained by
+behaviour cloning with DAgger. Model-free GAIL with PPO exists as an optional
+fine-tuning stage (:func:`~avrisk.learning.gail.gail_finetune`), limited to
+car following behind replayed human leaders and to the acceleration rows of
+the shared head (its shift is carried over to the ``xi`` prior by
+translation); it is not run by ``train_drivers`` and the shipped files do not
+use it. Measured on held-out windows (``benchmarks/gail_realism.py``) it brings
+the speed, acceleration, jerk, gap and TTC distributions closer to the human
+ones but does not reduce the rear-end collisions. The ensemble is one trunk
+with ``m`` bootstrap heads (DESIGN.md §4), not ``m`` independently trained
+generators.
 """
