@@ -319,6 +319,9 @@ class IDMDriver:
         predicts their reactions.
     """
 
+    #: IDM and MOBIL find leaders and followers from the privileged state.
+    reads_lidar = False
+
     def __init__(
         self,
         params: IDMParams,
@@ -454,6 +457,8 @@ class IDMPolicy:
     road : Road
     wheelbase_fraction : float, default=0.6
     """
+
+    reads_lidar = False
 
     def __init__(
         self, params: IDMParams, road: Road, *, wheelbase_fraction: float = 0.6

@@ -36,7 +36,7 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from avrisk.agents.policy import Action, DriverModel
+from avrisk.agents.policy import Action, DriverModel, reads_lidar
 from avrisk.sim.observation import Observation
 
 __all__ = ["MixedDriver"]
@@ -66,6 +66,7 @@ class MixedDriver:
             )
         self.first = first
         self.second = second
+        self.reads_lidar = reads_lidar(first) or reads_lidar(second)
         # (1, A): Action.where broadcasts masks from the leading dimension.
         self.use_second = use_second.reshape(-1, use_second.shape[-1])
 

@@ -23,6 +23,12 @@ Contract: a rollout's actions must depend only on that rollout's rows of
 ``obs`` and ``policy_state`` (and its seed): only elementwise work along the
 batch dimension, randomness from :mod:`avrisk.sim.noise`. That is what keeps a
 rollout's result independent of the batch it shares.
+
+Lidar on demand: scanning every vehicle's lidar is the simulator's costliest
+step. A policy or driver model that never reads ``obs.lidar`` may say so with a
+class attribute ``reads_lidar = False``; when neither the drivers nor the ego
+read it, the simulator skips the scan and ``obs.lidar`` is None. Without the
+attribute a model is assumed to read it (:func:`reads_lidar`).
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ __all__ = [
     "DriverModel",
     "Policy",
     "get_policy",
+    "reads_lidar",
     "register_policy",
 ]
 
@@ -91,6 +98,17 @@ class DriverModel(Protocol):
         ...
 
 
+def reads_lidar(model: Any) -> bool:
+    """Whether a policy or driver model reads ``obs.lidar`` (default True).
+
+    Examples
+    --------
+    >>> reads_lidar(ConstantPolicy()), reads_lidar(object())
+    (False, True)
+    """
+    return bool(getattr(model, "reads_lidar", True))
+
+
 class ConstantPolicy:
     """An ego that holds fixed commands (cruise control, test double).
 
@@ -106,6 +124,8 @@ class ConstantPolicy:
     >>> ConstantPolicy(accel=1.0).accel
     1.0
     """
+
+    reads_lidar = False
 
     def __init__(self, accel: float = 0.0, steer: float = 0.0) -> None:
         self.accel = accel

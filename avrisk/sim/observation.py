@@ -93,7 +93,9 @@ class Observation:
         Privileged ground truth, fields of shape (B, A).
     lidar : LidarScan or None
         Each vehicle's lidar, fields of shape (B, A, R); None when the
-        simulator runs without lidar (``n_lidar_beams = 0``).
+        simulator runs without lidar (``n_lidar_beams = 0``) or when neither
+        the drivers nor the ego read it (``reads_lidar = False``, see
+        :mod:`avrisk.agents.policy`).
     lane : LaneFeatures
         Fields of shape (B, A).
     collided : Tensor of bool, shape (B, A)

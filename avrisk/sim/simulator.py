@@ -51,7 +51,7 @@ import torch
 from torch import Tensor
 
 from avrisk.agents.idm import IDMDriver, IDMParams
-from avrisk.agents.policy import Action, DriverModel, Policy
+from avrisk.agents.policy import Action, DriverModel, Policy, reads_lidar
 from avrisk.safety.base import SafetyMeasure
 from avrisk.safety.ttc import MinTTC
 from avrisk.sim.collision import offroad, pairwise_overlap, reversing
@@ -544,7 +544,15 @@ class Simulator:
         steps = torch.zeros_like(seeds)
         alive = ~crash
 
-        obs = self._observation(state, geo, self._lidar(state, geo), seeds, 0)
+        # Scan lidar only if the drivers or the ego read it (results are the same).
+        lidar_read = reads_lidar(driver) or (
+            ego_policy is not None and reads_lidar(ego_policy)
+        )
+
+        def lidar(state: VehicleState, geo: _Geometry) -> LidarScan | None:
+            return self._lidar(state, geo) if lidar_read else None
+
+        obs = self._observation(state, geo, lidar(state, geo), seeds, 0)
         act = self._driver_act(driver)
         driver_state = driver.init(obs)
         ego_state = ego_policy.init(obs) if ego_policy is not None else None
@@ -574,7 +582,7 @@ class Simulator:
                 frames.append(self._frame(state, alive, ttc))
             alive = alive & ~hit
             if k < n_steps:
-                obs = self._observation(state, geo, self._lidar(state, geo), seeds, k)
+                obs = self._observation(state, geo, lidar(state, geo), seeds, k)
 
         trace = None
         if record_trace:

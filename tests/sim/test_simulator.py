@@ -3,7 +3,8 @@ import math
 import pytest
 import torch
 
-from avrisk.agents import ConstantPolicy, IDMParams, IDMPolicy
+from avrisk.agents import ConstantPolicy, IDMDriver, IDMParams, IDMPolicy
+from avrisk.agents.policy import reads_lidar
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 
 F64 = torch.float64
@@ -189,6 +190,42 @@ def test_the_idm_ego_policy_drives_exactly_like_the_default_ego(batch_of_seven):
         state, params, seeds(7), record_trace=True, ego_policy=IDMPolicy(params, ROAD)
     )
     assert_same(with_policy, res)
+
+
+class _LidarSpy:
+    """Wraps a driver model without declaring ``reads_lidar``; notes obs.lidar."""
+
+    def __init__(self, inner):
+        self.inner, self.saw_lidar = inner, []
+
+    def init(self, obs):
+        return self.inner.init(obs)
+
+    def act(self, obs, state):
+        self.saw_lidar.append(obs.lidar is not None)
+        return self.inner.act(obs, state)
+
+
+def test_lidar_is_scanned_only_for_models_that_read_it_and_changes_nothing_else(
+    batch_of_seven,
+):
+    sim, state, params, res = batch_of_seven
+    idm = IDMDriver(params, ROAD)
+    assert not reads_lidar(idm) and not reads_lidar(ConstantPolicy())
+    spy_of_idm = _LidarSpy(idm)  # undeclared: assumed to read the lidar
+    scanned = sim.run(state, spy_of_idm, seeds(7), record_trace=True)
+    assert all(spy_of_idm.saw_lidar)
+    assert_same(scanned, res)
+    # A model that declares it never reads lidar gets none, whatever wraps it.
+    spy_of_idm.reads_lidar = False
+    spy_of_idm.saw_lidar.clear()
+    sim.run(state, spy_of_idm, seeds(7))
+    assert spy_of_idm.saw_lidar and not any(spy_of_idm.saw_lidar)
+    # The ego policy counts too: an undeclared ego brings the scan back.
+    ego = _LidarSpy(IDMPolicy(params, ROAD))
+    with_ego = sim.run(state, idm, seeds(7), ego_policy=ego, record_trace=True)
+    assert all(ego.saw_lidar)
+    assert_same(with_ego, res)
 
 
 def test_trace_alive_marks_exactly_the_simulated_steps(batch_of_seven):
