@@ -19,6 +19,7 @@ from rich.console import Console
 from rich.table import Table
 
 from avrisk.cli.app import app
+from avrisk.cli.common import out_console, user_errors
 from avrisk.cli.progress import ce_progress
 from avrisk.rare import Estimate, cross_entropy, naive_mc
 from avrisk.testing import AnalyticProblem, beta_sum_problem, gaussian_linear_problem
@@ -65,13 +66,15 @@ def demo(
         "(0: none; the ratios then use CE's own estimate of p).",
     ),
 ) -> None:
-    """Estimate known rare-event probabilities with naive MC and cross-entropy IS.
+    """The main job: cross-entropy vs naive MC on exact problems, then a scenario.
 
-    Problems: the sum of six longitudinal offsets 80 + 40 Beta(2,2) m (the
-    paper's marginal) below a threshold (p = 1e-5), and a linear limit state of
-    a 100-dimensional standard normal (p = 1e-6).
+    First two problems with known answers at an equal budget of calls: the sum
+    of six longitudinal offsets 80 + 40 Beta(2,2) m (the paper's marginal)
+    below a threshold (p = 1e-5), and a linear limit state of a
+    100-dimensional standard normal (p = 1e-6). Then `avrisk compare` on the
+    bundled highway_default scenario, with its report under --scenario-out.
     """
-    console = Console(width=max(Console().width, 110))
+    console = out_console
     problems = [beta_sum_problem(6, p=1e-5), gaussian_linear_problem(100, p=1e-6)]
     n_iter, n_per_iter = 8, max(100, budget // 25)
     n_final = budget - n_iter * n_per_iter
@@ -116,7 +119,6 @@ def _scenario_part(
     console: Console, out: Path, rollouts: int, reference: int, seed: int
 ) -> None:
     """CE vs naive MC on the bundled scenario at ``rollouts`` each (and a reference)."""
-    from avrisk.cli.common import user_errors
     from avrisk.cli.run import EXPECTED, compare_runs
     from avrisk.pipeline import RunSettings
 
