@@ -1,9 +1,9 @@
 """Plots of a run, drawn from its ``summary.json`` alone (Matplotlib, Agg).
 
 * :func:`plot_comparison` -- the paper's Fig. 2/3: against each test threshold,
-  the ratio of the number of rare events (CE hits over the naive hits expected
-  at the same number of rollouts) and the ratio of estimator variances (naive
-  over CE, at the same number of rollouts).
+  the ratio of the number of rare events (CE's final-stage hits over the naive
+  hits expected with CE's whole budget of rollouts) and the ratio of estimator
+  variances (naive over CE, at that budget).
 * :func:`plot_ce_trajectory` -- ``gamma_k`` and the ``rho``-quantile per CE
   iteration, with the hits of each iteration.
 
@@ -81,8 +81,8 @@ def plot_comparison(
     gammas = [r["gamma"] for r in rows]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
     panels = (
-        ("rare_event_ratio", "rare events: CE / naive (same n)"),
-        ("variance_ratio", "variance: naive / CE (same n)"),
+        ("rare_event_ratio", "rare events: CE / naive (same budget)"),
+        ("variance_ratio", "variance: naive / CE (same budget)"),
     )
     for ax, (key, title) in zip(axes, panels, strict=True):
         ax.plot(gammas, [r[key] for r in rows], "o-", color="tab:blue")
