@@ -21,8 +21,13 @@ B. Multi-lane traffic (6 lanes, 6 vehicles, random scenes unseen in
    file as the human reference (raw NGSIM: accelerations are taken from the
    speed smoothed over 1 s, and jerk is not compared).
 
+The I-80 data of part A ship with the package; the US-101 file of part B does
+not: set ``$AVRISK_NGSIM_DIR`` to a folder holding the original NGSIM files
+(``us101_vehicle_subset.csv.gz``; see :mod:`avrisk.learning.ngsim`).
+
 Usage::
 
+    export AVRISK_NGSIM_DIR=/path/to/ngsim  # a folder of the original files
     .venv/bin/python benchmarks/driver_realism.py            # shipped drivers
     .venv/bin/python benchmarks/driver_realism.py --net DIR/driver_net.npz \
         --prior DIR/xi_prior.npz --scenes 128

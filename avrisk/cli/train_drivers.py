@@ -1,6 +1,7 @@
 """``avrisk train-drivers``: retrain the learned drivers and their ``xi`` prior.
 
-Runs :func:`avrisk.learning.train.train_drivers` on the NGSIM data (behaviour
+Runs :func:`avrisk.learning.train.train_drivers` on the NGSIM I-80 data
+shipped with the package (``avrisk/data/ngsim/``) or in ``--data-dir`` (behaviour
 cloning, DAgger, the bootstrap ensemble of heads, the graphical-lasso prior of
 ``xi``; about two to ten minutes on two cores) with one torch thread, so that
 the same seed, data and machine give the same files, and writes into
@@ -44,7 +45,7 @@ from avrisk.agents.drivers.store import (
 )
 from avrisk.cli.app import app
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
-from avrisk.learning.ngsim import I80_LATERAL_FILE, I80_PAIRS_FILE, ngsim_dir
+from avrisk.learning.ngsim import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
 
 if TYPE_CHECKING:
     from avrisk.learning.train import TrainEvent
@@ -125,18 +126,11 @@ def training_progress(console: Console) -> Iterator[Callable[[TrainEvent], None]
 def _data_folder(data_dir: Path | None) -> Path:
     """The NGSIM folder to train on, checked to hold the files training reads."""
     try:
-        folder = ngsim_dir(data_dir)
+        for names in (I80_PAIRS, I80_LATERAL):
+            ngsim_file(names, data_dir)
     except FileNotFoundError as exc:
         raise CliError(f"{exc} (--data-dir)") from None
-    missing = [
-        f for f in (I80_PAIRS_FILE, I80_LATERAL_FILE) if not (folder / f).is_file()
-    ]
-    if missing:
-        raise CliError(
-            f"NGSIM folder {folder} lacks {', '.join(missing)}; --data-dir must "
-            "name the folder holding the project's NGSIM files (see its SOURCE.md)"
-        )
-    return folder
+    return ngsim_dir(data_dir)
 
 
 def _check_writable(out: Path) -> None:
@@ -174,7 +168,8 @@ def train_drivers_command(
         Path | None,
         typer.Option(
             "--data-dir",
-            help="NGSIM folder; default $AVRISK_NGSIM_DIR, else the project's copy.",
+            help="NGSIM folder (packed or original files); default "
+            "$AVRISK_NGSIM_DIR, else the data shipped with avrisk.",
         ),
     ] = None,
 ) -> None:

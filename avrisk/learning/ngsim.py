@@ -1,7 +1,7 @@
 """Loaders for the NGSIM samples the project uses, in SI units.
 
-Three files (provenance in the data folder's ``SOURCE.md``), each read into a
-frozen dataclass of equal-length numpy columns, one row per 0.1 s sample:
+Three data sets (provenance in the data folder's ``SOURCE.md``), each read
+into a frozen dataclass of equal-length numpy columns, one row per 0.1 s sample:
 
 * :func:`load_i80_pairs` -- I-80 leader-follower car-following pairs
   (``i80_cf_pairs.csv.gz``). **The file is in feet**: positions [ft],
@@ -12,6 +12,13 @@ frozen dataclass of equal-length numpy columns, one row per 0.1 s sample:
 * :func:`load_us101` -- US-101 single-vehicle trajectories with lateral
   positions (``us101_vehicle_subset.csv.gz``); already SI. The vehicles around
   them are not in the file.
+
+The two I-80 data sets, all that training reads, ship with the package in
+``avrisk/data/ngsim/`` (the default folder, :func:`ngsim_dir`), packed by
+``scripts/pack_ngsim.py`` into Parquet files that the loaders turn into the
+same arrays, bit for bit, as the original files (:data:`I80_PAIRS`,
+:data:`I80_LATERAL`; the loaders read either form). US-101 does not ship: set
+``$AVRISK_NGSIM_DIR`` to a folder holding the original files to use it.
 
 NGSIM frame: ``Local_Y`` runs along the road in the direction of travel and
 marks the *front* centre of the vehicle; ``Local_X`` is lateral, from the
@@ -28,10 +35,11 @@ from __future__ import annotations
 import dataclasses
 import os
 import zlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
-from typing import Any, Self
+from typing import Any, NamedTuple, Self
 
 import numpy as np
 import pyarrow as pa
@@ -40,20 +48,33 @@ import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
 __all__ = [
+    "DECIMALS_KEY",
+    "EXCEPTIONS_SUFFIX",
     "FT",
+    "I80_FEET_COLUMNS",
     "I80_LANE_WIDTH",
+    "I80_LATERAL",
+    "I80_LATERAL_COLUMNS",
     "I80_N_LANES",
+    "I80_PAIRS",
+    "I80_PAIRS_COLUMNS",
     "NGSIM_DIR_ENV",
+    "US101_FILE",
     "US101_LANE_WIDTH",
     "CarFollowingPairs",
     "LateralPairs",
+    "NgsimFiles",
     "VehicleTrajectories",
+    "default_ngsim_dir",
     "episode_bounds",
+    "i80_derived_columns",
     "lateral_pair_split",
     "load_i80_lateral",
     "load_i80_pairs",
     "load_us101",
     "ngsim_dir",
+    "ngsim_file",
+    "read_i80_pairs_table",
 ]
 
 #: One international foot [m].
@@ -64,15 +85,73 @@ I80_N_LANES = 6
 I80_LANE_WIDTH = US101_LANE_WIDTH = 12 * FT
 #: Environment variable naming the folder that holds the NGSIM files.
 NGSIM_DIR_ENV = "AVRISK_NGSIM_DIR"
-#: Where the project keeps its copy (used when the variable is unset).
-_SHARED_NGSIM_DIR = Path("/work/shared/data/ngsim")
 
-I80_PAIRS_FILE = "i80_cf_pairs.csv.gz"
-I80_LATERAL_FILE = "i80_0400_0415_emd_cf_pairs.parquet"
+
+class NgsimFiles(NamedTuple):
+    """File names of one data set, in the order the loaders look for them.
+
+    Both hold the same data (the loaders return the same arrays).
+
+    Attributes
+    ----------
+    original : str
+        The file described in the original folder's ``SOURCE.md``.
+    packed : str
+        The compact Parquet file ``scripts/pack_ngsim.py`` makes from it, as
+        shipped in :func:`default_ngsim_dir`.
+    """
+
+    original: str
+    packed: str
+
+
+#: I-80 car-following pairs (:func:`load_i80_pairs`).
+I80_PAIRS = NgsimFiles("i80_cf_pairs.csv.gz", "i80_cf_pairs.parquet")
+#: I-80 16:00-16:15 pairs with lateral positions (:func:`load_i80_lateral`).
+I80_LATERAL = NgsimFiles(
+    "i80_0400_0415_emd_cf_pairs.parquet", "i80_0400_0415_lateral_pairs.parquet"
+)
+#: US-101 trajectories (:func:`load_us101`); not shipped with the package.
 US101_FILE = "us101_vehicle_subset.csv.gz"
+
+#: Columns of the I-80 pairs file that :func:`load_i80_pairs` reads, besides
+#: the ones in feet.
+I80_PAIRS_COLUMNS = (
+    "pair_id", "period", "follower_id", "leader_id", "lane_id", "split",
+    "in_manifest", "t",
+)  # fmt: skip
+#: Columns of the I-80 pairs file in feet, ft/s or ft/s^2, apart from those of
+#: :func:`i80_derived_columns`.
+I80_FEET_COLUMNS = (
+    "x_follower", "v_follower", "a_follower", "x_leader", "v_leader", "a_leader",
+    "leader_length",
+)  # fmt: skip
+#: Columns of the lateral pairs file and the :class:`LateralPairs` fields they
+#: fill (besides ``pair_id``).
+I80_LATERAL_COLUMNS = {
+    "vehicle_id": "follower_id", "preceding": "leader_id", "frame_id": "frame",
+    "time": "t", "local_x": "lateral", "local_y": "x", "v_length": "length",
+    "v_width": "width", "v_class": "vehicle_class", "v_vel": "speed",
+    "v_acc": "accel", "lane_id": "lane", "space_headway": "space_headway",
+    "time_headway": "time_headway", "preceding_local_y": "leader_x",
+    "preceding_length": "leader_length", "preceding_width": "leader_width",
+    "preceding_class": "leader_class", "preceding_vel": "leader_speed",
+    "preceding_acc": "leader_accel",
+}  # fmt: skip
+#: Field metadata key of a packed float column stored as integers: the number
+#: ``k`` of decimals (value = integer / 10**k).
+DECIMALS_KEY = b"avrisk.decimals"
+#: Suffix of the float64 column that holds, where not null, the values of a
+#: packed decimal column that are not exact decimals.
+EXCEPTIONS_SUFFIX = ".float64"
 
 IntArray = NDArray[np.int64]
 FloatArray = NDArray[np.float64]
+
+
+def default_ngsim_dir() -> Path:
+    """The package folder holding the shipped (packed) NGSIM files."""
+    return Path(str(resources.files("avrisk") / "data" / "ngsim"))
 
 
 def ngsim_dir(path: str | Path | None = None) -> Path:
@@ -81,8 +160,8 @@ def ngsim_dir(path: str | Path | None = None) -> Path:
     Parameters
     ----------
     path : str or Path, optional
-        Explicit folder; else ``$AVRISK_NGSIM_DIR``; else the project's shared
-        data folder.
+        Explicit folder; else ``$AVRISK_NGSIM_DIR``; else the package's folder
+        (:func:`default_ngsim_dir`), which holds the I-80 data sets only.
 
     Returns
     -------
@@ -91,19 +170,42 @@ def ngsim_dir(path: str | Path | None = None) -> Path:
     Raises
     ------
     FileNotFoundError
-        If the folder does not exist; the message says how to point to one.
+        If the folder does not exist.
     """
-    candidates = [path, os.environ.get(NGSIM_DIR_ENV), _SHARED_NGSIM_DIR]
-    for c in candidates:
-        if c is not None:
-            p = Path(c)
-            if p.is_dir():
-                return p
-            if c is not _SHARED_NGSIM_DIR:
-                raise FileNotFoundError(f"NGSIM folder {p} does not exist")
+    chosen = path if path is not None else os.environ.get(NGSIM_DIR_ENV)
+    folder = default_ngsim_dir() if chosen is None else Path(chosen)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"NGSIM folder {folder} does not exist")
+    return folder
+
+
+def ngsim_file(names: Sequence[str], path: str | Path | None = None) -> Path:
+    """The first of ``names`` that the NGSIM folder holds.
+
+    Parameters
+    ----------
+    names : sequence of str
+        File names, in order of preference (e.g. :data:`I80_PAIRS`).
+    path : str or Path, optional
+        The folder, as for :func:`ngsim_dir`.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    FileNotFoundError
+        If the folder does not exist or holds none of ``names``; the message
+        names the folder and the files.
+    """
+    folder = ngsim_dir(path)
+    for name in names:
+        if (folder / name).is_file():
+            return folder / name
     raise FileNotFoundError(
-        f"no NGSIM data folder: pass data_dir= or set ${NGSIM_DIR_ENV} to the "
-        "folder holding i80_cf_pairs.csv.gz (see its SOURCE.md)"
+        f"NGSIM folder {folder} lacks {' or '.join(names)}; pass the folder "
+        f"holding it or set ${NGSIM_DIR_ENV} (see its SOURCE.md)"
     )
 
 
@@ -353,7 +455,27 @@ def _col(table: pa.Table, name: str, dtype: Any) -> NDArray[Any]:
     arr = col.to_numpy(zero_copy_only=False)
     if dtype is str:
         return np.asarray(arr, dtype=np.str_)
+    if dtype is np.float64:
+        return _decode_decimals(table, name, np.asarray(arr, dtype=np.float64))
     return np.asarray(arr, dtype=dtype)
+
+
+def _decode_decimals(table: pa.Table, name: str, values: FloatArray) -> FloatArray:
+    """Undo the packed decimal form of column ``name`` (no-op for other columns).
+
+    The integers ``n`` (< 2**53, exact in float64) become ``n / 10**k``, the
+    correctly rounded float64 of the decimal, as a CSV parser gives it.
+    """
+    metadata = table.schema.field(name).metadata or {}
+    if DECIMALS_KEY not in metadata:
+        return values
+    values = values / 10.0 ** int(metadata[DECIMALS_KEY])
+    exceptions = name + EXCEPTIONS_SUFFIX
+    if exceptions in table.column_names:
+        col = table.column(exceptions)
+        exact = col.to_numpy(zero_copy_only=False)
+        values = np.where(col.is_valid().to_numpy(zero_copy_only=False), exact, values)
+    return values
 
 
 def _require(table: pa.Table, names: Sequence[str], path: Path) -> None:
@@ -362,39 +484,73 @@ def _require(table: pa.Table, names: Sequence[str], path: Path) -> None:
         raise ValueError(f"{path} lacks the columns {missing}; see SOURCE.md")
 
 
+def i80_derived_columns(feet: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+    """The I-80 pairs file's ``spacing`` [ft] and ``dv`` [ft/s] from its other columns.
+
+    The source computed them so in float64, bit for bit; the packed file omits
+    them and :func:`load_i80_pairs` recomputes them.
+
+    Parameters
+    ----------
+    feet : mapping of str to ndarray of float64
+        At least the file's ``x_follower``, ``x_leader``, ``leader_length``
+        [ft] and ``v_follower``, ``v_leader`` [ft/s], shape (N,).
+
+    Returns
+    -------
+    dict of str to ndarray of float64, shape (N,)
+        ``"spacing"`` and ``"dv"``.
+    """
+    return {
+        "spacing": feet["x_leader"] - feet["x_follower"] - feet["leader_length"],
+        "dv": feet["v_follower"] - feet["v_leader"],
+    }
+
+
+def read_i80_pairs_table(path: str | Path) -> pa.Table:
+    """The I-80 pairs file as stored (units of the file).
+
+    Parameters
+    ----------
+    path : str or Path
+        The packed ``.parquet`` file, or the original ``.csv`` or ``.csv.gz``.
+
+    Returns
+    -------
+    pyarrow.Table
+    """
+    path = Path(path)
+    if path.suffix == ".parquet":
+        return pq.read_table(path)
+    types = {"lane_id": pa.float64(), "period": pa.string(), "split": pa.string()}
+    return pa_csv.read_csv(
+        path, convert_options=pa_csv.ConvertOptions(column_types=types)
+    )
+
+
 def load_i80_pairs(path: str | Path | None = None) -> CarFollowingPairs:
     """Read the I-80 car-following pairs, converting feet to metres.
 
     Parameters
     ----------
     path : str or Path, optional
-        The ``.csv`` or ``.csv.gz`` file; default ``i80_cf_pairs.csv.gz`` in
-        :func:`ngsim_dir`.
+        The original ``.csv`` or ``.csv.gz`` file or the packed ``.parquet``;
+        default the :data:`I80_PAIRS` file in :func:`ngsim_dir`.
 
     Returns
     -------
     CarFollowingPairs
         Sorted by pair and time.
     """
-    path = Path(path) if path is not None else ngsim_dir() / I80_PAIRS_FILE
-    types = {"lane_id": pa.float64(), "period": pa.string(), "split": pa.string()}
-    table = pa_csv.read_csv(
-        path, convert_options=pa_csv.ConvertOptions(column_types=types)
-    )
-    ft_cols = ["x_follower", "x_leader", "leader_length", "spacing"]
-    fts_cols = ["v_follower", "v_leader", "dv", "a_follower", "a_leader"]
-    _require(
-        table,
-        ["pair_id", "period", "follower_id", "leader_id", "lane_id", "split",
-         "in_manifest", "t", *ft_cols, *fts_cols],
-        path,
-    )  # fmt: skip
+    path = Path(path) if path is not None else ngsim_file(I80_PAIRS)
+    table = read_i80_pairs_table(path)
+    _require(table, [*I80_PAIRS_COLUMNS, *I80_FEET_COLUMNS], path)
     lane = _col(table, "lane_id", np.float64)
     order = np.lexsort((_col(table, "t", np.float64), _col(table, "pair_id", np.int64)))
-
-    def m(name: str) -> FloatArray:
-        return _col(table, name, np.float64)[order] * FT
-
+    feet = {name: _col(table, name, np.float64)[order] for name in I80_FEET_COLUMNS}
+    for name, values in i80_derived_columns(feet).items():
+        in_file = name in table.column_names
+        feet[name] = _col(table, name, np.float64)[order] if in_file else values
     return CarFollowingPairs(
         pair_id=_col(table, "pair_id", np.int64)[order],
         period=_col(table, "period", str)[order],
@@ -404,15 +560,15 @@ def load_i80_pairs(path: str | Path | None = None) -> CarFollowingPairs:
         split=_col(table, "split", str)[order],
         in_manifest=_col(table, "in_manifest", np.int64)[order] != 0,
         t=_col(table, "t", np.float64)[order],
-        x_follower=m("x_follower"),
-        v_follower=m("v_follower"),
-        a_follower=m("a_follower"),
-        x_leader=m("x_leader"),
-        v_leader=m("v_leader"),
-        a_leader=m("a_leader"),
-        leader_length=m("leader_length"),
-        gap=m("spacing"),
-        dv=m("dv"),
+        x_follower=feet["x_follower"] * FT,
+        v_follower=feet["v_follower"] * FT,
+        a_follower=feet["a_follower"] * FT,
+        x_leader=feet["x_leader"] * FT,
+        v_leader=feet["v_leader"] * FT,
+        a_leader=feet["a_leader"] * FT,
+        leader_length=feet["leader_length"] * FT,
+        gap=feet["spacing"] * FT,
+        dv=feet["dv"] * FT,
     )
 
 
@@ -422,26 +578,17 @@ def load_i80_lateral(path: str | Path | None = None) -> LateralPairs:
     Parameters
     ----------
     path : str or Path, optional
-        The ``.parquet`` file; default ``i80_0400_0415_emd_cf_pairs.parquet`` in
-        :func:`ngsim_dir`.
+        The original or the packed ``.parquet`` file (same column names);
+        default the :data:`I80_LATERAL` file in :func:`ngsim_dir`.
 
     Returns
     -------
     LateralPairs
         Sorted by pair and time.
     """
-    path = Path(path) if path is not None else ngsim_dir() / I80_LATERAL_FILE
+    path = Path(path) if path is not None else ngsim_file(I80_LATERAL)
     table = pq.read_table(path)
-    names = {
-        "vehicle_id": "follower_id", "preceding": "leader_id", "frame_id": "frame",
-        "time": "t", "local_x": "lateral", "local_y": "x", "v_length": "length",
-        "v_width": "width", "v_class": "vehicle_class", "v_vel": "speed",
-        "v_acc": "accel", "lane_id": "lane", "space_headway": "space_headway",
-        "time_headway": "time_headway", "preceding_local_y": "leader_x",
-        "preceding_length": "leader_length", "preceding_width": "leader_width",
-        "preceding_class": "leader_class", "preceding_vel": "leader_speed",
-        "preceding_acc": "leader_accel",
-    }  # fmt: skip
+    names = I80_LATERAL_COLUMNS
     _require(table, ["pair_id", *names], path)
     ints = {
         "follower_id",
@@ -467,15 +614,16 @@ def load_us101(path: str | Path | None = None) -> VehicleTrajectories:
     Parameters
     ----------
     path : str or Path, optional
-        The ``.csv`` or ``.csv.gz`` file; default ``us101_vehicle_subset.csv.gz``
-        in :func:`ngsim_dir`.
+        The ``.csv`` or ``.csv.gz`` file; default :data:`US101_FILE` in
+        :func:`ngsim_dir`, which must then name a folder holding the original
+        files (``$AVRISK_NGSIM_DIR``): the package does not ship US-101.
 
     Returns
     -------
     VehicleTrajectories
         Sorted by vehicle and frame.
     """
-    path = Path(path) if path is not None else ngsim_dir() / US101_FILE
+    path = Path(path) if path is not None else ngsim_file([US101_FILE])
     table = pa_csv.read_csv(path)
     names = ["Vehicle_ID", "Frame_ID", "Global_Time", "local_x(m)", "local_y(m)",
              "v_Vel(m)", "v_Acc(m)", "Space_Headway(m)", "Time_Headway"]  # fmt: skip

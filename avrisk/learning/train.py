@@ -58,12 +58,12 @@ from avrisk.learning.demonstrations import (
 )
 from avrisk.learning.glasso import fit_sparse_gaussian
 from avrisk.learning.ngsim import (
-    I80_LATERAL_FILE,
-    I80_PAIRS_FILE,
+    I80_LATERAL,
+    I80_PAIRS,
     lateral_pair_split,
     load_i80_lateral,
     load_i80_pairs,
-    ngsim_dir,
+    ngsim_file,
 )
 from avrisk.learning.replay import (
     CarFollowingWindows,
@@ -610,7 +610,8 @@ def load_demonstrations(
     Parameters
     ----------
     data_dir : str or Path or None
-        NGSIM folder (:func:`avrisk.learning.ngsim.ngsim_dir`).
+        NGSIM folder (:func:`avrisk.learning.ngsim.ngsim_dir`; None: the data
+        shipped with the package), packed or original files.
     seed : int
         Seeds the simulated scenes (validation uses ``seed + 1``).
     config : TrainConfig
@@ -626,9 +627,9 @@ def load_demonstrations(
         Files and their sha256, lane centres, per-source counts.
     """
     road = Road() if road is None else road
-    folder = ngsim_dir(data_dir)
-    pairs = load_i80_pairs(folder / I80_PAIRS_FILE)
-    lateral = load_i80_lateral(folder / I80_LATERAL_FILE)
+    files = [ngsim_file(names, data_dir) for names in (I80_PAIRS, I80_LATERAL)]
+    pairs = load_i80_pairs(files[0])
+    lateral = load_i80_lateral(files[1])
     split = lateral_pair_split(lateral, pairs)
     centres = LaneCentres.fit(lateral.take(split == "train"))
     offsets = iter(range(0, 10_000_000, 1_000_000))
@@ -668,7 +669,7 @@ def load_demonstrations(
     train = Demonstrations.concat(parts["train"])
     val = Demonstrations.concat(parts["test"])
     meta = {
-        "files": {f: _sha256(folder / f) for f in (I80_PAIRS_FILE, I80_LATERAL_FILE)},
+        "files": {f.name: _sha256(f) for f in files},
         "lane_centres_m": centres.to_dict(),
         "train": train.summary(),
         "val": val.summary(),
@@ -678,9 +679,8 @@ def load_demonstrations(
 
 def training_windows(data_dir: str | Path | None, n_steps: int) -> CarFollowingWindows:
     """Car-following windows of the training splits (for noise calibration)."""
-    folder = ngsim_dir(data_dir)
-    pairs = load_i80_pairs(folder / I80_PAIRS_FILE)
-    lateral = load_i80_lateral(folder / I80_LATERAL_FILE)
+    pairs = load_i80_pairs(ngsim_file(I80_PAIRS, data_dir))
+    lateral = load_i80_lateral(ngsim_file(I80_LATERAL, data_dir))
     split = lateral_pair_split(lateral, pairs)
     train_lat = lateral.take(split == "train")
     return car_following_windows(
@@ -712,7 +712,8 @@ def train_drivers(
         Receives ``driver_net.npz``, ``xi_prior.npz`` and
         ``training_report.json`` (created if missing).
     data_dir : str or Path, optional
-        NGSIM folder; default ``$AVRISK_NGSIM_DIR`` or the project's copy.
+        NGSIM folder; default ``$AVRISK_NGSIM_DIR``, else the data shipped
+        with the package (:func:`avrisk.learning.ngsim.ngsim_dir`).
     config : TrainConfig
     progress : callable, optional
         Receives :class:`TrainEvent` reports (for a progress bar).

@@ -1,12 +1,22 @@
+import dataclasses
 import gzip
+import os
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+import avrisk
 from avrisk.learning.ngsim import (
+    DECIMALS_KEY,
+    EXCEPTIONS_SUFFIX,
     FT,
+    I80_LATERAL,
+    I80_PAIRS,
+    NGSIM_DIR_ENV,
+    US101_FILE,
     CarFollowingPairs,
     episode_bounds,
     lateral_pair_split,
@@ -14,7 +24,13 @@ from avrisk.learning.ngsim import (
     load_i80_pairs,
     load_us101,
     ngsim_dir,
+    ngsim_file,
+    read_i80_pairs_table,
 )
+
+#: The original NGSIM files (see their SOURCE.md): on the project's machines
+#: only, not in CI.
+ORIGINAL_DIR = Path(os.environ.get(NGSIM_DIR_ENV) or "/work/shared/data/ngsim")
 
 I80_HEADER = (
     "pair_id,period,follower_id,leader_id,lane_id,split,in_manifest,source_file,t,"
@@ -54,6 +70,43 @@ def test_i80_pairs_are_converted_from_feet_to_metres_and_sorted(tmp_path):
     assert p.split.tolist() == ["train", "train", "test", "test"]
     assert p.in_manifest.tolist() == [True, True, False, False]
     assert p.period[2] == "0500pm-0515pm"
+
+
+def assert_same_arrays(a, b):
+    """Every column equal in dtype and bits (so -0.0 differs from 0.0)."""
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        assert x.dtype == y.dtype, f.name
+        if x.dtype == np.float64:
+            x, y = x.view(np.int64), y.view(np.int64)
+        np.testing.assert_array_equal(x, y, err_msg=f.name)
+
+
+def test_packed_pairs_decode_decimals_and_exceptions_and_recompute_spacing(
+    tmp_path,
+):
+    write_gz(
+        tmp_path / "pairs.csv.gz",
+        [
+            I80_HEADER,
+            "3,0400pm-0415pm,1,2,,train,1,a.csv,0.0,100.25,10,1,160,10,0,16,43.75,0",
+            "3,0400pm-0415pm,1,2,,train,1,a.csv,0.1,-0.0,10,1,160,10,0,16,144.0,0",
+            "3,0400pm-0415pm,1,2,,train,1,a.csv,0.2,4.4e-16,10,1,160,10,0,16,144.0,0",
+        ],
+    )
+    original = load_i80_pairs(tmp_path / "pairs.csv.gz")
+    table = read_i80_pairs_table(tmp_path / "pairs.csv.gz")
+    table = table.drop_columns(["source_file", "spacing", "dv", "x_follower"])
+    # x_follower as hundredths of a foot; -0.0 and 4.4e-16 are not such decimals
+    decimals = pa.field("x_follower", pa.int64(), metadata={DECIMALS_KEY: b"2"})
+    table = table.append_column(decimals, pa.array([10025, None, None]))
+    table = table.append_column(
+        "x_follower" + EXCEPTIONS_SUFFIX, pa.array([None, -0.0, 4.4e-16])
+    )
+    pq.write_table(table, tmp_path / "pairs.parquet")
+    packed = load_i80_pairs(tmp_path / "pairs.parquet")
+    assert_same_arrays(packed, original)
+    assert np.signbit(packed.x_follower[1]) and packed.lane.tolist() == [-1] * 3
 
 
 def test_the_lateral_pairs_keep_si_units_and_name_the_follower_columns(tmp_path):
@@ -145,18 +198,20 @@ def test_a_lateral_pair_whose_follower_is_an_i80_test_follower_is_held_out(
     assert split.tolist() == ["test", "train"]  # a train follower never leaks
 
 
-def _data_dir():
-    try:
-        return ngsim_dir()
-    except FileNotFoundError:
-        return None
+def test_by_default_the_packed_i80_files_shipped_in_the_package_are_read(
+    monkeypatch,
+):
+    monkeypatch.delenv(NGSIM_DIR_ENV, raising=False)
+    shipped = Path(avrisk.__file__).parent / "data" / "ngsim"
+    assert ngsim_dir() == shipped and (shipped / "SOURCE.md").is_file()
+    assert ngsim_file(I80_PAIRS) == shipped / I80_PAIRS.packed
+    assert ngsim_file(I80_LATERAL) == shipped / I80_LATERAL.packed
+    with pytest.raises(FileNotFoundError, match=f"{shipped} lacks {US101_FILE}"):
+        load_us101()  # not shipped
 
 
-@pytest.mark.skipif(
-    _data_dir() is None,
-    reason="NGSIM files not present (set AVRISK_NGSIM_DIR to the data folder)",
-)
-def test_the_project_ngsim_files_load_with_plausible_si_values():
+def test_the_shipped_ngsim_files_load_with_plausible_si_values(monkeypatch):
+    monkeypatch.delenv(NGSIM_DIR_ENV, raising=False)
     pairs = load_i80_pairs()
     assert len(pairs) == 147_521
     assert set(np.unique(pairs.split)) == {"train", "test"}
@@ -165,5 +220,30 @@ def test_the_project_ngsim_files_load_with_plausible_si_values():
     lat = load_i80_lateral()
     assert len(lat) == 68_339 and np.unique(lat.pair_id).size == 142
     assert set(np.unique(lat.lane)) <= {1, 2, 3, 4, 5, 6}
-    us = load_us101()
+
+
+def original_file(name):
+    """A file of :data:`ORIGINAL_DIR`; skips the test where it is absent."""
+    path = ORIGINAL_DIR / name
+    if not path.is_file():
+        pytest.skip(
+            f"original NGSIM file {path} absent (only on the project's machines; "
+            f"set ${NGSIM_DIR_ENV} to the folder holding it)"
+        )
+    return path
+
+
+@pytest.mark.parametrize(
+    ("files", "load"), [(I80_PAIRS, load_i80_pairs), (I80_LATERAL, load_i80_lateral)]
+)
+def test_the_shipped_files_give_the_arrays_of_the_originals_bit_for_bit(
+    files, load, monkeypatch
+):
+    monkeypatch.delenv(NGSIM_DIR_ENV, raising=False)
+    assert_same_arrays(load(), load(original_file(files.original)))
+
+
+def test_the_original_us101_file_loads_with_plausible_si_values():
+    us = load_us101(original_file(US101_FILE))
     assert len(us) == 214_267 and np.unique(us.vehicle_id).size == 370
+    assert 0.0 < np.nanmedian(us.speed) < 30.0  # m/s
