@@ -56,6 +56,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--n-per-iter", type=int, default=2000)
     parser.add_argument("--n-iter", type=int, default=5)
     parser.add_argument("--n-final", type=int, default=10_000)
+    parser.add_argument(
+        "--defensive",
+        type=float,
+        default=0.0,
+        help="Share of CE's final stage drawn from P0 (defensive mixture).",
+    )
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
@@ -84,6 +90,7 @@ def main(argv: list[str] | None = None) -> None:
                 n_final=args.n_final,
                 seed=seed,
                 gamma_test=gamma_test,
+                defensive=args.defensive,
             )
             naive = naive_mc(
                 objective, base, args.gamma, ce.n_evals, seed=1000 + seed,
@@ -117,7 +124,8 @@ def main(argv: list[str] | None = None) -> None:
     n = records[0]["ce"]["n_evals"]
     print(
         f"\n{args.seeds} seeds; CE {args.n_iter} x {args.n_per_iter:,} + "
-        f"{args.n_final:,} = {n:,} rollouts (rho {args.rho}); naive MC {n:,} "
+        f"{args.n_final:,} = {n:,} rollouts (rho {args.rho}, defensive "
+        f"{args.defensive:g}); naive MC {n:,} "
         f"rollouts; reference: naive MC, {reference['estimate']['n_evals']:,} "
         "rollouts.\n"
     )

@@ -54,6 +54,13 @@ Select = Annotated[
     str,
     typer.Option(help=f"CE proposal selection: {', '.join(sorted(SELECTION_RULES))}."),
 ]
+Defensive = Annotated[
+    float,
+    typer.Option(
+        help="Share of CE's final stage drawn from P0 instead of the proposal, "
+        "in [0, 1): bounds every weight by 1/share (0: the paper's CE)."
+    ),
+]
 Failures = Annotated[int, typer.Option(min=0, help="Most likely failures to animate.")]
 Device = Annotated[str, typer.Option(help="Torch device of the simulator.")]
 
@@ -156,6 +163,7 @@ def run(
     seed: Seed = 0,
     batch_size: BatchSize = 4096,
     select: Select = "quantile",
+    defensive: Defensive = 0.0,
     failures: Failures = 6,
     device: Device = "cpu",
 ) -> None:
@@ -178,6 +186,7 @@ def run(
             seed=seed,
             batch_size=batch_size,
             select=select,
+            defensive=defensive,
         )
         objective = SimulationObjective(spec, device=device)
         label = "cross-entropy" if method == "ce" else "naive Monte Carlo"
@@ -287,6 +296,7 @@ def compare(
     seed: Seed = 0,
     batch_size: BatchSize = 4096,
     select: Select = "quantile",
+    defensive: Defensive = 0.0,
     failures: Failures = 6,
     device: Device = "cpu",
 ) -> None:
@@ -309,6 +319,7 @@ def compare(
             seed=seed,
             batch_size=batch_size,
             select=select,
+            defensive=defensive,
         )
         compare_runs(scenario, out, ce, reference_n, failures, device)
 

@@ -28,8 +28,12 @@ from avrisk.rare import (
     naive_mc,
 )
 from avrisk.rare.cross_entropy import check_ce_settings
+from avrisk.rare.defensive import check_defensive
 
 Method = Literal["naive", "ce"]
+
+#: Settings that only a cross-entropy run uses.
+CE_ONLY_SETTINGS = ("rho", "alpha", "n_per_iter", "n_iter", "select", "defensive")
 
 
 @dataclass(frozen=True)
@@ -56,6 +60,9 @@ class RunSettings:
         Largest number of rollouts per call of ``f``.
     select : str
         CE rule choosing the final proposal (``"quantile"``: the paper's).
+    defensive : float
+        Share of CE's final stage drawn from the base distribution (a
+        defensive mixture, :mod:`avrisk.rare.defensive`); 0: the paper's.
     """
 
     method: Method = "ce"
@@ -69,11 +76,13 @@ class RunSettings:
     seed: int = 0
     batch_size: int | None = None
     select: str = "quantile"
+    defensive: float = 0.0
 
     def __post_init__(self) -> None:
         if self.method not in ("naive", "ce"):
             raise ValueError(f"method must be 'naive' or 'ce'; got {self.method!r}")
         check_ce_settings(self.rho, self.alpha, self.select)
+        check_defensive(self.defensive)
         for name in ("n_per_iter", "n_final"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
@@ -92,8 +101,10 @@ class RunSettings:
         """The settings that define the run (recorded in config.json)."""
         out = asdict(self)
         if self.method == "naive":  # CE-only settings do not define a naive run
-            for key in ("rho", "alpha", "n_per_iter", "n_iter", "select"):
+            for key in CE_ONLY_SETTINGS:
                 out.pop(key)
+        elif not self.defensive:  # the paper's plain proposal: recorded as before
+            out.pop("defensive")
         return out
 
 
@@ -226,6 +237,7 @@ def _estimate(
         n_iter=s.n_iter,
         n_final=s.n_final,
         select=s.select,
+        defensive=s.defensive,
         callback=on_iteration,
         **common,
     )

@@ -35,6 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from avrisk.rare.defensive import DefensiveMixture, check_defensive
 from avrisk.rare.families.base import ExponentialFamily
 from avrisk.rare.final_stage import importance_estimates
 from avrisk.rare.problem import (
@@ -203,6 +204,7 @@ def cross_entropy(
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
     select: str = "quantile",
+    defensive: float = 0.0,
     callback: Callable[[CEInfo, CEState], None] | None = None,
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
@@ -236,6 +238,13 @@ def cross_entropy(
     select : {"quantile", "variance"}, default="quantile"
         Rule choosing the final proposal among the iterates
         (:data:`SELECTION_RULES`); ``"quantile"`` is the paper's.
+    defensive : float, default=0.0
+        Fraction ``lam`` in [0, 1) of the final stage drawn from ``base``
+        instead of the chosen proposal (a defensive mixture,
+        :mod:`avrisk.rare.defensive`): every weight is then at most
+        ``1 / lam``, so a proposal that misses part of the event, or has
+        heavy-tailed weights, cannot make the estimate or its standard error
+        collapse. 0 (the paper's): the proposal alone.
     callback : callable, optional
         Called after each iteration with its :class:`CEInfo` and the new
         :class:`CEState` (progress display, checkpoints).
@@ -268,6 +277,7 @@ def cross_entropy(
     n_per_iter = check_positive_int("n_per_iter", n_per_iter)
     n_iter = check_positive_int("n_iter", n_iter, minimum=0)
     n_final = check_positive_int("n_final", n_final)
+    defensive = check_defensive(defensive)
     problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
     state = ce_init(base)
     history = []
@@ -289,7 +299,7 @@ def cross_entropy(
     proposal = state.best
     values, log_w, _ = run_stage(
         problem,
-        proposal,
+        DefensiveMixture(proposal, base, defensive) if defensive else proposal,
         n_final,
         seed=seed,
         stage=FINAL_STAGE,

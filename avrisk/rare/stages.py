@@ -16,6 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from avrisk.rare.defensive import DefensiveMixture
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.problem import (
     SAMPLE_CHUNK,
@@ -84,7 +85,7 @@ class StageResult(NamedTuple):
 
 def run_stage(
     problem: RareEventProblem,
-    proposal: ExponentialFamily,
+    proposal: ExponentialFamily | DefensiveMixture,
     n: int,
     *,
     seed: int,
@@ -115,7 +116,7 @@ def run_stage(
 
 def _evaluate_chunk(
     problem: RareEventProblem,
-    proposal: ExponentialFamily,
+    proposal: ExponentialFamily | DefensiveMixture,
     seed: int,
     stage: int,
     chunk: int,

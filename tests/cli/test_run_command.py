@@ -83,6 +83,24 @@ def test_run_writes_a_complete_run_directory_with_a_report(short_scenario, tmp_p
         assert col in table.column_names, col
 
 
+def test_a_defensive_final_stage_is_recorded_and_bounds_its_weights(
+    short_scenario, tmp_path
+):
+    out = tmp_path / "run"
+    result = invoke("run", short_scenario, "--out", out, *CE_ARGS, "--defensive", 0.25)
+    assert result.exit_code == 0, result.output
+    config = json.loads((out / "config.json").read_text())
+    assert config["settings"]["defensive"] == 0.25
+    table = pq.read_table(out / "samples.parquet").to_pandas()
+    final = table[table["stage"] == 0]
+    assert len(final) == 100 and final["weight"].max() <= 4.0 + 1e-9
+    # A run without it keeps the paper's plain proposal and records no setting.
+    plain = tmp_path / "plain"
+    assert invoke("run", short_scenario, "--out", plain, *CE_ARGS).exit_code == 0
+    settings = json.loads((plain / "config.json").read_text())["settings"]
+    assert "defensive" not in settings
+
+
 def test_rerunning_run_reads_back_the_same_summary(short_scenario, tmp_path):
     out = tmp_path / "run"
     assert invoke("run", short_scenario, "--out", out, *CE_ARGS).exit_code == 0
