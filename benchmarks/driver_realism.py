@@ -31,6 +31,8 @@ Usage::
     .venv/bin/python benchmarks/driver_realism.py            # shipped drivers
     .venv/bin/python benchmarks/driver_realism.py --net DIR/driver_net.npz \
         --prior DIR/xi_prior.npz --scenes 128
+    .venv/bin/python benchmarks/driver_realism.py \
+        --figure benchmarks/results/driver_realism.png   # + part A's CDFs
 """
 
 from __future__ import annotations
@@ -160,7 +162,8 @@ def learned_drivers(net, fam, n: int, rng) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ part A
-def part_a(net, fam, n_steps: int, seed: int) -> str:
+def part_a(net, fam, n_steps: int, seed: int) -> tuple[str, dict, dict]:
+    """Table A, and the human and simulated samples behind it (for the figure)."""
     road = Road()
     win = held_out_windows(n_steps, road)
     n = len(win)
@@ -271,7 +274,49 @@ def part_a(net, fam, n_steps: int, seed: int) -> str:
         + " | ".join(f"{r['gap_rmse']:.2f}" for r in results.values())
         + " |"
     )
-    return "\n".join(lines)
+    return "\n".join(lines), human, results
+
+
+#: Quantities of the figure of part A, with their units and plotted ranges.
+FIGURE_PANELS = {
+    "speed": ("speed [m/s]", (0.0, 20.0)),
+    "accel": ("acceleration [m/s^2]", (-3.0, 3.0)),
+    "jerk": ("jerk [m/s^3]", (-5.0, 5.0)),
+    "gap": ("gap to the leader [m]", (0.0, 60.0)),
+    "ttc": ("TTC, closing only [s]", (0.0, 20.0)),
+    "offset": ("lateral offset [m]", (-1.0, 1.0)),
+}
+
+
+def draw_part_a(human: dict, results: dict, path: str) -> None:
+    """Empirical CDFs of part A's quantities: humans (black) vs each driver model."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5))
+    panels = FIGURE_PANELS.items()
+    for ax, (key, (label, xlim)) in zip(axes.ravel(), panels, strict=True):
+        samples = {"human (held out)": human[key]} | {
+            name: r[key] for name, r in results.items()
+        }
+        for name, x in samples.items():
+            x = np.sort(np.asarray(x, dtype=float))
+            style = dict(color="black", lw=2.0) if name.startswith("human") else {}
+            ax.plot(x, np.arange(1, x.size + 1) / x.size, label=name, **style)
+        ax.set_xlim(*xlim)
+        ax.set_xlabel(label)
+        ax.set_ylabel("fraction <= x")
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle(
+        "Car following on held-out NGSIM I-80 windows: learned drivers and IDM "
+        "against humans"
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 # ------------------------------------------------------------------ part B
@@ -455,6 +500,9 @@ def main() -> None:
     )
     parser.add_argument("--seed", type=int, default=2024)
     parser.add_argument(
+        "--figure", default=None, help="Also draw part A's distributions (PNG)."
+    )
+    parser.add_argument(
         "--scenario-rollouts",
         type=int,
         default=1000,
@@ -465,7 +513,11 @@ def main() -> None:
     net = load_driver_net(args.net)
     fam = None if args.prior == "none" else xi_base_family(load_xi_prior(args.prior))
     t0 = time.perf_counter()
-    print(part_a(net, fam, round(args.window / DT), args.seed))
+    table_a, human, results = part_a(net, fam, round(args.window / DT), args.seed)
+    print(table_a)
+    if args.figure:
+        draw_part_a(human, results, args.figure)
+        print(f"\nwrote {args.figure}")
     print()
     print(part_b(net, fam, args.scenes, args.seed + 1, args.horizon))
     print()
