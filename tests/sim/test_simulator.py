@@ -5,6 +5,7 @@ import torch
 
 from avrisk.agents import ConstantPolicy, IDMDriver, IDMParams, IDMPolicy
 from avrisk.agents.policy import reads_lidar
+from avrisk.safety import MinBoxTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 
 F64 = torch.float64
@@ -289,6 +290,20 @@ def test_compiled_steps_give_bit_identical_results_to_eager_ones(batch_of_seven)
     perm = torch.tensor([6, 5, 4, 3, 2, 1, 0])
     shuffled = sim.rollout(state[perm], params[perm], seeds(7)[perm], record_trace=True)
     assert_same(shuffled, _select(res, perm))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not _have_cxx(), reason="torch.compile needs a C++ compiler")
+def test_the_box_ttc_measure_compiles_to_bit_identical_results(batch_of_seven):
+    _, state, params, _ = batch_of_seven
+    eager = Simulator(ROAD, SimConfig(horizon=3.0), measure=MinBoxTTC())
+    compiled = Simulator(
+        ROAD, SimConfig(horizon=3.0), measure=MinBoxTTC(), compile=True
+    )
+    assert_same(
+        compiled.rollout(state, params, seeds(7), record_trace=True),
+        eager.rollout(state, params, seeds(7), record_trace=True),
+    )
 
 
 def test_the_environment_switches_compilation_on_unless_told_otherwise(monkeypatch):
