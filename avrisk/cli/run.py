@@ -32,6 +32,8 @@ from avrisk.scenario.spec import spec_from_dict
 EXPECTED = (ScenarioSpecError, RunDirectoryError, InvalidOutputError)
 DEFAULT_SCENARIO = "highway_default"
 COMPARE_PARTS = ("ce", "naive", "reference")
+#: How a run of each method is labelled in tables and reports.
+METHOD_LABELS = {"ce": "cross-entropy", "naive": "naive Monte Carlo"}
 
 
 Scenario = Annotated[
@@ -189,7 +191,7 @@ def run(
             defensive=defensive,
         )
         objective = SimulationObjective(spec, device=device)
-        label = "cross-entropy" if method == "ce" else "naive Monte Carlo"
+        label = METHOD_LABELS[method]
         run_dir = _execute(
             label, out, objective, spec.model_dump(mode="json"), settings
         )
@@ -211,7 +213,7 @@ def compare_runs(
     spec_json = spec.model_dump(mode="json")
     shared = dict(gamma=ce.gamma, gamma_test=ce.gamma_test, batch_size=ce.batch_size)
     plan = [
-        ("cross-entropy", out / "ce", ce),
+        (METHOD_LABELS["ce"], out / "ce", ce),
         (
             "naive MC, same budget",
             out / "naive",
@@ -354,7 +356,7 @@ def report(
                     f"{path} is not finished; rerun its command to resume it"
                 )
             method = directory.config()["settings"]["method"]
-            label = {"ce": "cross-entropy", "naive": "naive Monte Carlo"}[method]
+            label = METHOD_LABELS[method]
             runs.append((label if single else f"{label} ({name})", directory))
         reference = dict(parts).get("reference")
         ref_dir = (
