@@ -32,7 +32,6 @@ from numpy.typing import NDArray
 
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.features import (
-    N_BEAMS,
     N_FEATURES,
     features_from_observation,
 )
@@ -40,14 +39,14 @@ from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.idm import IDMDriver, IDMState
 from avrisk.agents.policy import Action
 from avrisk.learning.demonstrations import (
-    LIDAR_RANGE,
     SOURCE_IDM,
     Demonstrations,
+    observing_simulator,
     random_highway_scenes,
     split_students,
 )
 from avrisk.learning.replay import CarFollowingWindows, replay
-from avrisk.sim import Road, SimConfig, Simulator
+from avrisk.sim import Road
 from avrisk.sim.observation import Observation
 
 __all__ = ["ExpertLabeller", "dagger_demonstrations", "replay_dagger_demonstrations"]
@@ -188,15 +187,7 @@ def dagger_demonstrations(
     """
     road = Road() if road is None else road
     rng = np.random.default_rng(seed)
-    sim = Simulator(
-        road,
-        SimConfig(
-            horizon=horizon,
-            n_lidar_beams=N_BEAMS,
-            lidar_range=LIDAR_RANGE,
-            n_ttc_rays=1,
-        ),
-    )
+    sim = observing_simulator(road, horizon)
     parts = []
     for start in range(0, n_rollouts, batch):
         b = min(batch, n_rollouts - start)

@@ -85,6 +85,7 @@ __all__ = [
     "i80_pair_demonstrations",
     "lateral_pair_demonstrations",
     "lateral_tracks",
+    "observing_simulator",
     "random_highway_scenes",
     "simulated_demonstrations",
     "split_students",
@@ -194,8 +195,15 @@ class Demonstrations:
         return out
 
 
-def _observer(road: Road) -> Simulator:
-    config = SimConfig(n_lidar_beams=N_BEAMS, lidar_range=LIDAR_RANGE, n_ttc_rays=1)
+def observing_simulator(road: Road, horizon: float = SimConfig.horizon) -> Simulator:
+    """A simulator whose observations carry the driver network's lidar.
+
+    ``N_BEAMS`` beams of ``LIDAR_RANGE`` m, as the features expect; one TTC ray,
+    since demonstrations never read the safety measure. ``horizon`` in s.
+    """
+    config = SimConfig(
+        horizon=horizon, n_lidar_beams=N_BEAMS, lidar_range=LIDAR_RANGE, n_ttc_rays=1
+    )
     return Simulator(road, config)
 
 
@@ -242,7 +250,7 @@ def car_following_features(
     -------
     ndarray of float32, shape (N, N_FEATURES)
     """
-    sim = _observer(road)
+    sim = observing_simulator(road)
     centre = (np.asarray(lane, np.float64) + 0.5) * road.lane_width
     zeros = np.zeros_like(centre)
     leader_x = (
@@ -755,15 +763,7 @@ def simulated_demonstrations(
     """
     road = Road() if road is None else road
     rng = np.random.default_rng(seed)
-    sim = Simulator(
-        road,
-        SimConfig(
-            horizon=horizon,
-            n_lidar_beams=N_BEAMS,
-            lidar_range=LIDAR_RANGE,
-            n_ttc_rays=1,
-        ),
-    )
+    sim = observing_simulator(road, horizon)
     parts = []
     for start in range(0, n_rollouts, batch):
         b = min(batch, n_rollouts - start)
