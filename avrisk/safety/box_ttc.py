@@ -52,8 +52,9 @@ def _axis_window(c: Tensor, e: Tensor, r: Tensor) -> tuple[Tensor, Tensor]:
     safe_e = torch.where(moving, e, torch.ones_like(e))
     t1 = (-r - c) / safe_e
     t2 = (r - c) / safe_e
-    lo = torch.where(moving, torch.minimum(t1, t2), torch.where(c.abs() < r, -inf, inf))
-    hi = torch.where(moving, torch.maximum(t1, t2), torch.where(c.abs() < r, inf, -inf))
+    inside = c.abs() < r  # where a motionless axis overlaps for ever
+    lo = torch.where(moving, torch.minimum(t1, t2), torch.where(inside, -inf, inf))
+    hi = torch.where(moving, torch.maximum(t1, t2), torch.where(inside, inf, -inf))
     return lo, hi
 
 
