@@ -2,7 +2,7 @@
 
 For each of ``--seeds`` seeds, runs the cross-entropy method (``--n-iter``
 iterations of ``--n-per-iter`` rollouts, then ``--n-final``) and naive Monte
-Carlo with CE's total number of rollouts, on the bundled ``highway_default``
+Carlo with CE's total number of rollouts, on the bundled ``highway_idm``
 scenario unless told otherwise. Against a large naive reference run (a finished
 ``avrisk run --method naive`` directory, ``--reference``), it prints per
 threshold, as markdown:
@@ -47,7 +47,7 @@ from avrisk.scenario import build_base_distribution, load_spec
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", default="highway_default")
+    parser.add_argument("--scenario", default="highway_idm")
     parser.add_argument("--reference", type=Path, required=True)
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--gamma", type=float, default=0.1)

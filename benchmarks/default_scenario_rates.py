@@ -7,7 +7,7 @@ and/or the cross-entropy method (``avrisk.rare.cross_entropy``, ``--ce``).
 Prints a markdown table and draws ``p_gamma`` against ``gamma``: the naive
 empirical curve with its 95% Clopper-Pearson band, and the importance-sampling
 estimates with their 95% intervals. A tool for calibrating a scenario's
-rarity; the bundled ``highway_default`` is calibrated in BENCHMARKS.md by a
+rarity; the bundled ``highway_idm`` is calibrated in BENCHMARKS.md by a
 300,000-rollout naive run and ``benchmarks/ce_vs_naive.py``.
 
 Usage (one CPU thread each, a few minutes each)::
@@ -95,7 +95,7 @@ def _cp_band(k: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenario", default="highway_default")
+    parser.add_argument("--scenario", default="highway_idm")
     parser.add_argument("--naive", type=int, default=20_000, help="Naive MC rollouts.")
     parser.add_argument("--ce", action="store_true", help="Also run cross-entropy.")
     parser.add_argument(

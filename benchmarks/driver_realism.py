@@ -150,7 +150,11 @@ def fmt_q(x: np.ndarray) -> str:
 
 
 def learned_drivers(net, fam, n: int, rng) -> dict[str, Any]:
-    """The learned drivers compared: at mu0, and with xi ~ P0 per rollout."""
+    """The learned drivers compared: at mu0, and with xi ~ P0 per rollout.
+
+    The last one acts on its mean actions, as in the bundled default scenario
+    (``learned_drivers: {actions: mean}``); the others sample, as in the paper.
+    """
     if fam is None:
         return {"learned (own head)": LearnedDriver(net)}
     xi_draw = torch.as_tensor(fam.sample(n, rng), dtype=torch.float32)
@@ -158,6 +162,7 @@ def learned_drivers(net, fam, n: int, rng) -> dict[str, Any]:
     return {
         "learned mu0": LearnedDriver(net, mu0),
         "learned xi~P0": LearnedDriver(net, xi_draw),
+        "learned xi~P0, mean actions": LearnedDriver(net, xi_draw, stochastic=False),
     }
 
 
@@ -450,7 +455,7 @@ def part_c(net, fam, n: int, seed: int) -> str:
     )
     from avrisk.scenario.params import ParamLayout, ScenarioParams
 
-    spec = load_spec("highway_default")
+    spec = load_spec("highway_idm")
     ss = ScenarioSimulator(spec)
     rng = np.random.default_rng(seed)
     x = build_base_distribution(spec).sample(n, rng)
@@ -465,7 +470,7 @@ def part_c(net, fam, n: int, seed: int) -> str:
         rows[name] = ss.simulator.run(state, drv, seeds, ego_policy=ego)
     rows["IDM+MOBIL (bundled)"] = ss.simulator.rollout(state, idm, seeds)
     lines = [
-        f"**C. Bundled scenario `highway_default`** ({n} draws of the initial "
+        f"**C. Bundled scenario `highway_idm`** ({n} draws of the initial "
         "conditions from P0; ego IDM+MOBIL; environment drivers as named)",
         "",
         "| environment drivers | ego crash rate | ego off-road rate | "

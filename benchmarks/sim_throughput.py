@@ -197,7 +197,7 @@ def _table(rows: list[dict]) -> str:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--batch-sizes", default="1,64,1024,8192")
-    parser.add_argument("--scenario", default="highway_default")
+    parser.add_argument("--scenario", default="highway_idm")
     parser.add_argument(
         "--measures",
         default="min_box_ttc,min_ttc",

@@ -20,7 +20,7 @@ with the ensemble mean ``mu0`` and the sparse graphical-lasso precision
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 from avrisk.rare import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
 from avrisk.scenario.params import ParamLayout
@@ -52,7 +52,10 @@ def marginal_family(marginal: MarginalSpec) -> ScaledBeta:
 
 
 def xi_base_family(
-    prior: XiPrior | None = None, *, max_shift: float | None = 0.01
+    prior: XiPrior | None = None,
+    *,
+    max_shift: float | None = 0.01,
+    unit: Literal["absolute", "prior_sd"] = "absolute",
 ) -> FixedCovNormal:
     """The ``xi`` block of ``P0`` with its sparse precision.
 
@@ -61,7 +64,13 @@ def xi_base_family(
     prior : XiPrior, optional
         Default the shipped one (:func:`avrisk.agents.drivers.load_xi_prior`).
     max_shift : float or None, default=0.01
-        CE search box half-width around ``mu0`` (paper); None for no box.
+        CE search box half-width around ``mu0`` (paper: 0.01 absolute); None
+        for no box.
+    unit : {"absolute", "prior_sd"}, default="absolute"
+        ``max_shift`` in the units of ``xi``, or in prior standard deviations
+        ``sqrt(diag Sigma0)`` of each coordinate (one box that is equally
+        tight for every coordinate; see
+        :class:`~avrisk.scenario.spec.LearnedDriversSpec`).
 
     Returns
     -------
@@ -80,6 +89,11 @@ def xi_base_family(
         from avrisk.agents.drivers.store import load_xi_prior
 
         prior = load_xi_prior()
+    if unit not in ("absolute", "prior_sd"):
+        raise ValueError(f"unit must be 'absolute' or 'prior_sd'; got {unit!r}")
+    family = FixedCovNormal(prior.mean, precision=prior.precision)
+    if max_shift is not None and unit == "prior_sd":
+        max_shift = max_shift * family.std
     return FixedCovNormal(prior.mean, precision=prior.precision, max_shift=max_shift)
 
 
@@ -95,7 +109,8 @@ def build_base_distribution(spec: ScenarioSpec) -> Product:
     avrisk.rare.Product
         ``4 A`` one-dimensional :class:`~avrisk.rare.ScaledBeta` blocks in the
         column order of ``ParamLayout.from_spec(spec)``, then, if the scenario
-        has learned drivers, the 404-dimensional :func:`xi_base_family`;
+        has learned drivers, the 404-dimensional :func:`xi_base_family` with
+        the search box of ``spec.learned_drivers``;
         ``dim == layout.dim``. ``sample(n, rng)`` gives ``X`` of shape (n, D);
         ``log_prob(X)`` gives ``log p0`` of shape (n,) [log of 1 / (m m deg
         m/s) per vehicle, plus the log-density of ``xi``].
@@ -104,7 +119,7 @@ def build_base_distribution(spec: ScenarioSpec) -> Product:
     --------
     >>> import numpy as np
     >>> from avrisk.scenario import load_spec
-    >>> p0 = build_base_distribution(load_spec("highway_default"))
+    >>> p0 = build_base_distribution(load_spec("highway_idm"))
     >>> p0.dim
     24
     >>> p0.sample(3, np.random.default_rng(0)).shape
@@ -116,7 +131,10 @@ def build_base_distribution(spec: ScenarioSpec) -> Product:
         for name in VEHICLE_FIELDS
     ]
     if spec.has_learned_drivers:
-        blocks.append(xi_base_family())
+        search = spec.learned_drivers
+        blocks.append(
+            xi_base_family(max_shift=search.xi_search, unit=search.xi_search_unit)
+        )
     p0 = Product(blocks)
     layout = ParamLayout.from_spec(spec)
     if p0.dim != layout.dim:  # pragma: no cover - guards the two orderings

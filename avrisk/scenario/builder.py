@@ -303,7 +303,9 @@ class ScenarioSimulator:
         if bool(self._learned.any()):
             assert self.net is not None
             xi = torch.from_numpy(np.ascontiguousarray(params.xi))
-            learned = LearnedDriver(self.net, xi)
+            learned = LearnedDriver(
+                self.net, xi, stochastic=self.spec.learned_drivers.stochastic
+            )
             if not bool(self._idm.any()):
                 return learned
         idm = IDMDriver(

@@ -419,6 +419,49 @@ class SafetySpec(_Model):
     )
 
 
+class LearnedDriversSpec(_Model):
+    """How the learned environment drivers act and how CE may tilt their ``xi``.
+
+    ``actions: sampled`` draws every action from the network's Gaussians with
+    per-rollout noise (the paper's generative model); the noise is not part of
+    ``X``, so importance sampling cannot steer it and ``f(X)`` stays random
+    given ``X``. ``actions: mean`` drives with the mean actions: the drivers'
+    randomness is then all in ``X`` (the per-rollout ``xi``, the ensemble's
+    uncertainty about the policy) and ``f(X)`` is a deterministic function of
+    ``X``.
+
+    ``xi_search`` is the half-width of the cross-entropy search box for the
+    mean of ``xi`` around ``mu0``, per coordinate: in the units of ``xi``
+    (``xi_search_unit: absolute``; the paper's 0.01) or in prior standard
+    deviations ``sqrt(diag Sigma0)`` (``prior_sd``), which treats every
+    coordinate alike whatever its spread. 0 keeps ``xi ~ P0`` (CE does not
+    tilt it; its likelihood ratio is 1).
+    """
+
+    actions: Literal["sampled", "mean"] = Field(
+        "sampled",
+        description="'sampled' (the paper: actions drawn from the network's "
+        "Gaussians) or 'mean' (the mean actions; f deterministic given X).",
+    )
+    xi_search: float = Field(
+        0.01,
+        ge=0.0,
+        le=100.0,
+        description="Half-width of the CE search box for the mean of xi, per "
+        "coordinate, in xi_search_unit (paper: 0.01 absolute).",
+    )
+    xi_search_unit: Literal["absolute", "prior_sd"] = Field(
+        "absolute",
+        description="Unit of xi_search: 'absolute' (units of xi) or 'prior_sd' "
+        "(prior standard deviations of each coordinate).",
+    )
+
+    @property
+    def stochastic(self) -> bool:
+        """Whether actions are sampled (``actions: sampled``)."""
+        return self.actions == "sampled"
+
+
 class ScenarioSpec(_Model):
     """A complete scenario: road, vehicles, base distribution, agents, simulator.
 
@@ -449,6 +492,11 @@ class ScenarioSpec(_Model):
         SimulationSpec(), description="Simulator settings."
     )
     safety: SafetySpec = Field(SafetySpec(), description="Safety measure settings.")
+    learned_drivers: LearnedDriversSpec = Field(
+        LearnedDriversSpec(),
+        description="Actions and CE search box of the learned drivers (only "
+        "with 'model: learned' driver types).",
+    )
 
     @field_validator("name")
     @classmethod
@@ -489,6 +537,11 @@ class ScenarioSpec(_Model):
                         f"'drivers' defines {sorted(self.drivers)}"
                     )
         problems.extend(self._overlap_problems())
+        if "learned_drivers" in self.model_fields_set and not self.has_learned_drivers:
+            problems.append(
+                "learned_drivers: set, but no vehicle has a 'model: learned' "
+                "driver; remove the section or give a slot a learned driver type"
+            )
         if problems:
             raise ValueError("\n".join(problems))
         return self
@@ -582,6 +635,14 @@ class ScenarioSpec(_Model):
     def has_learned_drivers(self) -> bool:
         """Whether any environment vehicle is a learned driver (``X`` has ``xi``)."""
         return any(self.learned_slots)
+
+    @model_serializer(mode="wrap")
+    def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        """Dump without ``learned_drivers`` when no driver is learned."""
+        data = handler(self)
+        if not self.has_learned_drivers:
+            data.pop("learned_drivers", None)
+        return data
 
     def to_yaml(self) -> str:
         """The resolved spec as YAML text (loads back to an equal spec)."""

@@ -15,7 +15,7 @@ SUMMARY_KEYS = {"schema", "method", "settings", "estimate", "timing", "versions"
 @pytest.fixture(scope="module")
 def short_scenario(tmp_path_factory):
     """The bundled scenario with a 1.5 s horizon, to keep CI fast."""
-    text = resources.files("avrisk.data.scenarios").joinpath("highway_default.yaml")
+    text = resources.files("avrisk.data.scenarios").joinpath("highway_idm.yaml")
     spec = yaml.safe_load(text.read_text())
     spec["name"] = "highway_short"
     spec["simulation"]["horizon"] = 1.5
@@ -123,9 +123,9 @@ def test_bad_input_gives_one_clear_line_and_leaves_nothing(tmp_path):
     out = tmp_path / "run"
     missing = invoke("run", tmp_path / "nope.yaml", "--out", out)
     assert missing.exit_code == 2 and "error:" in missing.output
-    bad_rho = invoke("run", "highway_default", "--out", out, "--rho", 1.5)
+    bad_rho = invoke("run", "highway_idm", "--out", out, "--rho", 1.5)
     assert bad_rho.exit_code == 2 and "rho must be in (0, 1)" in bad_rho.output
-    bad_gamma = invoke("run", "highway_default", "--out", out, "--gamma-test", "0.1,x")
+    bad_gamma = invoke("run", "highway_idm", "--out", out, "--gamma-test", "0.1,x")
     assert bad_gamma.exit_code == 2 and "--gamma-test" in bad_gamma.output
     assert not out.exists()
     assert "Traceback" not in missing.output + bad_rho.output + bad_gamma.output

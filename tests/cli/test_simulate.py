@@ -19,7 +19,7 @@ runner = CliRunner()
 @pytest.fixture(scope="module")
 def short_scenario(tmp_path_factory) -> Path:
     """The default scenario cut to 2 s and 36 TTC rays, to keep tests fast."""
-    data = load_spec("highway_default").model_dump(mode="json")
+    data = load_spec("highway_idm").model_dump(mode="json")
     data["simulation"]["horizon"] = 2.0
     data["safety"]["n_rays"] = 36
     path = tmp_path_factory.mktemp("scen") / "short.yaml"

@@ -206,3 +206,15 @@ def test_fixed_cov_normal_rejects_bad_input_naming_it():
 def test_log_prob_rejects_samples_of_the_wrong_dimension():
     with pytest.raises(ValueError, match=r"shape \(n, 3\)"):
         FixedCovNormal(np.zeros(3), cov=np.eye(3)).log_prob(np.zeros((4, 2)))
+
+
+@pytest.mark.parametrize("as_sparse", [False, True])
+def test_fixed_cov_normal_std_is_the_root_of_the_covariance_diagonal(as_sparse):
+    rng = np.random.default_rng(3)
+    a = rng.standard_normal((5, 5))
+    cov = a @ a.T + 0.5 * np.eye(5)
+    prec = np.linalg.inv(cov)
+    fam = FixedCovNormal(
+        np.zeros(5), precision=sparse.csr_array(prec) if as_sparse else prec
+    )
+    np.testing.assert_allclose(fam.std, np.sqrt(np.diag(cov)), rtol=1e-10)

@@ -114,7 +114,7 @@ def test_a_parallel_pass_is_a_near_collision_only_for_the_ray_measure(spec):
 
 
 def test_a_rollout_of_the_bundled_default_is_batch_independent():
-    spec = load_spec("highway_default")
+    spec = load_spec("highway_idm")
     spec = spec.model_copy(
         update={
             "simulation": spec.simulation.model_copy(update={"horizon": 1.0}),

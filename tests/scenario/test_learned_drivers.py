@@ -62,18 +62,18 @@ def frames(spec, x, seeds):
 
 
 def test_the_learned_scenario_appends_one_xi_block_to_x():
-    layout = ParamLayout.from_spec(load_spec("highway_learned"))
+    layout = ParamLayout.from_spec(load_spec("highway_default"))
     assert layout.xi_dim == XI_DIM == 404
     assert layout.dim == 24 + 404 and len(layout.columns) == layout.dim
     assert layout.columns[23:26] == ("veh5.speed", "xi.0", "xi.1")
     assert layout.columns[-1] == "xi.403" and layout.unit("xi.403") == "-"
     assert layout.xi_slice == slice(24, 428)
-    default = ParamLayout.from_spec(load_spec("highway_default"))
+    default = ParamLayout.from_spec(load_spec("highway_idm"))
     assert (default.dim, default.xi_dim) == (24, 0)
 
 
 def test_p0_of_the_learned_scenario_ends_with_the_shipped_xi_prior():
-    spec = load_spec("highway_learned")
+    spec = load_spec("highway_default")
     p0 = build_base_distribution(spec)
     assert p0.dim == 428 and len(p0.blocks) == 25
     assert all(isinstance(b, ScaledBeta) for b in p0.blocks[:24])
@@ -86,12 +86,12 @@ def test_p0_of_the_learned_scenario_ends_with_the_shipped_xi_prior():
     assert log_p0.shape == (6,) and np.isfinite(log_p0).all()
     np.testing.assert_allclose(
         log_p0 - xi.log_prob(x[:, 24:]),
-        build_base_distribution(load_spec("highway_default")).log_prob(x[:, :24]),
+        build_base_distribution(load_spec("highway_idm")).log_prob(x[:, :24]),
     )
 
 
 def test_a_learned_rollout_depends_only_on_its_own_row_and_seed():
-    spec = shortened("highway_learned", 1.5)
+    spec = shortened("highway_default", 1.5)
     x, seeds = sample(spec, 5)
     together, result = frames(spec, x, seeds)
     alone, _ = frames(spec, x[3:4], seeds[3:4])
@@ -101,8 +101,14 @@ def test_a_learned_rollout_depends_only_on_its_own_row_and_seed():
     assert result.f.shape == (5,) and result.steps.tolist() == [15] * 5
 
 
-def test_the_seed_and_xi_each_change_a_learned_rollout():
-    spec = shortened("highway_learned", 1.0)
+def with_actions(spec, actions):
+    """``spec`` with its learned drivers acting on ``actions``."""
+    drivers = spec.learned_drivers.model_copy(update={"actions": actions})
+    return spec.model_copy(update={"learned_drivers": drivers})
+
+
+def test_the_seed_and_xi_each_change_a_rollout_with_sampled_actions():
+    spec = with_actions(shortened("highway_default", 1.0), "sampled")
     x, seeds = sample(spec, 2)
     base, _ = frames(spec, x[:1], seeds[:1])
     other_seed, _ = frames(spec, x[:1], seeds[1:2])
@@ -112,6 +118,42 @@ def test_the_seed_and_xi_each_change_a_learned_rollout():
     env = slice(1, None)  # vehicles 1..5: the learned drivers
     assert not torch.equal(base[:, :, :, env], other_seed[:, :, :, env])
     assert not torch.equal(base[:, :, :, env], other_x[:, :, :, env])
+
+
+def test_with_mean_actions_a_rollout_is_a_function_of_x_alone():
+    spec = shortened("highway_default", 1.0)
+    assert spec.learned_drivers.actions == "mean"
+    x, seeds = sample(spec, 2)
+    base, _ = frames(spec, x[:1], seeds[:1])
+    other_seed, _ = frames(spec, x[:1], seeds[1:2])
+    other_xi = x[:1].copy()
+    other_xi[0, 24:] = x[1, 24:]
+    other_x, _ = frames(spec, other_xi, seeds[:1])
+    assert torch.equal(base, other_seed)
+    env = slice(1, None)
+    assert not torch.equal(base[:, :, :, env], other_x[:, :, :, env])
+
+
+def test_the_xi_search_box_of_p0_follows_the_spec():
+    spec = load_spec("highway_default")
+    xi = build_base_distribution(spec).blocks[-1]
+    assert np.all(xi.max_shift == 0.0)  # xi_search: 0 -> CE leaves xi at P0
+    moved = xi.project(xi.mean + 1.0)
+    np.testing.assert_array_equal(moved.mean, xi.mean)
+    search = {"xi_search": 0.5, "xi_search_unit": "prior_sd"}
+    wide = spec.model_copy(
+        update={"learned_drivers": spec.learned_drivers.model_copy(update=search)}
+    )
+    xi = build_base_distribution(wide).blocks[-1]
+    np.testing.assert_allclose(xi.max_shift, 0.5 * xi.std)
+    paper = spec.model_copy(
+        update={
+            "learned_drivers": spec.learned_drivers.model_copy(
+                update={"xi_search": 0.01, "xi_search_unit": "absolute"}
+            )
+        }
+    )
+    assert np.all(build_base_distribution(paper).blocks[-1].max_shift == 0.01)
 
 
 def test_mixed_traffic_gives_each_vehicle_the_action_of_its_own_model():

@@ -17,7 +17,7 @@ from avrisk.scenario import (
 
 @pytest.fixture(scope="module")
 def spec():
-    return load_spec("highway_default")
+    return load_spec("highway_idm")
 
 
 def test_the_layout_names_columns_vehicle_by_vehicle_then_xi():

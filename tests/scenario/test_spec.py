@@ -32,20 +32,24 @@ def _error(data: dict) -> str:
     return str(info.value)
 
 
-def test_the_bundled_learned_scenario_has_the_default_road_and_slots():
-    default, learned = load_spec("highway_default"), load_spec("highway_learned")
-    assert {"highway_default", "highway_learned"} <= set(bundled_scenarios())
-    assert learned.road == default.road and learned.simulation == default.simulation
-    assert learned.initial_conditions == default.initial_conditions
-    slots = [v.model_copy(update={"driver": None}) for v in learned.vehicles]
-    assert slots == [v.model_copy(update={"driver": None}) for v in default.vehicles]
+def test_the_default_scenario_is_learned_traffic_on_the_idm_scenarios_road():
+    idm, learned = load_spec("highway_idm"), load_spec("highway_default")
+    assert {"highway_idm", "highway_default"} <= set(bundled_scenarios())
+    assert learned.road == idm.road and learned.simulation == idm.simulation
+    assert learned.initial_conditions == idm.initial_conditions
+    roles = ("lane", "length", "width")
+    assert [v.model_dump(include=set(roles)) for v in learned.vehicles] == [
+        v.model_dump(include=set(roles)) for v in idm.vehicles
+    ]
     assert learned.learned_slots == (False,) + (True,) * 5
     assert learned.ego.policy == "lidar_imitation"
+    assert learned.learned_drivers.actions == "mean"
+    assert learned.learned_drivers.xi_search == 0.0
 
 
-def test_the_bundled_default_loads_by_name_with_the_papers_marginals():
-    spec = load_spec("highway_default")
-    assert "highway_default" in bundled_scenarios()
+def test_the_bundled_idm_scenario_loads_by_name_with_the_papers_marginals():
+    spec = load_spec("highway_idm")
+    assert "highway_idm" in bundled_scenarios()
     assert spec.road.n_lanes == 6 and spec.road.lane_width == 3.7
     assert spec.n_vehicles == 6
     ic = spec.initial_conditions
@@ -97,6 +101,30 @@ def test_learned_drivers_and_the_lidar_ego_take_no_idm_parameters():
     data["drivers"]["human"] = {"model": "learned"}
     data["ego"]["params"] = {"desired_speed": 20.0}
     assert "ego: policy 'lidar_imitation' takes no IDM+MOBIL parameters" in _error(data)
+
+
+def test_the_learned_drivers_section_defaults_to_the_paper_and_needs_learned_drivers():
+    data = _minimal() | {"drivers": {"human": {"model": "learned"}}}
+    spec = spec_from_dict(data)
+    assert spec.learned_drivers.actions == "sampled"
+    assert spec.learned_drivers.stochastic
+    assert (spec.learned_drivers.xi_search, spec.learned_drivers.xi_search_unit) == (
+        0.01,
+        "absolute",
+    )
+    section = {"actions": "mean", "xi_search": 0.5, "xi_search_unit": "prior_sd"}
+    tuned = spec_from_dict(data | {"learned_drivers": section})
+    assert not tuned.learned_drivers.stochastic
+    assert yaml.safe_load(tuned.to_yaml())["learned_drivers"] == section
+    assert spec_from_dict(yaml.safe_load(tuned.to_yaml())) == tuned
+
+    idm_only = _minimal() | {"learned_drivers": {"actions": "mean"}}
+    assert "no vehicle has a 'model: learned' driver" in _error(idm_only)
+    assert "learned_drivers" not in spec_from_dict(_minimal()).to_yaml()
+    bad = data | {"learned_drivers": {"actions": "greedy", "xi_search": -1}}
+    message = _error(bad)
+    assert "learned_drivers.actions" in message
+    assert "learned_drivers.xi_search" in message
 
 
 def test_a_slot_override_replaces_only_the_named_marginal():
@@ -181,7 +209,7 @@ def test_slots_that_could_start_overlapping_in_one_lane_are_rejected():
 
 
 def test_an_unknown_scenario_name_lists_the_bundled_ones():
-    with pytest.raises(ScenarioSpecError, match="highway_default"):
+    with pytest.raises(ScenarioSpecError, match="highway_idm"):
         load_spec("no_such_scenario")
 
 

@@ -92,6 +92,16 @@ class FixedCovNormal(ExponentialFamily):
         new.mean = np.asarray(mu, dtype=np.float64).copy()
         return new
 
+    @property
+    def std(self) -> FloatArray:
+        """Marginal standard deviations ``sqrt(diag Sigma0)``, shape (D,).
+
+        From the Cholesky factor ``P = L L^T``: ``Sigma0 = L^-T L^-1``, so
+        ``diag Sigma0`` is the column sums of squares of ``L^-1``.
+        """
+        inv = linalg.solve_triangular(self._chol, np.eye(self.dim), lower=True)
+        return np.sqrt((inv * inv).sum(axis=0))
+
     def _quad(self, d: FloatArray) -> FloatArray:
         """Row-wise ``d_i^T P d_i`` for ``d`` of shape (n, D) (``P`` symmetric)."""
         pd = np.asarray(self.precision @ d.T).T if self._sparse else d @ self.precision
