@@ -60,7 +60,7 @@ def demo(
         help="Rollouts per method on the default scenario (0: skip).",
     ),
     reference: int = typer.Option(
-        100_000,
+        50_000,
         min=0,
         help="Rollouts of the naive reference run on the default scenario "
         "(0: none; the ratios then use CE's own estimate of p).",

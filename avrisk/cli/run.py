@@ -25,7 +25,7 @@ from avrisk.pipeline.objective import SimulationObjective
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.cross_entropy import SELECTION_RULES
 from avrisk.report.html import write_report
-from avrisk.report.plots import comparison_rows
+from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
 from avrisk.scenario import ScenarioSpecError, build_base_distribution, load_spec
 from avrisk.scenario.spec import spec_from_dict
 
@@ -253,10 +253,14 @@ def _print_ratios(
         ce.summary()["estimate"],
         reference.summary()["estimate"] if reference is not None else None,
     )
+    caption = "Expected naive hits and variance p(1-p)/n use p from the " + (
+        "naive reference run." if reference is not None else "CE estimate."
+    )
+    if not all(row["reliable"] for row in rows):
+        caption += "\n" + UNRELIABLE_NOTE + "."
     table = Table(
         title="CE against naive Monte Carlo with the same number of rollouts",
-        caption="Expected naive hits and variance p(1-p)/n use p from the "
-        + ("naive reference run." if reference is not None else "CE estimate."),
+        caption=escape(caption),
     )
     for col in (
         "gamma [s]",
@@ -276,7 +280,8 @@ def _print_ratios(
             str(naive_hits.get(row["gamma"], "")),
             f"{row['naive_hits_expected']:.1f}",
             f"{row['rare_event_ratio']:.1f}x",
-            f"{row['variance_ratio']:.1f}x",
+            f"{row['variance_ratio']:.1f}x"
+            + ("" if row["reliable"] else UNRELIABLE_MARK),
         )
     out_console.print(table)
 

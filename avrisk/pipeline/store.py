@@ -187,7 +187,10 @@ class RunDirectory:
             "sample_id": batch.ids,
             "seed": batch.seeds,
         }
-        columns.update(zip(self.param_names, batch.x.T, strict=True))
+        columns.update(
+            (name, _narrowest(col))
+            for name, col in zip(self.param_names, batch.x.T, strict=True)
+        )
         with np.errstate(over="ignore"):
             weight = np.exp(log_w)
         columns.update(
@@ -229,13 +232,14 @@ class RunDirectory:
         )
         target = self.path / SAMPLES_FILE
         tmp = target.with_name(f".{target.name}.tmp-{os.getpid()}")
+        schema = _widest_schema([pq.read_schema(path) for path in files])
         writer = None
         try:
             for path in files:
                 table = pq.read_table(path)
                 if writer is None:
-                    writer = pq.ParquetWriter(tmp, table.schema)
-                writer.write_table(table.cast(writer.schema))
+                    writer = pq.ParquetWriter(tmp, schema)
+                writer.write_table(table.cast(schema))
         finally:
             if writer is not None:
                 writer.close()
@@ -256,6 +260,24 @@ class RunDirectory:
     def samples(self, columns: Sequence[str] | None = None) -> pa.Table:
         """The samples table of a complete run."""
         return pq.read_table(self.path / SAMPLES_FILE, columns=columns)
+
+
+def _narrowest(column: np.ndarray) -> np.ndarray:
+    """``column`` as float32 if that loses nothing (e.g. float32-rounded xi)."""
+    narrow = column.astype(np.float32)
+    return narrow if np.array_equal(narrow, column) else column
+
+
+def _widest_schema(schemas: Sequence[pa.Schema]) -> pa.Schema | None:
+    """The first chunk's schema, float64 where any chunk stored float64."""
+    if not schemas:
+        return None
+    wide = {f.name for s in schemas for f in s if f.type == pa.float64()}
+    first = schemas[0]
+    return pa.schema(
+        [f.with_type(pa.float64()) if f.name in wide else f for f in first],
+        metadata=first.metadata,
+    )
 
 
 def _diff_keys(a: Any, b: Any, prefix: str = "") -> set[str]:

@@ -18,7 +18,14 @@ import numpy as np
 import pyarrow.compute as pc
 
 from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
-from avrisk.report.plots import comparison_rows, plot_ce_trajectory, plot_comparison
+from avrisk.rare.final_stage import MIN_RELIABLE_ESS
+from avrisk.report.plots import (
+    UNRELIABLE_MARK,
+    UNRELIABLE_NOTE,
+    comparison_rows,
+    plot_ce_trajectory,
+    plot_comparison,
+)
 from avrisk.scenario.params import XI_PREFIX
 
 #: Sections of the report, in order (a golden list for tests).
@@ -72,7 +79,7 @@ def _run_view(
             "No rollout reached the threshold: the estimate is 0 and the interval is "
             "an upper bound only."
         )
-    elif (main["ess"] or 0) < 10:
+    elif (main["ess"] or 0) < MIN_RELIABLE_ESS:
         warning = (
             f"Only {main['ess']:.1f} effective hits: a few weights dominate, so the "
             "standard error is unreliable."
@@ -164,6 +171,8 @@ def write_report(
         comparison = {
             "plot": "plots/comparison.png",
             "rows": comparison_rows(ce_summary["estimate"], ref),
+            "mark": UNRELIABLE_MARK,
+            "note": UNRELIABLE_NOTE,
         }
     failures, gamma = [], None
     if failures_from is not None:
@@ -186,6 +195,8 @@ def write_report(
         subtitle=subtitle,
         runs=views,
         comparison=comparison,
+        mark=UNRELIABLE_MARK,
+        min_ess=MIN_RELIABLE_ESS,
         failures=failures,
         failures_gamma=gamma,
         settings=settings,

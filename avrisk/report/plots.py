@@ -24,6 +24,15 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from avrisk.rare.final_stage import MIN_RELIABLE_ESS  # noqa: E402
+
+#: Marks a variance ratio computed from an unreliable CE standard error.
+UNRELIABLE_MARK = "*"
+UNRELIABLE_NOTE = (
+    f"{UNRELIABLE_MARK} fewer than {MIN_RELIABLE_ESS:g} effective CE hits at this "
+    "threshold: CE's standard error, hence the variance ratio, is unreliable"
+)
+
 
 def comparison_rows(
     ce: dict[str, Any], reference: dict[str, Any] | None = None
@@ -47,7 +56,9 @@ def comparison_rows(
     -------
     list of dict
         Keys ``gamma``, ``p``, ``ce_hits``, ``naive_hits_expected``,
-        ``rare_event_ratio``, ``variance_ratio``.
+        ``rare_event_ratio``, ``variance_ratio``, and ``reliable``: whether CE
+        had at least ``MIN_RELIABLE_ESS`` effective hits there (else its
+        standard error, and so the variance ratio, means little).
     """
     ref = {g["gamma"]: g for g in (reference or {}).get("by_gamma", [])}
     rows = []
@@ -68,6 +79,7 @@ def comparison_rows(
                 if naive_hits > 0
                 else np.nan,
                 "variance_ratio": naive_var / stderr**2 if stderr > 0 else np.nan,
+                "reliable": (g.get("ess") or 0.0) >= MIN_RELIABLE_ESS,
             }
         )
     return sorted(rows, key=lambda row: row["gamma"])
@@ -86,6 +98,18 @@ def plot_comparison(
     )
     for ax, (key, title) in zip(axes, panels, strict=True):
         ax.plot(gammas, [r[key] for r in rows], "o-", color="tab:blue")
+        shaky = [r for r in rows if not r["reliable"]]
+        if key == "variance_ratio" and shaky:
+            ax.plot(
+                [r["gamma"] for r in shaky],
+                [r[key] for r in shaky],
+                "o",
+                mfc="white",
+                mec="tab:red",
+                ms=9,
+                label=f"< {MIN_RELIABLE_ESS:g} effective hits: unreliable",
+            )
+            ax.legend(fontsize="small")
         ax.axhline(1.0, color="grey", lw=0.8, ls="--")
         ax.set_yscale("log")
         ax.set_xlabel("threshold gamma [s]")

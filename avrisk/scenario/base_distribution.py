@@ -75,7 +75,8 @@ def xi_base_family(
     Returns
     -------
     avrisk.rare.FixedCovNormal
-        Dimension ``XI_DIM = 404``; the precision is kept sparse.
+        Dimension ``XI_DIM = 404``; the precision is kept sparse; samples are
+        rounded to float32 (the precision of the simulator's network).
 
     Examples
     --------
@@ -94,7 +95,14 @@ def xi_base_family(
     family = FixedCovNormal(prior.mean, precision=prior.precision)
     if max_shift is not None and unit == "prior_sd":
         max_shift = max_shift * family.std
-    return FixedCovNormal(prior.mean, precision=prior.precision, max_shift=max_shift)
+    # The simulator reads xi in float32: float32 samples change no rollout and
+    # halve the xi columns of a run's samples table (404 of its 428 columns).
+    return FixedCovNormal(
+        prior.mean,
+        precision=prior.precision,
+        max_shift=max_shift,
+        float32_samples=True,
+    )
 
 
 def build_base_distribution(spec: ScenarioSpec) -> Product:

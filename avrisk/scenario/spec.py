@@ -118,7 +118,11 @@ class MarginalSpec(_Model):
     """One scaled-Beta marginal ``lo + scale * Beta(a, b)`` and its CE search box.
 
     The cross-entropy method searches over ``Beta(a', b')`` with ``a', b'`` in
-    ``search`` (paper: ``[1.5, 7]``), keeping ``lo`` and ``scale`` fixed.
+    ``search`` (paper: ``[1.5, 7]``), keeping ``lo`` and ``scale`` fixed. The
+    likelihood ratio ``Beta(a, b) / Beta(a', b')`` has finite variance under
+    the proposal only while ``a' < 2 a`` and ``b' < 2 b``; a box reaching
+    further lets CE pick proposals whose estimates are unreliable (too low,
+    with too small a standard error).
     """
 
     lo: float = Field(

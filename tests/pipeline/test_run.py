@@ -12,6 +12,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
+from avrisk.rare import FixedCovNormal, Product, StageBatch
 from avrisk.testing import gaussian_linear_problem
 
 PROBLEM = gaussian_linear_problem(2, p=1e-4)
@@ -176,3 +177,65 @@ def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_result(tmp_path)
     resumed = run(tmp_path / "run")
     assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
     assert resumed["timing"]["rollouts_replayed"] >= 2 * 2000
+
+
+def test_float32_exact_parameters_are_stored_as_float32_and_resume_exactly(tmp_path):
+    # One block samples float32-rounded values (as the xi block does): its
+    # column is stored in half the space, and the run still resumes exactly.
+    base = Product(
+        [
+            FixedCovNormal(np.zeros(1), cov=np.eye(1), float32_samples=True),
+            FixedCovNormal(np.zeros(1), cov=np.eye(1)),
+        ]
+    )
+
+    def run_on(path, f=with_crash_flag):
+        return run_estimation(RunDirectory(path, NAMES), base, f, CE)
+
+    reference = run_on(tmp_path / "reference")
+    schema = pq.read_schema(tmp_path / "reference" / "samples.parquet")
+    assert str(schema.field("x0").type) == "float"
+    assert str(schema.field("x1").type) == "double"
+    x0 = pq.read_table(tmp_path / "reference" / "samples.parquet")["x0"].to_numpy()
+    assert len(np.unique(x0)) > 0.99 * len(x0)  # real draws, not a constant
+
+    calls = []
+
+    def interrupted(x):
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        calls.append(len(x))
+        return with_crash_flag(x)
+
+    with pytest.raises(KeyboardInterrupt):
+        run_on(tmp_path / "run", f=interrupted)
+    resumed = run_on(tmp_path / "run")
+    assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
+    assert resumed["timing"]["rollouts_replayed"] == 3 * 2000
+
+
+def test_a_column_float32_exact_in_one_chunk_only_is_gathered_as_float64(tmp_path):
+    directory = RunDirectory(tmp_path / "run", NAMES)
+    directory.claim({"test": 1})
+    exact = np.array([[0.5, 1.0], [0.25, 2.0]])
+    inexact = np.array([[0.1, 1.0], [0.2, 2.0]])
+    for chunk, x in enumerate((exact, inexact)):
+        directory.record(
+            StageBatch(
+                stage=1,
+                chunk=chunk,
+                ids=np.arange(2) + 2 * chunk,
+                x=x,
+                values=np.zeros(2),
+                extras={},
+                log_p0=np.zeros(2),
+                log_q=np.zeros(2),
+                seeds=np.arange(2),
+            )
+        )
+    assert str(pq.read_schema(directory._chunk_path(1, 0)).field("x0").type) == "float"
+    np.testing.assert_array_equal(directory.cached(1, 1).x, inexact)
+    directory.finish({})
+    table = directory.samples()
+    assert str(table.schema.field("x0").type) == "double"
+    np.testing.assert_array_equal(table["x0"].to_numpy(), [0.5, 0.25, 0.1, 0.2])

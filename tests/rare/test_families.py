@@ -218,3 +218,25 @@ def test_fixed_cov_normal_std_is_the_root_of_the_covariance_diagonal(as_sparse):
         np.zeros(5), precision=sparse.csr_array(prec) if as_sparse else prec
     )
     np.testing.assert_allclose(fam.std, np.sqrt(np.diag(cov)), rtol=1e-10)
+
+
+def test_float32_samples_are_exactly_representable_in_float32_and_keep_the_law():
+    rng = np.random.default_rng(4)
+    fam = FixedCovNormal(np.full(3, 0.1), cov=np.diag([1e-6, 1.0, 4.0]))
+    rounded = FixedCovNormal(
+        np.full(3, 0.1), cov=np.diag([1e-6, 1.0, 4.0]), float32_samples=True
+    )
+    x = rounded.sample(20_000, rng)
+    assert x.dtype == np.float64
+    np.testing.assert_array_equal(x.astype(np.float32).astype(np.float64), x)
+    y = fam.sample(5, rng)  # the unrounded family is not float32-exact
+    assert not np.array_equal(y.astype(np.float32).astype(np.float64), y)
+    # Same draws as the unrounded family up to float32 rounding.
+    np.testing.assert_allclose(
+        rounded.sample(4, np.random.default_rng(9)),
+        fam.sample(4, np.random.default_rng(9)),
+        rtol=1e-7,
+    )
+    assert rounded.project(np.ones(3)).float32_samples
+    se = np.sqrt(np.diag([1e-6, 1.0, 4.0]) / len(x)).diagonal()
+    assert np.all(np.abs(x.mean(0) - 0.1) < 4 * se)

@@ -1,3 +1,4 @@
+import json
 import re
 
 import pytest
@@ -101,3 +102,26 @@ def test_comparison_ratios_are_against_naive_mc_with_ces_whole_budget(runs):
             g["variance_reduction"] * g["n_samples"] / n
         )
         assert row["rare_event_ratio"] > 5 and row["variance_ratio"] > 5
+        assert row["reliable"] == (g["ess"] >= 10)
+
+
+def test_a_variance_ratio_from_few_effective_hits_is_marked_unreliable(runs, tmp_path):
+    root, dirs = runs
+    ce = dirs[0][1].summary()["estimate"]
+    shaky = {**ce, "by_gamma": [{**g, "ess": 1.4} for g in ce["by_gamma"]]}
+    assert not any(row["reliable"] for row in comparison_rows(shaky))
+    assert all(row["reliable"] for row in comparison_rows(ce))
+
+    report = write_report(tmp_path / "report", dirs, title="t")
+    assert "effective CE hits" not in report.read_text()
+    summary_path = dirs[0][1].path / "summary.json"
+    original = summary_path.read_text()
+    try:
+        summary = json.loads(original)
+        summary["estimate"]["by_gamma"][0]["ess"] = 1.4
+        summary_path.write_text(json.dumps(summary))
+        text = write_report(tmp_path / "shaky", dirs, title="t").read_text()
+    finally:
+        summary_path.write_text(original)
+    assert "fewer than 10 effective CE hits at this threshold" in text
+    assert text.count("</td></tr>") > 0 and "*</td></tr>" in text
