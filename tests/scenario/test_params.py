@@ -58,7 +58,7 @@ def test_p0_is_a_product_of_one_scaled_beta_per_coordinate(spec):
     assert isinstance(p0, Product) and p0.dim == layout.dim == 24
     assert all(isinstance(b, ScaledBeta) for b in p0.blocks)
     speed3 = p0.blocks[layout.index("veh3.speed")]
-    assert (speed3.lo, speed3.scale, speed3.bounds) == (10.0, 10.0, (1.5, 7.0))
+    assert (speed3.lo, speed3.scale, speed3.bounds) == (10.0, 10.0, (1.0, 3.9))
 
 
 def test_p0_has_the_papers_marginals(spec):
