@@ -86,6 +86,8 @@ def _run_view(
         )
     return {
         "label": label,
+        # Importance-weighted (its standard error can be unreliable), not naive.
+        "weighted": est["method"] != "naive_mc",
         "gamma": est["gamma"],
         "p": est["p"],
         "stderr": est["stderr"],

@@ -125,3 +125,19 @@ def test_a_variance_ratio_from_few_effective_hits_is_marked_unreliable(runs, tmp
         summary_path.write_text(original)
     assert "fewer than 10 effective CE hits at this threshold" in text
     assert text.count("</td></tr>") > 0 and "*</td></tr>" in text
+
+
+def test_naive_runs_are_never_marked_unreliable(runs, tmp_path):
+    root, dirs = runs
+    summary_path = dirs[1][1].path / "summary.json"
+    original = summary_path.read_text()
+    try:
+        summary = json.loads(original)
+        assert summary["estimate"]["method"] == "naive_mc"
+        for g in summary["estimate"]["by_gamma"]:
+            g.update(n_hits=2, ess=2.0)
+        summary_path.write_text(json.dumps(summary))
+        text = write_report(tmp_path / "naive", dirs[1:], title="t").read_text()
+    finally:
+        summary_path.write_text(original)
+    assert "*</td></tr>" not in text
