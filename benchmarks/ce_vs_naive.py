@@ -50,9 +50,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--scenario", default="highway_idm")
     parser.add_argument("--reference", type=Path, required=True)
     parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument(
+        "--first-seed", type=int, default=0, help="Seeds run: first-seed + 0..seeds-1."
+    )
     parser.add_argument("--gamma", type=float, default=0.1)
     parser.add_argument("--gamma-test", default="0.2,0.3,0.5,1.0")
     parser.add_argument("--rho", type=float, default=0.1)
+    parser.add_argument("--alpha", type=float, default=0.8, help="CE smoothing.")
     parser.add_argument("--n-per-iter", type=int, default=2000)
     parser.add_argument("--n-iter", type=int, default=5)
     parser.add_argument("--n-final", type=int, default=10_000)
@@ -76,7 +80,7 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(f"{args.reference} is not a run directory")
 
     records = []
-    for seed in range(args.seeds):
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
         start = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # zero-hit naive runs are expected
@@ -85,6 +89,7 @@ def main(argv: list[str] | None = None) -> None:
                 base,
                 args.gamma,
                 rho=args.rho,
+                alpha=args.alpha,
                 n_per_iter=args.n_per_iter,
                 n_iter=args.n_iter,
                 n_final=args.n_final,
@@ -124,8 +129,8 @@ def main(argv: list[str] | None = None) -> None:
     n = records[0]["ce"]["n_evals"]
     print(
         f"\n{args.seeds} seeds; CE {args.n_iter} x {args.n_per_iter:,} + "
-        f"{args.n_final:,} = {n:,} rollouts (rho {args.rho}, defensive "
-        f"{args.defensive:g}); naive MC {n:,} "
+        f"{args.n_final:,} = {n:,} rollouts (rho {args.rho}, alpha {args.alpha}, "
+        f"defensive {args.defensive:g}); naive MC {n:,} "
         f"rollouts; reference: naive MC, {reference['estimate']['n_evals']:,} "
         "rollouts.\n"
     )
