@@ -22,7 +22,11 @@ measure. Example (the bundled ``highway_default`` is the full one)::
       - {lane: 3, offset: 20.0, driver: human}
 
 A scenario with any ``learned`` driver adds the network's last layer ``xi``
-(one draw per rollout, shared by all its learned drivers) to the sample ``X``.
+(one draw per rollout, shared by all its learned drivers) to the sample ``X``;
+its ``learned_drivers`` section (:class:`LearnedDriversSpec`) says whether they
+sample their actions and how far the cross-entropy method may move ``xi``::
+
+    learned_drivers: {actions: mean, xi_search: 0.0, xi_search_unit: prior_sd}
 
 Files are read with ``yaml.safe_load``; unknown keys are rejected and every
 error names the field, the allowed range and the value given.
