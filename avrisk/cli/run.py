@@ -106,7 +106,8 @@ def _execute(
 
 def _print_summary(runs: list[tuple[str, RunDirectory]]) -> None:
     table = Table(title="P(min TTC <= gamma)")
-    for col in ("run", "gamma [s]", "p", "stderr", "95% CI", "hits", "ESS", "rollouts"):
+    columns = ("run", "gamma [s]", "p", "stderr", "95% CI", "hits", "ESS", "Pareto k")
+    for col in (*columns, "rollouts"):
         table.add_column(escape(col), justify="left" if col == "run" else "right")
     for label, run_dir in runs:
         est = run_dir.summary()["estimate"]
@@ -119,6 +120,7 @@ def _print_summary(runs: list[tuple[str, RunDirectory]]) -> None:
                 f"{g['ci'][0]:.2g}..{g['ci'][1]:.2g}",
                 str(g["n_hits"]),
                 f"{g['ess'] or 0:.1f}",
+                "-" if g.get("pareto_k") is None else f"{g['pareto_k']:.2f}",
                 f"{est['n_evals']:,}",
             )
     out_console.print(table)

@@ -9,7 +9,12 @@ import numpy as np
 from avrisk.rare.families.base import FloatArray
 from avrisk.rare.intervals import clopper_pearson, normal_interval, wilson
 from avrisk.rare.results import GammaEstimate
-from avrisk.rare.weights import kish_ess, weighted_mean_and_stderr
+from avrisk.rare.weights import (
+    MAX_RELIABLE_PARETO_K,
+    kish_ess,
+    pareto_tail_index,
+    weighted_mean_and_stderr,
+)
 
 CONFIDENCE = 0.95
 
@@ -20,14 +25,26 @@ BINOMIAL_INTERVALS = {"clopper-pearson": clopper_pearson, "wilson": wilson}
 MIN_RELIABLE_ESS = 10.0
 
 
+def is_reliable(ess: float | None, pareto_k: float | None) -> bool:
+    """Whether an importance-sampling standard error can be trusted.
+
+    At least ``MIN_RELIABLE_ESS`` effective hits, and no heavy tail in the hits'
+    weights (``pareto_k <= MAX_RELIABLE_PARETO_K``, or unknown). ``None``
+    stands for a value missing from a summary.
+    """
+    heavy = pareto_k is not None and pareto_k > MAX_RELIABLE_PARETO_K
+    return (ess or 0.0) >= MIN_RELIABLE_ESS and not heavy
+
+
 class ZeroHitsWarning(UserWarning):
     """The importance-sampling stage saw no event: its interval is only ``(0, 1)``."""
 
 
 class UnreliableEstimateWarning(UserWarning):
-    """Few effective hits: a handful of weights dominate the estimate.
+    """Few effective hits, or hit weights with a heavy tail (Pareto k > 0.7).
 
-    The standard error and the interval are computed from those same weights,
+    A handful of weights dominate the estimate, or would in a larger sample;
+    the standard error and the interval are computed from those same weights,
     so they cannot be trusted either.
     """
 
@@ -79,12 +96,22 @@ def importance_estimates(
         else:
             ci = normal_interval(p, se, CONFIDENCE)
         ess = kish_ess(log_w[hits])
+        tail = pareto_tail_index(log_w[hits])
         if 0 < k and ess < MIN_RELIABLE_ESS:
             warnings.warn(
                 f"f <= {g:g}: {k} hits but an effective number of only {ess:.1f}; "
                 "a few weights dominate and the standard error is unreliable "
                 "(the proposal is degenerate: raise n_per_iter or rho, or see "
                 "Estimate.history)",
+                UnreliableEstimateWarning,
+                stacklevel=3,
+            )
+        elif tail > MAX_RELIABLE_PARETO_K:
+            warnings.warn(
+                f"f <= {g:g}: the hits' weights have a heavy tail (Pareto k = "
+                f"{tail:.2f} > {MAX_RELIABLE_PARETO_K}); the standard error is "
+                "unreliable, likely too small (raise n_per_iter and n_final, or "
+                "compare runs with other seeds)",
                 UnreliableEstimateWarning,
                 stacklevel=3,
             )
@@ -97,5 +124,6 @@ def importance_estimates(
             ess=ess,
             n_samples=values.size,
             confidence=CONFIDENCE,
+            pareto_k=tail,
         )
     return out

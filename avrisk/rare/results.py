@@ -35,6 +35,10 @@ class GammaEstimate:
         Size of the final stage.
     confidence : float
         Level of ``ci``.
+    pareto_k : float
+        Tail index of the hits' weights
+        (:func:`avrisk.rare.weights.pareto_tail_index`): above 0.7 the standard
+        error is unreliable. NaN for naive Monte Carlo and for too few hits.
     """
 
     gamma: float
@@ -45,6 +49,7 @@ class GammaEstimate:
     ess: float
     n_samples: int
     confidence: float = 0.95
+    pareto_k: float = math.nan
 
     @property
     def rel_error(self) -> float:
@@ -73,6 +78,7 @@ class GammaEstimate:
                 "confidence": self.confidence,
                 "n_hits": self.n_hits,
                 "ess": self.ess,
+                "pareto_k": self.pareto_k,
                 "n_samples": self.n_samples,
                 "rel_error": self.rel_error,
                 "variance_reduction": self.variance_reduction,

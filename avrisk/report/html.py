@@ -18,7 +18,8 @@ import numpy as np
 import pyarrow.compute as pc
 
 from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
-from avrisk.rare.final_stage import MIN_RELIABLE_ESS
+from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable
+from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 from avrisk.report.plots import (
     UNRELIABLE_MARK,
     UNRELIABLE_NOTE,
@@ -84,10 +85,23 @@ def _run_view(
             f"Only {main['ess']:.1f} effective hits: a few weights dominate, so the "
             "standard error is unreliable."
         )
+    elif not is_reliable(main["ess"], main.get("pareto_k")):
+        warning = (
+            f"The hits' weights have a heavy tail (Pareto k = {main['pareto_k']:.2f} "
+            f"> {MAX_RELIABLE_PARETO_K:g}): the standard error is unreliable, likely "
+            "too small; compare runs with other seeds."
+        )
+    weighted = est["method"] != "naive_mc"  # naive MC's stderr is binomial
+    by_gamma = [
+        {
+            "pareto_k": None,  # summaries written before it was recorded
+            **g,
+            "reliable": not weighted or is_reliable(g["ess"], g.get("pareto_k")),
+        }
+        for g in sorted(est["by_gamma"], key=lambda g: g["gamma"])
+    ]
     return {
         "label": label,
-        # Importance-weighted (its standard error can be unreliable), not naive.
-        "weighted": est["method"] != "naive_mc",
         "gamma": est["gamma"],
         "p": est["p"],
         "stderr": est["stderr"],
@@ -95,7 +109,7 @@ def _run_view(
         "n_hits": est["n_hits"],
         "ess": est["ess"] or 0.0,
         "n_evals": est["n_evals"],
-        "by_gamma": sorted(est["by_gamma"], key=lambda g: g["gamma"]),
+        "by_gamma": by_gamma,
         "warning": warning,
         "timing": (
             f"{timing['wall_time_s']:.1f} s wall time; "
@@ -198,7 +212,6 @@ def write_report(
         runs=views,
         comparison=comparison,
         mark=UNRELIABLE_MARK,
-        min_ess=MIN_RELIABLE_ESS,
         failures=failures,
         failures_gamma=gamma,
         settings=settings,

@@ -24,12 +24,14 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from avrisk.rare.final_stage import MIN_RELIABLE_ESS  # noqa: E402
+from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable  # noqa: E402
+from avrisk.rare.weights import MAX_RELIABLE_PARETO_K  # noqa: E402
 
-#: Marks a variance ratio computed from an unreliable CE standard error.
+#: Marks a figure computed from an unreliable CE standard error.
 UNRELIABLE_MARK = "*"
 UNRELIABLE_NOTE = (
-    f"{UNRELIABLE_MARK} fewer than {MIN_RELIABLE_ESS:g} effective CE hits at this "
+    f"{UNRELIABLE_MARK} fewer than {MIN_RELIABLE_ESS:g} effective CE hits, or hit "
+    f"weights with a heavy tail (Pareto k > {MAX_RELIABLE_PARETO_K:g}), at this "
     "threshold: CE's standard error, hence the variance ratio, is unreliable"
 )
 
@@ -56,9 +58,10 @@ def comparison_rows(
     -------
     list of dict
         Keys ``gamma``, ``p``, ``ce_hits``, ``naive_hits_expected``,
-        ``rare_event_ratio``, ``variance_ratio``, and ``reliable``: whether CE
-        had at least ``MIN_RELIABLE_ESS`` effective hits there (else its
-        standard error, and so the variance ratio, means little).
+        ``rare_event_ratio``, ``variance_ratio``, and ``reliable``: whether CE's
+        standard error there can be trusted
+        (:func:`avrisk.rare.final_stage.is_reliable`; else the variance ratio
+        means little).
     """
     ref = {g["gamma"]: g for g in (reference or {}).get("by_gamma", [])}
     rows = []
@@ -79,7 +82,7 @@ def comparison_rows(
                 if naive_hits > 0
                 else np.nan,
                 "variance_ratio": naive_var / stderr**2 if stderr > 0 else np.nan,
-                "reliable": (g.get("ess") or 0.0) >= MIN_RELIABLE_ESS,
+                "reliable": is_reliable(g.get("ess"), g.get("pareto_k")),
             }
         )
     return sorted(rows, key=lambda row: row["gamma"])
@@ -107,7 +110,7 @@ def plot_comparison(
                 mfc="white",
                 mec="tab:red",
                 ms=9,
-                label=f"< {MIN_RELIABLE_ESS:g} effective hits: unreliable",
+                label="CE's standard error unreliable",
             )
             ax.legend(fontsize="small")
         ax.axhline(1.0, color="grey", lw=0.8, ls="--")

@@ -1,9 +1,17 @@
+import warnings
+
 import numpy as np
 import pytest
 from scipy import stats
 
+from avrisk.rare.final_stage import UnreliableEstimateWarning, importance_estimates
 from avrisk.rare.intervals import clopper_pearson, normal_interval, wilson
-from avrisk.rare.weights import kish_ess, normalized_weights, weighted_mean_and_stderr
+from avrisk.rare.weights import (
+    kish_ess,
+    normalized_weights,
+    pareto_tail_index,
+    weighted_mean_and_stderr,
+)
 
 
 def test_weighted_mean_is_exact_for_weights_spanning_1e_minus_300_to_1e300():
@@ -86,3 +94,52 @@ def test_variance_reduction_is_undefined_for_an_estimate_outside_0_1():
         n_samples=100,
     )
     assert fine.variance_reduction == pytest.approx(0.25 / 100 / 0.01**2)
+
+
+def _tail_size(n):
+    return int(min(0.2 * n, 3 * np.sqrt(n)))
+
+
+@pytest.mark.parametrize("k", [0.2, 0.8])
+def test_pareto_tail_index_recovers_a_generalised_pareto_shape(k):
+    n = 20_000
+    w = stats.genpareto.rvs(k, size=n, random_state=np.random.default_rng(5))
+    se = (1 + k) / np.sqrt(_tail_size(n))  # asymptotic sd of the ML shape
+    got = pareto_tail_index(np.log(w) + 500.0)  # any shift of log w
+    assert abs(got - k) < 3 * se
+
+
+@pytest.mark.parametrize("a_q", [3.0, 8.0])
+def test_pareto_tail_index_of_beta_likelihood_ratios_is_the_exact_tail(a_q):
+    # Base Beta(2, 2), proposal Beta(a_q, 2): near x = 0 the weight grows as
+    # x^(2 - a_q) and P(w > t) ~ t^(-a_q / (a_q - 2)), so k = (a_q - 2) / a_q:
+    # 1/3 (finite variance) and 3/4 (infinite: a_q >= 2 * 2).
+    n = 200_000
+    x = stats.beta.rvs(a_q, 2, size=n, random_state=np.random.default_rng(6))
+    log_w = stats.beta.logpdf(x, 2, 2) - stats.beta.logpdf(x, a_q, 2)
+    k = (a_q - 2) / a_q
+    se = (1 + k) / np.sqrt(_tail_size(n))
+    assert abs(pareto_tail_index(log_w) - k) < 3 * se
+
+
+def test_pareto_tail_index_needs_a_tail():
+    assert np.isnan(pareto_tail_index(np.zeros(20)))  # 4 tail weights: too few
+    assert pareto_tail_index(np.zeros(1000)) == -np.inf  # equal weights
+
+
+def test_heavy_tailed_hit_weights_are_reported_and_warned_about():
+    n = 20_000
+    rng = np.random.default_rng(7)
+    x = stats.beta.rvs(8.0, 2, size=n, random_state=rng)  # k = 0.75
+    log_w = stats.beta.logpdf(x, 2, 2) - stats.beta.logpdf(x, 8.0, 2)
+    values = rng.uniform(size=n)
+    with pytest.warns(UnreliableEstimateWarning, match="Pareto k"):
+        heavy = importance_estimates(values, log_w, (0.5,))[0.5]
+    assert heavy.pareto_k > 0.7 and heavy.ess > 10
+    assert heavy.to_dict()["pareto_k"] == heavy.pareto_k
+    x = stats.beta.rvs(3.0, 2, size=n, random_state=rng)  # k = 1/3
+    log_w = stats.beta.logpdf(x, 2, 2) - stats.beta.logpdf(x, 3.0, 2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        light = importance_estimates(values, log_w, (0.5,))[0.5]
+    assert light.pareto_k < 0.5

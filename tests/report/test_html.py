@@ -102,7 +102,7 @@ def test_comparison_ratios_are_against_naive_mc_with_ces_whole_budget(runs):
             g["variance_reduction"] * g["n_samples"] / n
         )
         assert row["rare_event_ratio"] > 5 and row["variance_ratio"] > 5
-        assert row["reliable"] == (g["ess"] >= 10)
+        assert row["reliable"] == (g["ess"] >= 10 and g["pareto_k"] <= 0.7)
 
 
 def test_a_variance_ratio_from_few_effective_hits_is_marked_unreliable(runs, tmp_path):
@@ -110,6 +110,10 @@ def test_a_variance_ratio_from_few_effective_hits_is_marked_unreliable(runs, tmp
     ce = dirs[0][1].summary()["estimate"]
     shaky = {**ce, "by_gamma": [{**g, "ess": 1.4} for g in ce["by_gamma"]]}
     assert not any(row["reliable"] for row in comparison_rows(shaky))
+    heavy = {**ce, "by_gamma": [{**g, "pareto_k": 0.9} for g in ce["by_gamma"]]}
+    assert not any(row["reliable"] for row in comparison_rows(heavy))
+    unknown = {**ce, "by_gamma": [{**g, "pareto_k": None} for g in ce["by_gamma"]]}
+    assert all(row["reliable"] for row in comparison_rows(unknown))
     assert all(row["reliable"] for row in comparison_rows(ce))
 
     report = write_report(tmp_path / "report", dirs, title="t")
@@ -123,7 +127,7 @@ def test_a_variance_ratio_from_few_effective_hits_is_marked_unreliable(runs, tmp
         text = write_report(tmp_path / "shaky", dirs, title="t").read_text()
     finally:
         summary_path.write_text(original)
-    assert "fewer than 10 effective CE hits at this threshold" in text
+    assert "fewer than 10 effective CE hits, or hit weights with a heavy tail" in text
     assert text.count("</td></tr>") > 0 and "*</td></tr>" in text
 
 
