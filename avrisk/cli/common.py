@@ -12,9 +12,9 @@ from rich.console import Console
 from rich.markup import escape
 
 #: Diagnostics and progress go to stderr; results to stdout. Both are at least
-#: 110 columns wide so that tables and progress lines do not wrap or get cut
+#: 120 columns wide so that tables and progress lines do not wrap or get cut
 #: when piped to a file (Rich assumes 80 columns there).
-_WIDTH = max(Console().width, 110)
+_WIDTH = max(Console().width, 120)
 err_console = Console(stderr=True, width=_WIDTH)
 out_console = Console(width=_WIDTH)
 
