@@ -8,6 +8,7 @@ can rebuild it at any time.
 from __future__ import annotations
 
 import datetime as dt
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -74,11 +75,17 @@ def _run_view(
     timing = summary["timing"]
     rate = timing.get("rollouts_per_second")
     main = next(g for g in est["by_gamma"] if g["gamma"] == est["gamma"])
+    weighted = est["method"] != "naive_mc"  # naive MC's stderr is binomial
     warning = None
     if main["n_hits"] == 0:
         warning = (
             "No rollout reached the threshold: the estimate is 0 and the interval is "
             "an upper bound only."
+        )
+    elif not weighted and main["n_hits"] < MIN_RELIABLE_ESS:
+        warning = (
+            f"Only {main['n_hits']} hits: the relative standard error is about "
+            f"{1 / math.sqrt(main['n_hits']):.0%}."
         )
     elif (main["ess"] or 0) < MIN_RELIABLE_ESS:
         warning = (
@@ -91,7 +98,6 @@ def _run_view(
             f"> {MAX_RELIABLE_PARETO_K:g}): the standard error is unreliable, likely "
             "too small; compare runs with other seeds."
         )
-    weighted = est["method"] != "naive_mc"  # naive MC's stderr is binomial
     by_gamma = [
         {
             "pareto_k": None,  # summaries written before it was recorded

@@ -145,3 +145,19 @@ def test_naive_runs_are_never_marked_unreliable(runs, tmp_path):
     finally:
         summary_path.write_text(original)
     assert "*</td></tr>" not in text
+
+
+def test_a_naive_run_with_few_hits_is_told_its_relative_error(runs, tmp_path):
+    root, dirs = runs
+    summary_path = dirs[1][1].path / "summary.json"
+    original = summary_path.read_text()
+    try:
+        summary = json.loads(original)
+        for g in summary["estimate"]["by_gamma"]:
+            g.update(n_hits=4, ess=4.0)
+        summary_path.write_text(json.dumps(summary))
+        text = write_report(tmp_path / "few", dirs[1:], title="t").read_text()
+    finally:
+        summary_path.write_text(original)
+    assert "Only 4 hits: the relative standard error is about 50%." in text
+    assert "weights dominate" not in text
