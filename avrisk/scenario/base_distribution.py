@@ -92,17 +92,12 @@ def xi_base_family(
         prior = load_xi_prior()
     if unit not in ("absolute", "prior_sd"):
         raise ValueError(f"unit must be 'absolute' or 'prior_sd'; got {unit!r}")
-    family = FixedCovNormal(prior.mean, precision=prior.precision)
-    if max_shift is not None and unit == "prior_sd":
-        max_shift = max_shift * family.std
     # The simulator reads xi in float32: float32 samples change no rollout and
     # halve the xi columns of a run's samples table (404 of its 428 columns).
-    return FixedCovNormal(
-        prior.mean,
-        precision=prior.precision,
-        max_shift=max_shift,
-        float32_samples=True,
-    )
+    family = FixedCovNormal(prior.mean, precision=prior.precision, float32_samples=True)
+    if max_shift is not None and unit == "prior_sd":
+        max_shift = max_shift * family.std
+    return family.with_max_shift(max_shift)
 
 
 def build_base_distribution(spec: ScenarioSpec) -> Product:

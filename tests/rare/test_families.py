@@ -240,3 +240,12 @@ def test_float32_samples_are_exactly_representable_in_float32_and_keep_the_law()
     assert rounded.project(np.ones(3)).float32_samples
     se = np.sqrt(np.diag([1e-6, 1.0, 4.0]) / len(x)).diagonal()
     assert np.all(np.abs(x.mean(0) - 0.1) < 4 * se)
+
+
+def test_with_max_shift_changes_only_the_search_box():
+    fam = FixedCovNormal(np.zeros(2), cov=np.eye(2), float32_samples=True)
+    boxed = fam.with_max_shift([0.5, 1.0])
+    np.testing.assert_array_equal(boxed.max_shift, [0.5, 1.0])
+    assert fam.max_shift is None and boxed.float32_samples
+    np.testing.assert_array_equal(boxed.mean, fam.mean)
+    np.testing.assert_allclose(boxed.project(np.array([2.0, 2.0])).mean, [0.5, 1.0])

@@ -100,6 +100,12 @@ class FixedCovNormal(ExponentialFamily):
         new.mean = np.asarray(mu, dtype=np.float64).copy()
         return new
 
+    def with_max_shift(self, max_shift: float | Any | None) -> FixedCovNormal:
+        """Same distribution (and Cholesky factor), another CE search box."""
+        new = self._at(self.mean)
+        new.max_shift = _as_shift(max_shift, self.dim)
+        return new
+
     @property
     def std(self) -> FloatArray:
         """Marginal standard deviations ``sqrt(diag Sigma0)``, shape (D,).
