@@ -28,6 +28,18 @@ class Registry:
             raise ValueError(f"{self.kind} {name!r} is already registered")
         self._factories[name] = factory
 
+    def names(self) -> list[str]:
+        """The registered names, sorted."""
+        return sorted(self._factories)
+
+    def get(self, name: str) -> Callable[..., Any]:
+        """The factory registered as ``name`` (KeyError listing the known names)."""
+        try:
+            return self._factories[name]
+        except KeyError:
+            known = sorted(self._factories)
+            raise KeyError(f"unknown {self.kind} {name!r}; known: {known}") from None
+
     def build(self, name: str, **kwargs: Any) -> Any:
         """Call the factory registered as ``name``.
 
@@ -36,9 +48,4 @@ class Registry:
         KeyError
             If ``name`` is not registered; the message lists the known names.
         """
-        try:
-            factory = self._factories[name]
-        except KeyError:
-            known = sorted(self._factories)
-            raise KeyError(f"unknown {self.kind} {name!r}; known: {known}") from None
-        return factory(**kwargs)
+        return self.get(name)(**kwargs)

@@ -1,6 +1,14 @@
-"""The Typer application that every sub-command module registers itself on."""
+"""The ``avrisk`` Typer application: every command, registered in one place.
+
+Command modules define plain functions and know nothing of this application.
+"""
 
 import typer
+
+from avrisk.cli.demo import demo
+from avrisk.cli.run import compare, report, run
+from avrisk.cli.simulate import replay, simulate
+from avrisk.cli.train_drivers import train_drivers_command
 
 app = typer.Typer(
     name="avrisk",
@@ -34,12 +42,11 @@ def _root(
     """Rare-event risk estimation for autonomous-vehicle policies."""
 
 
+for command in (run, compare, report, simulate, replay, demo):
+    app.command()(command)
+app.command("train-drivers")(train_drivers_command)
+
+
 def main() -> None:
     """Entry point of the ``avrisk`` console script."""
-    # Sub-command modules register on `app` when imported.
-    import avrisk.cli.demo  # noqa: F401
-    import avrisk.cli.run  # noqa: F401
-    import avrisk.cli.simulate  # noqa: F401
-    import avrisk.cli.train_drivers  # noqa: F401
-
     app()

@@ -18,10 +18,11 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from avrisk.cli.app import app
 from avrisk.cli.common import out_console, user_errors
-from avrisk.cli.progress import ce_progress
-from avrisk.rare import Estimate, cross_entropy, naive_mc
+from avrisk.cli.progress import RichRunMonitor
+from avrisk.cli.workflow import EXPECTED, compare_runs, settings
+from avrisk.rare import CrossEntropy, Estimate, cross_entropy, naive_mc
+from avrisk.rare.cross_entropy import CESettings
 from avrisk.testing import AnalyticProblem, beta_sum_problem, gaussian_linear_problem
 
 METHOD_LABELS = {"naive_mc": "naive MC", "cross_entropy": "CE"}
@@ -41,7 +42,6 @@ def _row(table: Table, problem: AnalyticProblem, est: Estimate) -> None:
     )
 
 
-@app.command()
 def demo(
     budget: int = typer.Option(
         100_000,
@@ -85,18 +85,7 @@ def demo(
     results = {}
     for problem in problems:
         naive = naive_mc(problem.f, problem.base, problem.gamma, budget, seed=seed)
-        with ce_progress(console, f"CE {problem.name}", n_iter) as callback:
-            ce = cross_entropy(
-                problem.f,
-                problem.base,
-                problem.gamma,
-                rho=0.1,
-                n_per_iter=n_per_iter,
-                n_iter=n_iter,
-                n_final=n_final,
-                seed=seed,
-                callback=callback,
-            )
+        ce = _cross_entropy(console, problem, n_iter, n_per_iter, n_final, seed)
         _row(table, problem, naive)
         _row(table, problem, ce)
         results[problem.name] = {
@@ -116,19 +105,42 @@ def demo(
         _scenario_part(console, scenario_out, rollouts, reference, seed)
 
 
+def _cross_entropy(
+    console: Console,
+    problem: AnalyticProblem,
+    n_iter: int,
+    n_per_iter: int,
+    n_final: int,
+    seed: int,
+) -> Estimate:
+    """CE on an analytic problem, with a progress bar over its calls of f."""
+    ce_settings = CESettings(
+        rho=0.1, n_per_iter=n_per_iter, n_iter=n_iter, n_final=n_final
+    )
+    method = CrossEntropy(ce_settings)
+    with RichRunMonitor(console, f"CE {problem.name}") as monitor:
+        monitor.start(method.budget(), method.describe())
+        return cross_entropy(
+            problem.f,
+            problem.base,
+            problem.gamma,
+            seed=seed,
+            callback=lambda info, state: monitor.status(method.progress(info)),
+            on_batch=lambda batch: monitor.advance(len(batch.ids), replayed=False),
+            **ce_settings.model_dump(),
+        )
+
+
 def _scenario_part(
     console: Console, out: Path, rollouts: int, reference: int, seed: int
 ) -> None:
     """CE vs naive MC on the bundled scenario at ``rollouts`` each (and a reference)."""
-    from avrisk.cli.run import EXPECTED, compare_runs
-    from avrisk.pipeline import RunSettings
-
     # Half the budget searches (5 iterations), half is the final stage. rho 0.02:
     # in learned traffic most rollouts end with a min TTC of 1-2.5 s however
     # close they start, so CE's 10% quantile stalls there (BENCHMARKS.md).
     n_iter, n_per_iter = 5, rollouts // 10
-    ce = RunSettings(
-        method="ce",
+    ce = settings(
+        "ce",
         gamma=0.1,
         gamma_test=(0.2, 0.3, 0.5, 1.0),
         rho=0.02,

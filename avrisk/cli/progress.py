@@ -1,9 +1,6 @@
-"""Rich progress display for cross-entropy searches."""
+"""Rich progress display of an estimation run."""
 
 from __future__ import annotations
-
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 
 from rich.console import Console
 from rich.progress import (
@@ -15,38 +12,9 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from avrisk.rare import CEInfo, CEState
-
-
-@contextmanager
-def ce_progress(
-    console: Console, label: str, n_iter: int
-) -> Iterator[Callable[[CEInfo], None]]:
-    """Show a bar over CE iterations; yields the callback to pass to the search.
-
-    Each update shows the iteration, ``gamma_k``, the hits and the elite ESS.
-    """
-    columns = (
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[status]}"),
-        TimeElapsedColumn(),
-        TextColumn("ETA"),
-        TimeRemainingColumn(),
-    )
-    with Progress(*columns, console=console, transient=False) as progress:
-        task = progress.add_task(label, total=n_iter, status="")
-
-        def update(info: CEInfo, state: CEState | None = None) -> None:
-            status = f"gamma_k={info.gamma_k:.4g} hits={info.n_hits} ESS={info.ess:.0f}"
-            progress.update(task, advance=1, status=status)
-
-        yield update
-
 
 class RichRunMonitor:
-    """Progress of a run: a bar over all rollouts, CE iteration status, ETA.
+    """Progress of a run: a bar over all rollouts, the estimator's status, ETA.
 
     Implements :class:`avrisk.pipeline.RunMonitor`.
     """
@@ -87,11 +55,7 @@ class RichRunMonitor:
         assert self._progress is not None
         self._progress.update(self._task, advance=n)
 
-    def iteration(self, info: CEInfo) -> None:
-        """Show the state of the CE search after an iteration."""
+    def status(self, text: str) -> None:
+        """Show the estimator's status line after a step."""
         assert self._progress is not None
-        status = (
-            f"iter {info.iteration}: gamma_k={info.gamma_k:.3g} "
-            f"hits={info.n_hits} ESS={info.ess:.0f}"
-        )
-        self._progress.update(self._task, status=status)
+        self._progress.update(self._task, status=text)

@@ -34,7 +34,6 @@ from rich.progress import (
 from rich.table import Table
 
 import avrisk
-from avrisk.cli.app import app
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
 from avrisk.pipeline.objective import EVENT_COLUMNS
 from avrisk.pipeline.store import write_parquet_atomic
@@ -230,7 +229,6 @@ def _summary_table(table: pa.Table, wall_s: float) -> Table:
     return summary
 
 
-@app.command()
 def simulate(
     scenario: Annotated[
         str, typer.Argument(help="Scenario YAML file, or a bundled name.")
@@ -298,7 +296,6 @@ def _parse_rows(rows: str, n_rows: int) -> list[int]:
     return picked
 
 
-@app.command()
 def replay(
     file: Annotated[
         Path, typer.Argument(help="Parquet file written by 'avrisk simulate'.")

@@ -43,7 +43,6 @@ from avrisk.agents.drivers.store import (
     XI_PRIOR_FILE,
     default_drivers_dir,
 )
-from avrisk.cli.app import app
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
 from avrisk.learning.ngsim import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
 
@@ -153,7 +152,6 @@ def _size(n_bytes: int) -> str:
     return f"{n_bytes / 1024:,.0f} kB" if n_bytes >= 1024 else f"{n_bytes} B"
 
 
-@app.command("train-drivers")
 def train_drivers_command(
     seed: Annotated[int, typer.Option(min=0, help="Seeds the whole training.")] = 0,
     out: Annotated[

@@ -11,101 +11,102 @@ from __future__ import annotations
 import platform
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
-from typing import Any, Literal, Protocol
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 
 import avrisk
 from avrisk.pipeline.store import RunDirectory
 from avrisk.rare import (
-    CEInfo,
-    CEState,
     Estimate,
+    EstimationContext,
+    Estimator,
     ExponentialFamily,
+    RareEventProblem,
     StageBatch,
-    cross_entropy,
-    naive_mc,
+    estimator_names,
+    get_estimator,
+    run_estimator,
 )
-from avrisk.rare.cross_entropy import check_ce_settings
-from avrisk.rare.defensive import check_defensive
-
-Method = Literal["naive", "ce"]
-
-#: Settings that only a cross-entropy run uses.
-CE_ONLY_SETTINGS = ("rho", "alpha", "n_per_iter", "n_iter", "select", "defensive")
+from avrisk.rare.evaluation import Evaluator
+from avrisk.rare.problem import threshold_list
 
 
-@dataclass(frozen=True)
 class RunSettings:
-    """Options of one estimation run (the paper's names and defaults).
+    """Options of one estimation run: the event, the seed and the estimator's own.
 
-    Attributes
+    Parameters
     ----------
-    method : {"naive", "ce"}
-        Naive Monte Carlo or cross-entropy importance sampling.
-    gamma : float
+    method : str, default="ce"
+        A registered estimator (:func:`avrisk.rare.estimator_names`): ``"ce"``
+        (the paper's cross-entropy), ``"naive"``, ``"defensive"`` ...
+    gamma : float, default=0.14
         Threshold of the event ``f <= gamma`` [unit of f, s for TTC].
-    gamma_test : tuple of float
+    gamma_test : sequence of float, default=()
         Further thresholds estimated from the final samples.
-    rho, alpha : float
-        CE quantile level and smoothing.
-    n_per_iter, n_iter : int
-        CE search: samples per iteration and iterations.
-    n_final : int
-        Samples of the final stage (all samples, for naive MC).
-    seed : int
+    seed : int, default=0
         Run seed.
-    batch_size : int or None
+    batch_size : int or None, default=None
         Largest number of rollouts per call of ``f``.
-    select : str
-        CE rule choosing the final proposal (``"quantile"``: the paper's).
-    defensive : float
-        Share of CE's final stage drawn from the base distribution (a
-        defensive mixture, :mod:`avrisk.rare.defensive`); 0: the paper's.
+    **options
+        The estimator's settings by name (e.g. ``rho``, ``n_iter``,
+        ``n_final`` for CE), validated by its settings model.
+
+    Raises
+    ------
+    ValueError
+        For an unknown method or a bad setting (the message names it).
+
+    Examples
+    --------
+    >>> s = RunSettings("naive", gamma=0.1, n_final=1000)
+    >>> s.estimator.budget(), s.to_dict()["n_final"]
+    (1000, 1000)
     """
 
-    method: Method = "ce"
-    gamma: float = 0.14
-    gamma_test: tuple[float, ...] = ()
-    rho: float = 0.01
-    alpha: float = 0.8
-    n_per_iter: int = 5000
-    n_iter: int = 100
-    n_final: int = 100_000
-    seed: int = 0
-    batch_size: int | None = None
-    select: str = "quantile"
-    defensive: float = 0.0
-
-    def __post_init__(self) -> None:
-        if self.method not in ("naive", "ce"):
-            raise ValueError(f"method must be 'naive' or 'ce'; got {self.method!r}")
-        check_ce_settings(self.rho, self.alpha, self.select)
-        check_defensive(self.defensive)
-        for name in ("n_per_iter", "n_final"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
-        if self.n_iter < 0:
-            raise ValueError(f"n_iter must be >= 0; got {self.n_iter}")
-        object.__setattr__(self, "gamma_test", tuple(float(g) for g in self.gamma_test))
+    def __init__(
+        self,
+        method: str = "ce",
+        *,
+        gamma: float = 0.14,
+        gamma_test: Any = (),
+        seed: int = 0,
+        batch_size: int | None = None,
+        **options: Any,
+    ) -> None:
+        if method not in estimator_names():
+            raise ValueError(
+                f"method must be one of {estimator_names()}; got {method!r}"
+            )
+        self.method = method
+        self.gamma = float(gamma)
+        self.gamma_test = tuple(float(g) for g in threshold_list(gamma_test))
+        self.seed = seed
+        self.batch_size = batch_size
+        self.estimator: Estimator[Any, Any] = get_estimator(method, **options)
 
     @property
     def total_rollouts(self) -> int:
-        """Calls of ``f`` the run makes in all."""
-        if self.method == "naive":
-            return self.n_final
-        return self.n_iter * self.n_per_iter + self.n_final
+        """Calls of ``f`` the run plans to make."""
+        return self.estimator.budget()
 
     def to_dict(self) -> dict[str, Any]:
         """The settings that define the run (recorded in config.json)."""
-        out = asdict(self)
-        if self.method == "naive":  # CE-only settings do not define a naive run
-            for key in CE_ONLY_SETTINGS:
-                out.pop(key)
-        elif not self.defensive:  # the paper's plain proposal: recorded as before
-            out.pop("defensive")
-        return out
+        return {
+            "method": self.method,
+            "gamma": self.gamma,
+            "gamma_test": self.gamma_test,
+            **self.estimator.settings.recorded(),
+            "seed": self.seed,
+            "batch_size": self.batch_size,
+        }
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, RunSettings) and self.to_dict() == other.to_dict()
+
+    def __repr__(self) -> str:
+        return f"RunSettings({self.to_dict()})"
 
 
 class RunMonitor(Protocol):
@@ -117,8 +118,8 @@ class RunMonitor(Protocol):
     def advance(self, n: int, *, replayed: bool) -> None:
         """``n`` more rollouts are done (``replayed``: from an earlier session)."""
 
-    def iteration(self, info: CEInfo) -> None:
-        """A CE iteration finished."""
+    def status(self, text: str) -> None:
+        """The estimator finished a step (a CE iteration): its status line."""
 
 
 class SilentMonitor:
@@ -130,7 +131,7 @@ class SilentMonitor:
     def advance(self, n: int, *, replayed: bool) -> None:  # noqa: D102
         pass
 
-    def iteration(self, info: CEInfo) -> None:  # noqa: D102
+    def status(self, text: str) -> None:  # noqa: D102
         pass
 
 
@@ -140,7 +141,6 @@ class _Clock:
 
     seconds: float = 0.0
     rollouts: int = 0
-    history: list[CEInfo] = field(default_factory=list)
 
 
 def run_estimation(
@@ -151,6 +151,7 @@ def run_estimation(
     *,
     context: dict[str, Any] | None = None,
     monitor: RunMonitor | None = None,
+    evaluator: Evaluator | None = None,
 ) -> dict[str, Any]:
     """Run (or resume, or just read back) one estimation into ``run_dir``.
 
@@ -168,6 +169,8 @@ def run_estimation(
         config.json and compared on resume.
     monitor : RunMonitor, optional
         Progress display.
+    evaluator : Evaluator, optional
+        Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
 
     Returns
     -------
@@ -182,9 +185,11 @@ def run_estimation(
         return run_dir.summary()
     clock = _Clock()
     start = time.perf_counter()
-    monitor.start(settings.total_rollouts, _describe(settings))
+    monitor.start(settings.total_rollouts, settings.estimator.describe())
     try:
-        estimate = _estimate(run_dir, base, _timed(f, clock), settings, monitor, clock)
+        estimate = _estimate(
+            run_dir, base, _timed(f, clock), settings, monitor, evaluator
+        )
     except BaseException:
         if created and not run_dir.has_recorded_chunks():
             run_dir.discard()  # nothing worth keeping: leave no half-made directory
@@ -201,7 +206,7 @@ def _estimate(
     f: Callable[..., Any],
     s: RunSettings,
     monitor: RunMonitor,
-    clock: _Clock,
+    evaluator: Evaluator | None,
 ) -> Estimate:
     def on_batch(batch: StageBatch) -> None:
         run_dir.record(batch)
@@ -213,34 +218,17 @@ def _estimate(
             monitor.advance(len(batch.values), replayed=True)
         return batch
 
-    def on_iteration(info: CEInfo, state: CEState) -> None:
-        clock.history.append(info)
-        run_dir.checkpoint(info, state, clock.history)
-        monitor.iteration(info)
+    infos: list[Any] = []
+    estimator = s.estimator
 
-    common = dict(
-        seed=s.seed,
-        gamma_test=s.gamma_test,
-        batch_size=s.batch_size,
-        on_batch=on_batch,
-        cache=cache,
-    )
-    if s.method == "naive":
-        return naive_mc(f, base, s.gamma, s.n_final, **common)
-    return cross_entropy(
-        f,
-        base,
-        s.gamma,
-        rho=s.rho,
-        alpha=s.alpha,
-        n_per_iter=s.n_per_iter,
-        n_iter=s.n_iter,
-        n_final=s.n_final,
-        select=s.select,
-        defensive=s.defensive,
-        callback=on_iteration,
-        **common,
-    )
+    def on_step(info: Any, state: Any) -> None:
+        infos.append(info)
+        run_dir.checkpoint(estimator.checkpoint(state, infos))
+        monitor.status(estimator.progress(info))
+
+    problem = RareEventProblem(base, f, s.gamma, s.gamma_test, s.batch_size)
+    context = EstimationContext(s.seed, evaluator, on_batch, cache)
+    return run_estimator(estimator, problem, context, callback=on_step)
 
 
 def _timed(f: Callable[..., Any], clock: _Clock) -> Callable[..., Any]:
@@ -255,12 +243,6 @@ def _timed(f: Callable[..., Any], clock: _Clock) -> Callable[..., Any]:
 
     timed.needs_seeds = getattr(f, "needs_seeds", False)  # type: ignore[attr-defined]
     return timed
-
-
-def _describe(s: RunSettings) -> str:
-    if s.method == "naive":
-        return f"naive MC, {s.n_final:,} rollouts"
-    return f"CE {s.n_iter}x{s.n_per_iter:,} + {s.n_final:,}"
 
 
 def _summary(

@@ -5,7 +5,7 @@
     DIR/
       config.json      resolved scenario and options; a different run is refused
       chunks/          one Parquet file per evaluated chunk while the run goes on
-      checkpoint.json  CE state and history after the latest iteration
+      checkpoint.json  the estimator's state and steps after its latest step
       samples.parquet  every rollout of every stage, once the run is complete
       summary.json     estimates, intervals, ESS, timing, versions (SUMMARY_SCHEMA)
 
@@ -28,7 +28,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from avrisk.rare import CEInfo, CEState, StageBatch
+from avrisk.rare import StageBatch
 from avrisk.rare.problem import FINAL_STAGE
 
 SUMMARY_SCHEMA = "avrisk.summary/1"
@@ -205,21 +205,12 @@ class RunDirectory:
 
     # -- checkpoints and the end of a run ---------------------------------------
 
-    def checkpoint(
-        self, info: CEInfo, state: CEState, history: Sequence[CEInfo]
-    ) -> None:
-        """Record the CE state after an iteration (for inspection and reports)."""
-        write_json(
-            self.path / CHECKPOINT_FILE,
-            {
-                "iterations_done": state.iteration,
-                "n_evals": state.n_evals,
-                "proposal": state.proposal.to_dict(),
-                "best": state.best.to_dict(),
-                "best_iteration": state.best_iteration,
-                "history": [h.to_dict() for h in history],
-            },
-        )
+    def checkpoint(self, record: dict[str, Any]) -> None:
+        """Record the estimator's state after a step (for inspection and reports).
+
+        ``record`` is the estimator's JSON-ready ``checkpoint(state, infos)``.
+        """
+        write_json(self.path / CHECKPOINT_FILE, record)
 
     def finish(self, summary: dict[str, Any]) -> None:
         """Gather the chunks into ``samples.parquet``, then write ``summary.json``.

@@ -5,10 +5,18 @@ them) and a batched black-box function ``f``, and estimates ``P0(f(X) <=
 gamma)`` for thresholds where naive Monte Carlo is hopeless.
 """
 
-from avrisk.rare.cross_entropy import CEState, ce_init, ce_step, cross_entropy
+from avrisk.rare.cross_entropy import CEState, CrossEntropy, cross_entropy
+from avrisk.rare.estimator import (
+    EstimationContext,
+    Estimator,
+    estimator_names,
+    get_estimator,
+    run_estimator,
+)
+from avrisk.rare.evaluation import EvalResult, EvalTask, Evaluator, LocalEvaluator
 from avrisk.rare.families import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
 from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
-from avrisk.rare.naive_mc import naive_mc
+from avrisk.rare.naive_mc import NaiveMC, naive_mc
 from avrisk.rare.problem import InvalidOutputError, RareEventProblem
 from avrisk.rare.results import CEInfo, Estimate, GammaEstimate
 from avrisk.rare.stages import StageBatch, run_stage
@@ -16,6 +24,14 @@ from avrisk.rare.stages import StageBatch, run_stage
 __all__ = [
     "CEInfo",
     "CEState",
+    "CrossEntropy",
+    "EstimationContext",
+    "Estimator",
+    "EvalResult",
+    "EvalTask",
+    "Evaluator",
+    "LocalEvaluator",
+    "NaiveMC",
     "Estimate",
     "ExponentialFamily",
     "FixedCovNormal",
@@ -27,9 +43,10 @@ __all__ = [
     "StageBatch",
     "UnreliableEstimateWarning",
     "ZeroHitsWarning",
-    "ce_init",
-    "ce_step",
     "cross_entropy",
+    "estimator_names",
+    "get_estimator",
     "naive_mc",
+    "run_estimator",
     "run_stage",
 ]

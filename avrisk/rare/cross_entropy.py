@@ -14,10 +14,12 @@ For ``k = 0 .. K-1``, with proposal ``P_theta_k`` (``theta_0`` = base):
 The estimate comes from ``n`` fresh samples of the remembered proposal:
 ``p_hat = mean(w_i 1{f_i <= gamma})``, unbiased for ``P0(f <= gamma)``.
 
-The low-level pair :func:`ce_init` / :func:`ce_step` carries everything the next
-iteration needs in a :class:`CEState` and diagnostics in a :class:`CEInfo`, so a
-driver can checkpoint between iterations; :func:`cross_entropy` is the
-top-level loop.
+:class:`CrossEntropy` is the method behind the engine's estimator protocol
+(:mod:`avrisk.rare.estimator`): its ``init`` / ``step`` pair carries everything
+the next iteration needs in a :class:`CEState` and diagnostics in a
+:class:`CEInfo`, so a driver can checkpoint between iterations. It is
+registered as ``"ce"`` and, with a defensive final stage of 10% by default, as
+``"defensive"``. :func:`cross_entropy` is the top-level function.
 
 References
 ----------
@@ -29,24 +31,31 @@ R. Y. Rubinstein, D. P. Kroese. The Cross-Entropy Method. Springer, 2004.
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable, Sequence
-from typing import NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
+from pydantic import Field
 
-from avrisk.rare.defensive import DefensiveMixture, check_defensive
+from avrisk.rare.defensive import DefensiveMixture
+from avrisk.rare.estimator import (
+    DiagnosticTable,
+    EstimationContext,
+    EstimatorSettings,
+    register_estimator,
+    run_estimator,
+)
+from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily
-from avrisk.rare.final_stage import importance_estimates
+from avrisk.rare.final_stage import bracket_failures, importance_estimates
 from avrisk.rare.problem import (
     FINAL_STAGE,
     BatchFunction,
     RareEventProblem,
-    check_positive_int,
     threshold_list,
 )
 from avrisk.rare.results import CEInfo, Estimate
-from avrisk.rare.stages import BatchCache, BatchRecorder, run_stage
+from avrisk.rare.stages import BatchCache, BatchRecorder
 from avrisk.rare.weights import (
     kish_ess,
     normalized_weights,
@@ -81,11 +90,6 @@ class CEState(NamedTuple):
     n_evals: int
 
 
-def ce_init(base: ExponentialFamily) -> CEState:
-    """State before the first iteration: the proposal is the base distribution."""
-    return CEState(base, 0, base, (math.inf,), -1, 0)
-
-
 #: Hits an iterate needs before the ``"variance"`` rule trusts its estimate.
 MIN_HITS_FOR_VARIANCE = 10
 
@@ -112,82 +116,202 @@ SELECTION_RULES: dict[str, Callable[[CEInfo], tuple[float, ...]]] = {
 }
 
 
-def ce_step(
-    state: CEState,
-    problem: RareEventProblem,
-    *,
-    seed: int,
-    rho: float,
-    alpha: float,
-    n_per_iter: int,
-    select: str = "quantile",
-    on_batch: BatchRecorder | None = None,
-    cache: BatchCache | None = None,
-) -> tuple[CEState, CEInfo]:
-    """One cross-entropy iteration (steps 1-5 of the module docstring).
+class CESettings(EstimatorSettings):
+    """Settings of cross-entropy importance sampling (the paper's names)."""
 
-    The samples of iteration ``k`` come from stage ``k + 1`` of ``seed``, so an
-    iteration re-run from a checkpointed state gives the same result.
-    ``on_batch`` and ``cache`` are passed to
-    :func:`~avrisk.rare.stages.run_stage`.
-    """
-    stage = state.iteration + 1
-    proposal = state.proposal
-    values, log_w, stats = run_stage(
-        problem,
-        proposal,
-        n_per_iter,
-        seed=seed,
-        stage=stage,
-        keep_stats=True,
-        on_batch=on_batch,
-        cache=cache,
+    OMIT_IF_DEFAULT = ("defensive",)
+
+    rho: float = Field(0.01, gt=0.0, lt=1.0, description="Elite quantile level.")
+    alpha: float = Field(0.8, gt=0.0, le=1.0, description="Smoothing of the update.")
+    n_per_iter: int = Field(5000, ge=1, description="Samples per search iteration.")
+    n_iter: int = Field(100, ge=0, description="Search iterations K.")
+    n_final: int = Field(100_000, ge=1, description="Samples of the final stage.")
+    select: Literal["quantile", "variance"] = Field(
+        "quantile", description="Rule choosing the final proposal (SELECTION_RULES)."
     )
-    quantile = float(np.quantile(values, rho, method="inverted_cdf"))
-    gamma_k = max(problem.gamma, quantile)
-    elite = values <= gamma_k
-    if not np.isfinite(log_w[elite]).any():
-        raise FloatingPointError(
-            f"iteration {state.iteration}: every elite sample has zero base density"
+    defensive: float = Field(
+        0.0,
+        ge=0.0,
+        lt=1.0,
+        description="Share of the final stage drawn from P0 (weights <= 1/share).",
+    )
+
+
+class DefensiveCESettings(CESettings):
+    """CE with a defensive final stage: ``defensive`` must be above 0."""
+
+    OMIT_IF_DEFAULT = ()
+
+    defensive: float = Field(
+        0.1,
+        gt=0.0,
+        lt=1.0,
+        description="Share of the final stage drawn from P0 (weights <= 1/share).",
+    )
+
+
+@register_estimator
+class CrossEntropy:
+    """Cross-entropy importance sampling (module docstring) as an Estimator."""
+
+    name = "ce"
+    label = "cross-entropy"
+    Settings: type[CESettings] = CESettings
+    weighted = True
+
+    def __init__(self, settings: CESettings) -> None:
+        self.settings = settings
+
+    def budget(self) -> int:
+        """Search iterations times their samples, plus the final stage."""
+        s = self.settings
+        return s.n_iter * s.n_per_iter + s.n_final
+
+    def describe(self) -> str:
+        """``"CE 20x5,000 + 100,000"`` (and the defensive share)."""
+        s = self.settings
+        text = f"CE {s.n_iter}x{s.n_per_iter:,} + {s.n_final:,}"
+        return text + (f", defensive {s.defensive:g}" if s.defensive else "")
+
+    def init(self, problem: RareEventProblem) -> CEState:
+        """Before the first iteration: the proposal is the base distribution."""
+        base = problem.base
+        return CEState(base, 0, base, (math.inf,), -1, 0)
+
+    def done(self, state: CEState) -> bool:
+        """After ``n_iter`` iterations."""
+        return state.iteration >= self.settings.n_iter
+
+    def step(
+        self, state: CEState, problem: RareEventProblem, context: EstimationContext
+    ) -> tuple[CEState, CEInfo]:
+        """One cross-entropy iteration (steps 1-5 of the module docstring).
+
+        The samples of iteration ``k`` come from stage ``k + 1`` of the run
+        seed, so an iteration re-run from a checkpointed state gives the same
+        result. Samples that failed to evaluate count as safe in the search
+        (they only steer the proposal; the final stage brackets them).
+        """
+        s = self.settings
+        stage = state.iteration + 1
+        proposal = state.proposal
+        result = context.stage(problem, proposal, s.n_per_iter, stage, keep_stats=True)
+        values = np.where(result.failed, np.inf, result.values)
+        log_w, stats = result.log_w, result.stats
+        assert stats is not None
+        quantile = float(np.quantile(values, s.rho, method="inverted_cdf"))
+        gamma_k = max(problem.gamma, quantile)
+        elite = values <= gamma_k
+        if not np.isfinite(log_w[elite]).any():
+            raise FloatingPointError(
+                f"iteration {state.iteration}: every elite sample has zero base density"
+            )
+        target = normalized_weights(log_w[elite]) @ stats[elite]
+        m = s.alpha * target + (1.0 - s.alpha) * proposal.mean_param()
+        hits = values <= problem.gamma
+        p_k, se_k = weighted_mean_and_stderr(log_w, hits)
+        n_evals = state.n_evals + s.n_per_iter
+        info = CEInfo(
+            iteration=state.iteration,
+            gamma_k=gamma_k,
+            quantile=quantile,
+            ess=kish_ess(log_w[elite]),
+            n_elite=int(elite.sum()),
+            n_hits=int(np.count_nonzero(hits)),
+            n_evals=n_evals,
+            rel_var=s.n_per_iter * (se_k / p_k) ** 2 if p_k > 0 else math.inf,
         )
-    target = normalized_weights(log_w[elite]) @ stats[elite]
-    m = alpha * target + (1.0 - alpha) * proposal.mean_param()
-    hits = values <= problem.gamma
-    p_k, se_k = weighted_mean_and_stderr(log_w, hits)
-    n_evals = state.n_evals + n_per_iter
-    info = CEInfo(
-        iteration=state.iteration,
-        gamma_k=gamma_k,
-        quantile=quantile,
-        ess=kish_ess(log_w[elite]),
-        n_elite=int(elite.sum()),
-        n_hits=int(np.count_nonzero(hits)),
-        n_evals=n_evals,
-        rel_var=n_per_iter * (se_k / p_k) ** 2 if p_k > 0 else math.inf,
-    )
-    score = SELECTION_RULES[select](info)
-    better = score < state.best_score
-    new_state = CEState(
-        proposal=proposal.project(m),
-        iteration=stage,
-        best=proposal if better else state.best,
-        best_score=score if better else state.best_score,
-        best_iteration=state.iteration if better else state.best_iteration,
-        n_evals=n_evals,
-    )
-    return new_state, info
-
-
-def check_ce_settings(rho: float, alpha: float, select: str = "quantile") -> None:
-    """Raise a ValueError naming ``rho``, ``alpha`` or ``select`` if out of range."""
-    if not 0.0 < rho < 1.0:
-        raise ValueError(f"rho must be in (0, 1); got {rho}")
-    if not 0.0 < alpha <= 1.0:
-        raise ValueError(f"alpha must be in (0, 1]; got {alpha}")
-    if select not in SELECTION_RULES:
-        raise ValueError(
-            f"select must be one of {sorted(SELECTION_RULES)}; got {select!r}"
+        score = SELECTION_RULES[s.select](info)
+        better = score < state.best_score
+        new_state = CEState(
+            proposal=proposal.project(m),
+            iteration=stage,
+            best=proposal if better else state.best,
+            best_score=score if better else state.best_score,
+            best_iteration=state.iteration if better else state.best_iteration,
+            n_evals=n_evals,
         )
+        return new_state, info
+
+    def finalize(
+        self, state: CEState, problem: RareEventProblem, context: EstimationContext
+    ) -> Estimate:
+        """Fresh samples of the best proposal (or its defensive mixture)."""
+        s = self.settings
+        proposal = state.best
+        sampled = (
+            DefensiveMixture(proposal, problem.base, s.defensive)
+            if s.defensive
+            else proposal
+        )
+        stage = context.stage(problem, sampled, s.n_final, FINAL_STAGE)
+        by_gamma = bracket_failures(
+            lambda v: importance_estimates(v, stage.log_w, problem.thresholds),
+            stage.values,
+            stage.failed,
+        )
+        return Estimate(
+            method="cross_entropy",
+            gamma=problem.gamma,
+            by_gamma=by_gamma,
+            n_evals=state.n_evals + s.n_final,
+            proposal=proposal,
+            best_iteration=None if state.best_iteration < 0 else state.best_iteration,
+        )
+
+    def progress(self, info: CEInfo) -> str:
+        """``"iter 3: gamma_k=0.21 hits=12 ESS=40"``."""
+        return (
+            f"iter {info.iteration}: gamma_k={info.gamma_k:.3g} "
+            f"hits={info.n_hits} ESS={info.ess:.0f}"
+        )
+
+    def checkpoint(self, state: CEState, infos: Sequence[CEInfo]) -> dict[str, Any]:
+        """The proposals and the iterations so far (for inspection and reports)."""
+        return {
+            "iterations_done": state.iteration,
+            "n_evals": state.n_evals,
+            "proposal": state.proposal.to_dict(),
+            "best": state.best.to_dict(),
+            "best_iteration": state.best_iteration,
+            "history": [h.to_dict() for h in infos],
+        }
+
+    @staticmethod
+    def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
+        """The search trajectory: levels, quantiles, hits and ESS per iteration."""
+        history = estimate.get("history") or []
+        if not history:
+            return []
+        columns = (
+            "CE iteration",
+            "rho-quantile of f",
+            "gamma_k",
+            "samples with f <= gamma",
+            "elite ESS",
+        )
+        rows = [
+            (h["iteration"], h["quantile"], h["gamma_k"], h["n_hits"], h["ess"])
+            for h in history
+        ]
+        return [
+            DiagnosticTable(
+                "Cross-entropy search",
+                columns,
+                rows,
+                lines=("rho-quantile of f", "gamma_k"),
+                bars="samples with f <= gamma",
+            )
+        ]
+
+
+@register_estimator
+class DefensiveCrossEntropy(CrossEntropy):
+    """CE whose final stage is a defensive mixture with ``P0`` (Hesterberg 1995)."""
+
+    name = "defensive"
+    label = "cross-entropy, defensive"
+    Settings = DefensiveCESettings
 
 
 def cross_entropy(
@@ -208,6 +332,7 @@ def cross_entropy(
     callback: Callable[[CEInfo, CEState], None] | None = None,
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
+    evaluator: Evaluator | None = None,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by cross-entropy importance sampling.
 
@@ -254,6 +379,8 @@ def cross_entropy(
     cache : callable, optional
         ``cache(stage, chunk)`` returns a recorded batch of an interrupted run
         with the same settings, or ``None``: resuming replays the record.
+    evaluator : Evaluator, optional
+        Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
 
     Returns
     -------
@@ -272,47 +399,15 @@ def cross_entropy(
     >>> bool(abs(est.p / norm.sf(5.0) - 1) < 0.1)
     True
     """
-    start = time.perf_counter()
-    check_ce_settings(rho, alpha, select)
-    n_per_iter = check_positive_int("n_per_iter", n_per_iter)
-    n_iter = check_positive_int("n_iter", n_iter, minimum=0)
-    n_final = check_positive_int("n_final", n_final)
-    defensive = check_defensive(defensive)
+    settings = CESettings.validated(
+        rho=rho,
+        alpha=alpha,
+        n_per_iter=n_per_iter,
+        n_iter=n_iter,
+        n_final=n_final,
+        select=select,
+        defensive=defensive,
+    )
     problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    state = ce_init(base)
-    history = []
-    for _ in range(n_iter):
-        state, info = ce_step(
-            state,
-            problem,
-            seed=seed,
-            rho=rho,
-            alpha=alpha,
-            n_per_iter=n_per_iter,
-            select=select,
-            on_batch=on_batch,
-            cache=cache,
-        )
-        history.append(info)
-        if callback is not None:
-            callback(info, state)
-    proposal = state.best
-    values, log_w, _ = run_stage(
-        problem,
-        DefensiveMixture(proposal, base, defensive) if defensive else proposal,
-        n_final,
-        seed=seed,
-        stage=FINAL_STAGE,
-        on_batch=on_batch,
-        cache=cache,
-    )
-    return Estimate(
-        method="cross_entropy",
-        gamma=problem.gamma,
-        by_gamma=importance_estimates(values, log_w, problem.thresholds),
-        n_evals=state.n_evals + n_final,
-        proposal=proposal,
-        history=tuple(history),
-        best_iteration=None if state.best_iteration < 0 else state.best_iteration,
-        wall_time_s=time.perf_counter() - start,
-    )
+    context = EstimationContext(seed, evaluator, on_batch, cache)
+    return run_estimator(CrossEntropy(settings), problem, context, callback=callback)

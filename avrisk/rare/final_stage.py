@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 
@@ -47,6 +49,47 @@ class UnreliableEstimateWarning(UserWarning):
     the standard error and the interval are computed from those same weights,
     so they cannot be trusted either.
     """
+
+
+def bracket_failures(
+    estimates: Callable[[FloatArray], dict[float, GammaEstimate]],
+    values: FloatArray,
+    failed: np.ndarray | None,
+) -> dict[float, GammaEstimate]:
+    """Estimates with failed samples counted safe, bracketed by counting them dangerous.
+
+    Parameters
+    ----------
+    estimates : callable
+        Per-threshold estimates from the values of every sample.
+    values : ndarray of shape (n,)
+        ``f`` (NaN allowed where ``failed``).
+    failed : ndarray of bool, shape (n,), or None
+        Samples whose evaluation failed (None: none).
+
+    Returns
+    -------
+    dict of float to GammaEstimate
+        ``p`` with the failed samples counted safe, ``p_if_failed_dangerous``
+        with them counted dangerous, and ``ci`` from the low end of the first
+        interval to the high end of the second.
+    """
+    if failed is None or not failed.any():
+        return estimates(values)
+    safe = estimates(np.where(failed, np.inf, values))
+    with warnings.catch_warnings():  # the safe side has warned already
+        warnings.simplefilter("ignore")
+        dangerous = estimates(np.where(failed, -np.inf, values))
+    n_failed = int(np.count_nonzero(failed))
+    return {
+        g: replace(
+            est,
+            ci=(est.ci[0], max(est.ci[1], dangerous[g].ci[1])),
+            n_failed=n_failed,
+            p_if_failed_dangerous=dangerous[g].p,
+        )
+        for g, est in safe.items()
+    }
 
 
 def binomial_estimates(

@@ -10,20 +10,105 @@ zero-width interval.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
+from typing import Any, Literal, NamedTuple
 
+from pydantic import Field
+
+from avrisk.rare.estimator import (
+    DiagnosticTable,
+    EstimationContext,
+    EstimatorSettings,
+    register_estimator,
+    run_estimator,
+)
+from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily
-from avrisk.rare.final_stage import BINOMIAL_INTERVALS, binomial_estimates
+from avrisk.rare.final_stage import binomial_estimates, bracket_failures
 from avrisk.rare.problem import (
     FINAL_STAGE,
     BatchFunction,
     RareEventProblem,
-    check_positive_int,
     threshold_list,
 )
 from avrisk.rare.results import Estimate
-from avrisk.rare.stages import BatchCache, BatchRecorder, run_stage
+from avrisk.rare.stages import BatchCache, BatchRecorder
+
+
+class NaiveSettings(EstimatorSettings):
+    """Settings of naive Monte Carlo."""
+
+    OMIT_IF_DEFAULT = ("interval",)
+
+    n_final: int = Field(100_000, ge=1, description="Samples (= calls of f).")
+    interval: Literal["clopper-pearson", "wilson"] = Field(
+        "clopper-pearson", description="Binomial confidence interval (95%)."
+    )
+
+
+class NaiveState(NamedTuple):
+    """Naive Monte Carlo has no steps: its one stage is the final one."""
+
+
+@register_estimator
+class NaiveMC:
+    """Naive Monte Carlo as an :class:`~avrisk.rare.estimator.Estimator`."""
+
+    name = "naive"
+    label = "naive Monte Carlo"
+    Settings = NaiveSettings
+    weighted = False
+
+    def __init__(self, settings: NaiveSettings) -> None:
+        self.settings = settings
+
+    def budget(self) -> int:
+        """``n_final`` calls of ``f``."""
+        return self.settings.n_final
+
+    def describe(self) -> str:
+        """``"naive MC, 100,000 rollouts"``."""
+        return f"naive MC, {self.settings.n_final:,} rollouts"
+
+    def init(self, problem: RareEventProblem) -> NaiveState:
+        """Nothing to prepare."""
+        return NaiveState()
+
+    def done(self, state: NaiveState) -> bool:
+        """Always: there is no search."""
+        return True
+
+    def step(self, state: NaiveState, problem: Any, context: Any) -> Any:
+        """Never called (:meth:`done` is always true)."""
+        raise RuntimeError("naive Monte Carlo has no search steps")
+
+    def finalize(
+        self, state: NaiveState, problem: RareEventProblem, context: EstimationContext
+    ) -> Estimate:
+        """Sample ``P0``, count the hits of every threshold."""
+        n, interval = self.settings.n_final, self.settings.interval
+        stage = context.stage(problem, problem.base, n, FINAL_STAGE)
+        by_gamma = bracket_failures(
+            lambda v: binomial_estimates(v, problem.thresholds, interval),
+            stage.values,
+            stage.failed,
+        )
+        return Estimate(
+            method="naive_mc", gamma=problem.gamma, by_gamma=by_gamma, n_evals=n
+        )
+
+    def progress(self, info: Any) -> str:
+        """Nothing to say between steps."""
+        return ""
+
+    def checkpoint(self, state: NaiveState, infos: Sequence[Any]) -> dict[str, Any]:
+        """No state worth recording."""
+        return {}
+
+    @staticmethod
+    def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
+        """No per-step tables."""
+        return []
 
 
 def naive_mc(
@@ -38,6 +123,7 @@ def naive_mc(
     interval: str = "clopper-pearson",
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
+    evaluator: Evaluator | None = None,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by plain sampling from ``base``.
 
@@ -65,6 +151,8 @@ def naive_mc(
     cache : callable, optional
         ``cache(stage, chunk)`` returns a recorded batch of an interrupted run
         with the same settings, or ``None`` (see :mod:`avrisk.rare.stages`).
+    evaluator : Evaluator, optional
+        Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
 
     Returns
     -------
@@ -79,20 +167,8 @@ def naive_mc(
     >>> bool(abs(est.p - 0.02275) < 4 * est.stderr)
     True
     """
-    start = time.perf_counter()
-    n = check_positive_int("n", n)
-    if interval not in BINOMIAL_INTERVALS:
-        raise ValueError(
-            f"interval must be one of {sorted(BINOMIAL_INTERVALS)}; got {interval!r}"
-        )
+    settings = NaiveSettings.validated(n_final=n, interval=interval)
+    estimator = NaiveMC(settings)
     problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    stage = run_stage(
-        problem, base, n, seed=seed, stage=FINAL_STAGE, on_batch=on_batch, cache=cache
-    )
-    return Estimate(
-        method="naive_mc",
-        gamma=problem.gamma,
-        by_gamma=binomial_estimates(stage.values, problem.thresholds, interval),
-        n_evals=n,
-        wall_time_s=time.perf_counter() - start,
-    )
+    context = EstimationContext(seed, evaluator, on_batch, cache)
+    return run_estimator(estimator, problem, context)

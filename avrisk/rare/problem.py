@@ -29,6 +29,9 @@ BatchFunction = Callable[..., Any]
 #: Stage number of the final (estimation) stage; CE search iteration k is k + 1.
 FINAL_STAGE = 0
 
+#: Optional per-sample output of ``f``: 0 evaluated, non-zero failed (NaN allowed).
+STATUS = "status"
+
 #: Rows drawn from one random generator; fixed, because changing it changes X.
 SAMPLE_CHUNK = 8192
 
@@ -103,7 +106,9 @@ class RareEventProblem:
 
         ``f`` returns either the ``(n,)`` values, or a mapping with the values
         under ``"f"`` and any other per-sample outputs (crash flags, ...) as
-        ``(n,)`` arrays: those are passed on for recording, never used.
+        ``(n,)`` arrays: those are passed on for recording. One of them is
+        understood: ``"status"``, non-zero where the evaluation of a sample
+        failed (its value may then be NaN; see :mod:`avrisk.rare.evaluation`).
 
         Returns
         -------
@@ -113,7 +118,7 @@ class RareEventProblem:
         Raises
         ------
         InvalidOutputError
-            If ``f`` returns the wrong shape or any NaN.
+            If ``f`` returns the wrong shape, or NaN for a sample not marked failed.
         """
         needs_seeds = bool(getattr(self.f, "needs_seeds", False))
         step = self.batch_size or max(1, len(x))
@@ -134,13 +139,19 @@ class RareEventProblem:
                 out = out["f"]
             parts.append(_column(out, len(chunk), "f", dtype=np.float64))
         values = np.concatenate(parts) if parts else np.empty(0)
-        bad = np.flatnonzero(np.isnan(values))
+        columns = {k: np.concatenate(v) for k, v in extras.items()}
+        nan = np.isnan(values)
+        if STATUS in columns:  # a failed sample may have no value
+            nan &= np.asarray(columns[STATUS]) == 0
+        bad = np.flatnonzero(nan)
         if bad.size:
             raise InvalidOutputError(
                 f"f returned NaN for {bad.size} of {values.size} samples "
-                f"(first at row {bad[0]}: x = {x[bad[0]].tolist()[:8]}...)"
+                f"(first at row {bad[0]}: x = {x[bad[0]].tolist()[:8]}...); "
+                f"a sample whose evaluation failed must say so in a "
+                f"{STATUS!r} output (non-zero)"
             )
-        return values, {k: np.concatenate(v) for k, v in extras.items()}
+        return values, columns
 
 
 def _column(out: Any, n: int, name: str, dtype: Any = None) -> np.ndarray:

@@ -39,6 +39,13 @@ class GammaEstimate:
         Tail index of the hits' weights
         (:func:`avrisk.rare.weights.pareto_tail_index`): above 0.7 the standard
         error is unreliable. NaN for naive Monte Carlo and for too few hits.
+    n_failed : int
+        Samples whose evaluation failed (:mod:`avrisk.rare.evaluation`). They
+        are counted safe in ``p``, ``stderr`` and ``n_hits``;
+        ``p_if_failed_dangerous`` counts them dangerous, and ``ci`` spans both.
+    p_if_failed_dangerous : float
+        The estimate with the failed samples counted dangerous (the upper end
+        of the bracket; equals ``p`` when none failed).
     """
 
     gamma: float
@@ -50,6 +57,12 @@ class GammaEstimate:
     n_samples: int
     confidence: float = 0.95
     pareto_k: float = math.nan
+    n_failed: int = 0
+    p_if_failed_dangerous: float = math.nan
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.p_if_failed_dangerous):
+            object.__setattr__(self, "p_if_failed_dangerous", self.p)
 
     @property
     def rel_error(self) -> float:
@@ -82,6 +95,8 @@ class GammaEstimate:
                 "n_samples": self.n_samples,
                 "rel_error": self.rel_error,
                 "variance_reduction": self.variance_reduction,
+                "n_failed": self.n_failed,
+                "p_if_failed_dangerous": self.p_if_failed_dangerous,
             }
         )
 
@@ -138,7 +153,7 @@ class Estimate:
     Attributes
     ----------
     method : str
-        ``"naive_mc"`` or ``"cross_entropy"``.
+        The estimator (``"naive_mc"``, ``"cross_entropy"``, ...).
     gamma : float
         Main threshold.
     by_gamma : dict of float to GammaEstimate
@@ -147,12 +162,16 @@ class Estimate:
         Every call of ``f``, search stages included.
     proposal : ExponentialFamily or None
         Proposal of the final stage (``None`` for naive Monte Carlo).
-    history : tuple of CEInfo
-        One entry per cross-entropy iteration (empty for naive Monte Carlo).
+    history : tuple
+        The diagnostics (``Info``, with ``to_dict()``) of every step of the
+        estimator: one :class:`CEInfo` per cross-entropy iteration; empty for
+        naive Monte Carlo.
     best_iteration : int or None
         Iteration whose proposal was chosen (lowest ``rho``-quantile).
     wall_time_s : float
         Wall-clock time of the whole estimate [s].
+    details : dict
+        Further JSON-ready results of the estimator (e.g. a level sequence).
     """
 
     method: str
@@ -160,9 +179,10 @@ class Estimate:
     by_gamma: dict[float, GammaEstimate]
     n_evals: int
     proposal: ExponentialFamily | None = None
-    history: tuple[CEInfo, ...] = field(default_factory=tuple)
+    history: tuple[Any, ...] = field(default_factory=tuple)
     best_iteration: int | None = None
     wall_time_s: float = 0.0
+    details: dict[str, Any] = field(default_factory=dict)
 
     @property
     def main(self) -> GammaEstimate:
@@ -217,6 +237,7 @@ class Estimate:
                 "proposal": None if self.proposal is None else self.proposal.to_dict(),
                 "best_iteration": self.best_iteration,
                 "history": [h.to_dict() for h in self.history],
+                **({"details": self.details} if self.details else {}),
             }
         )
 

@@ -3,20 +3,30 @@
 A *stage* is one batch of ``n`` samples from one distribution: a CE search
 iteration or the final estimation stage. Its samples are drawn in chunks of
 :data:`~avrisk.rare.problem.SAMPLE_CHUNK` rows from per-chunk generators, so
-memory stays bounded for any ``n`` and each chunk can be recorded as it is
-done (``on_batch``) and, when a run resumes, replayed from that record
-(``cache``) instead of being evaluated again. A replayed chunk holds the same
-numbers as a fresh one, so a resumed run ends with the same result.
+memory stays bounded for any ``n``. The chunks go to an evaluator
+(:mod:`avrisk.rare.evaluation`) that may return them in any order; each is
+recorded as it comes back (``on_batch``) and, when a run resumes, replayed from
+that record (``cache``) instead of being evaluated again. A replayed chunk
+holds the same numbers as a fresh one, so a resumed run ends with the same
+result. A recorded chunk with failed samples (``status != 0``) is evaluated
+again on resume.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import NamedTuple
 
 import numpy as np
 
 from avrisk.rare.defensive import DefensiveMixture
+from avrisk.rare.evaluation import (
+    EvalResult,
+    EvalTask,
+    Evaluator,
+    LocalEvaluator,
+    failed_mask,
+)
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.problem import (
     SAMPLE_CHUNK,
@@ -59,6 +69,11 @@ class StageBatch(NamedTuple):
     log_q: FloatArray
     seeds: np.ndarray
 
+    @property
+    def failed(self) -> np.ndarray:
+        """Bool (m,): samples whose evaluation failed (``status != 0``)."""
+        return failed_mask(self.values, self.extras)
+
 
 #: Called with each newly evaluated chunk (recording, progress).
 BatchRecorder = Callable[[StageBatch], None]
@@ -72,15 +87,19 @@ class StageResult(NamedTuple):
     Attributes
     ----------
     values : ndarray of shape (n,)
+        ``f`` of every sample (NaN where ``failed``).
     log_w : ndarray of shape (n,)
         ``log p0 - log q``.
     stats : ndarray of shape (n, K) or None
         Sufficient statistics under the sampled family, when asked for.
+    failed : ndarray of bool, shape (n,)
+        Samples whose evaluation failed (see :mod:`avrisk.rare.evaluation`).
     """
 
     values: FloatArray
     log_w: FloatArray
     stats: FloatArray | None
+    failed: np.ndarray
 
 
 def run_stage(
@@ -93,40 +112,99 @@ def run_stage(
     keep_stats: bool = False,
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
+    evaluator: Evaluator | None = None,
 ) -> StageResult:
-    """Draw ``n`` samples of ``proposal`` for ``stage`` and evaluate ``f``."""
-    values, log_w, stats = [], [], []
-    for chunk, start in enumerate(range(0, n, SAMPLE_CHUNK)):
-        size = min(SAMPLE_CHUNK, n - start)
+    """Draw ``n`` samples of ``proposal`` for ``stage`` and evaluate ``f``.
+
+    Parameters
+    ----------
+    problem : RareEventProblem
+    proposal : ExponentialFamily or DefensiveMixture
+        The distribution sampled.
+    n : int
+        Samples of the stage.
+    seed : int
+        Run seed.
+    stage : int
+        Stage number (sample ``i`` depends only on ``seed``, ``stage``, ``i``).
+    keep_stats : bool, default=False
+        Also return the sufficient statistics of the samples under ``proposal``.
+    on_batch : callable, optional
+        Called with each newly evaluated chunk, in the order they come back.
+    cache : callable, optional
+        ``cache(stage, chunk)``: a recorded chunk of an interrupted run, or None.
+    evaluator : Evaluator, optional
+        Where ``f`` runs; default :class:`~avrisk.rare.evaluation.LocalEvaluator`.
+
+    Returns
+    -------
+    StageResult
+    """
+    sizes = [min(SAMPLE_CHUNK, n - start) for start in range(0, n, SAMPLE_CHUNK)]
+    batches: dict[int, StageBatch] = {}
+    for chunk, size in enumerate(sizes):
         batch = cache(stage, chunk) if cache is not None else None
-        if batch is None or batch.values.shape != (size,):
-            batch = _evaluate_chunk(problem, proposal, seed, stage, chunk, start, size)
-            if on_batch is not None:
-                on_batch(batch)
-        values.append(batch.values)
-        log_w.append(batch.log_p0 - batch.log_q)
-        if keep_stats:
-            stats.append(proposal.sufficient_stat(batch.x))
+        if batch is not None and batch.values.shape == (size,):
+            if not batch.failed.any():
+                batches[chunk] = batch
+
+    def tasks() -> Iterator[EvalTask]:
+        for chunk, size in enumerate(sizes):
+            if chunk not in batches:
+                yield _chunk_task(proposal, seed, stage, chunk, size)
+
+    for result in (evaluator or LocalEvaluator()).evaluate(problem, tasks()):
+        batch = _stage_batch(problem, proposal, result)
+        batches[batch.chunk] = batch
+        if on_batch is not None:
+            on_batch(batch)
+    if len(batches) != len(sizes):
+        missing = sorted(set(range(len(sizes))) - set(batches))
+        raise RuntimeError(
+            f"the evaluator returned no result for chunks {missing} of stage {stage}"
+        )
+    ordered = [batches[chunk] for chunk in range(len(sizes))]
     return StageResult(
-        np.concatenate(values),
-        np.concatenate(log_w),
-        np.concatenate(stats) if keep_stats else None,
+        np.concatenate([b.values for b in ordered]),
+        np.concatenate([b.log_p0 - b.log_q for b in ordered]),
+        (
+            np.concatenate([proposal.sufficient_stat(b.x) for b in ordered])
+            if keep_stats
+            else None
+        ),
+        np.concatenate([b.failed for b in ordered]),
     )
 
 
-def _evaluate_chunk(
-    problem: RareEventProblem,
+def _chunk_task(
     proposal: ExponentialFamily | DefensiveMixture,
     seed: int,
     stage: int,
     chunk: int,
-    start: int,
     size: int,
-) -> StageBatch:
+) -> EvalTask:
+    start = chunk * SAMPLE_CHUNK
     ids = np.arange(start, start + size, dtype=np.int64)
     x = proposal.sample(size, chunk_rng(seed, stage, chunk))
-    seeds = sample_seeds(seed, stage, ids)
-    values, extras = problem.evaluate(x, seeds)
-    log_p0 = problem.base.log_prob(x)
-    log_q = log_p0 if proposal is problem.base else proposal.log_prob(x)
-    return StageBatch(stage, chunk, ids, x, values, extras, log_p0, log_q, seeds)
+    return EvalTask(stage, chunk, ids, x, sample_seeds(seed, stage, ids))
+
+
+def _stage_batch(
+    problem: RareEventProblem,
+    proposal: ExponentialFamily | DefensiveMixture,
+    result: EvalResult,
+) -> StageBatch:
+    task = result.task
+    log_p0 = problem.base.log_prob(task.x)
+    log_q = log_p0 if proposal is problem.base else proposal.log_prob(task.x)
+    return StageBatch(
+        task.stage,
+        task.chunk,
+        task.ids,
+        task.x,
+        result.values,
+        result.extras,
+        log_p0,
+        log_q,
+        task.seeds,
+    )

@@ -19,14 +19,15 @@ import numpy as np
 import pyarrow.compute as pc
 
 from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
+from avrisk.rare.estimator import estimator_class
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 from avrisk.report.plots import (
     UNRELIABLE_MARK,
     UNRELIABLE_NOTE,
     comparison_rows,
-    plot_ce_trajectory,
     plot_comparison,
+    plot_diagnostic,
 )
 from avrisk.scenario.params import XI_PREFIX
 
@@ -68,14 +69,14 @@ def top_failures(run_dir: RunDirectory, gamma: float, k: int) -> list[dict[str, 
 
 
 def _run_view(
-    label: str, run_dir: RunDirectory, trajectory: str | None
+    label: str, run_dir: RunDirectory, diagnostics: list[str]
 ) -> dict[str, Any]:
     summary = run_dir.summary()
     est = summary["estimate"]
     timing = summary["timing"]
     rate = timing.get("rollouts_per_second")
     main = next(g for g in est["by_gamma"] if g["gamma"] == est["gamma"])
-    weighted = est["method"] != "naive_mc"  # naive MC's stderr is binomial
+    weighted = estimator_class(summary["method"]).weighted
     warning = None
     if main["n_hits"] == 0:
         warning = (
@@ -127,7 +128,7 @@ def _run_view(
                 else ""
             )
         ),
-        "trajectory": trajectory,
+        "diagnostics": diagnostics,
     }
 
 
@@ -150,8 +151,9 @@ def write_report(
     out_dir : Path
         Where ``report.html`` and ``plots/`` go.
     runs : sequence of (label, RunDirectory)
-        Complete runs to show, in order; the CE ones get a trajectory plot and
-        the first CE one is compared with naive sampling.
+        Complete runs to show, in order; each gets its estimator's diagnostic
+        plots, and the first importance-weighted one is compared with naive
+        sampling.
     title, subtitle : str
     reference : RunDirectory, optional
         A large naive run whose estimates serve as ``p`` in the comparison.
@@ -175,17 +177,15 @@ def write_report(
     views, ce_summary = [], None
     for i, (label, run_dir) in enumerate(runs):
         summary = run_dir.summary()
-        trajectory = None
-        if summary["estimate"]["history"]:
-            name = f"ce_trajectory_{i}.png"
-            plot_ce_trajectory(
-                summary["estimate"]["history"],
-                summary["estimate"]["gamma"],
-                plots / name,
-            )
-            trajectory = f"plots/{name}"
+        estimator = estimator_class(summary["method"])
+        images = []
+        for j, table in enumerate(estimator.diagnostics(summary["estimate"])):
+            name = f"diagnostics_{i}_{j}.png"
+            plot_diagnostic(table, summary["estimate"]["gamma"], plots / name)
+            images.append(f"plots/{name}")
+        if estimator.weighted:
             ce_summary = ce_summary or summary
-        views.append(_run_view(label, run_dir, trajectory))
+        views.append(_run_view(label, run_dir, images))
     comparison = None
     if ce_summary is not None:
         ref = reference.summary()["estimate"] if reference is not None else None

@@ -4,8 +4,8 @@
   the ratio of the number of rare events (CE's final-stage hits over the naive
   hits expected with CE's whole budget of rollouts) and the ratio of estimator
   variances (naive over CE, at that budget).
-* :func:`plot_ce_trajectory` -- ``gamma_k`` and the ``rho``-quantile per CE
-  iteration, with the hits of each iteration.
+* :func:`plot_diagnostic` -- an estimator's per-step diagnostics (for CE:
+  ``gamma_k`` and the ``rho``-quantile per iteration, with its hits).
 
 Ratios use expected naive figures, ``n p`` hits and variance ``p (1 - p) / n``
 with ``p`` the best estimate at hand (a reference run when given, else CE's
@@ -24,6 +24,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from avrisk.rare.estimator import DiagnosticTable  # noqa: E402
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable  # noqa: E402
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K  # noqa: E402
 
@@ -124,23 +125,46 @@ def plot_comparison(
     return path
 
 
-def plot_ce_trajectory(history: list[dict[str, Any]], gamma: float, path: Path) -> Path:
-    """Draw ``gamma_k``, the ``rho``-quantile and the hits per CE iteration."""
-    it = [h["iteration"] for h in history]
-    fig, (ax, ax_hits) = plt.subplots(
-        2, 1, figsize=(7, 5), sharex=True, constrained_layout=True
+def plot_diagnostic(
+    table: DiagnosticTable, gamma: float, path: Path, unit: str = "s"
+) -> Path:
+    """Draw an estimator's per-step diagnostics: lines over steps, bars below.
+
+    Parameters
+    ----------
+    table : DiagnosticTable
+        From the estimator's ``diagnostics``.
+    gamma : float
+        Threshold, marked on the top panel [``unit``].
+    path : Path
+        PNG to write.
+    unit : str, default="s"
+        Unit of ``f``.
+    """
+    steps = table.column(table.columns[0])
+    panels = 2 if table.bars else 1
+    fig, axes = plt.subplots(
+        panels,
+        1,
+        figsize=(7, 2.5 + 2.5 * panels),
+        sharex=True,
+        squeeze=False,
+        constrained_layout=True,
     )
-    ax.plot(it, [h["quantile"] for h in history], "o-", label="rho-quantile of f")
-    ax.plot(it, [h["gamma_k"] for h in history], "s--", label="gamma_k")
+    ax = axes[0, 0]
+    for name, style in zip(table.lines, ("o-", "s--", "^:", "v-."), strict=False):
+        ax.plot(steps, table.column(name), style, label=name)
     ax.axhline(gamma, color="tab:red", lw=1, label=f"gamma = {gamma:g}")
-    ax.set_ylabel("f [s]")
-    ax.set_title("Cross-entropy search")
+    ax.set_ylabel(f"f [{unit}]")
+    ax.set_title(table.title)
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(True, alpha=0.3)
-    ax_hits.bar(it, [h["n_hits"] for h in history], color="tab:orange")
-    ax_hits.set_ylabel("samples with f <= gamma")
-    ax_hits.set_xlabel("CE iteration")
-    ax_hits.grid(True, alpha=0.3)
+    if table.bars:
+        below = axes[1, 0]
+        below.bar(steps, table.column(table.bars), color="tab:orange")
+        below.set_ylabel(table.bars)
+        below.grid(True, alpha=0.3)
+    axes[-1, 0].set_xlabel(table.columns[0])
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -3,7 +3,6 @@ import json
 from typer.testing import CliRunner
 
 import avrisk
-import avrisk.cli.demo  # noqa: F401  (registers the command)
 from avrisk.cli.app import app
 
 

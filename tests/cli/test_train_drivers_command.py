@@ -6,7 +6,6 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-import avrisk.cli.train_drivers  # noqa: F401  (registers the command)
 import avrisk.learning.train as training
 from avrisk.agents.drivers import XiPrior, load_driver_net
 from avrisk.agents.drivers.store import default_drivers_dir

@@ -134,12 +134,14 @@ def test_an_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path):
 
 
 def test_bad_settings_are_rejected_by_name():
-    with pytest.raises(ValueError, match="rho must be in"):
+    with pytest.raises(ValueError, match="estimator 'ce': rho: .* less than 1"):
         RunSettings(rho=2.0)
-    with pytest.raises(ValueError, match="method must be"):
-        RunSettings(method="splitting")
-    with pytest.raises(ValueError, match="n_final must be >= 1"):
+    with pytest.raises(ValueError, match="method must be one of .*'naive'"):
+        RunSettings(method="no_such_method")
+    with pytest.raises(ValueError, match="n_final: .* greater than or equal to 1"):
         RunSettings(n_final=0)
+    with pytest.raises(ValueError, match="'naive': rho: Extra inputs"):
+        RunSettings("naive", rho=0.1)
 
 
 SCRIPT = """

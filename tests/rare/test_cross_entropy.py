@@ -6,15 +6,16 @@ import pytest
 from scipy import stats
 
 from avrisk.rare import (
+    CrossEntropy,
+    EstimationContext,
     FixedCovNormal,
     RareEventProblem,
     ScaledBeta,
     UnreliableEstimateWarning,
     ZeroHitsWarning,
-    ce_init,
-    ce_step,
     cross_entropy,
 )
+from avrisk.rare.cross_entropy import CESettings
 from avrisk.testing import (
     beta_sum_cdf,
     beta_sum_problem,
@@ -80,11 +81,12 @@ def test_gamma_k_is_the_larger_of_gamma_and_the_rho_quantile():
 def test_the_final_proposal_is_the_iterate_with_the_lowest_rho_quantile():
     problem = gaussian_linear_problem(2, p=1e-6)
     base, seen = problem.base, []
-    state = ce_init(base)
     rp = RareEventProblem(base, problem.f, problem.gamma)
+    method = CrossEntropy(CESettings(rho=0.1, alpha=0.8, n_per_iter=1000))
+    state = method.init(rp)
     for _ in range(6):
         seen.append(state.proposal)
-        state, info = ce_step(state, rp, seed=4, rho=0.1, alpha=0.8, n_per_iter=1000)
+        state, info = method.step(state, rp, EstimationContext(seed=4))
     est = cross_entropy(
         problem.f,
         base,
@@ -104,9 +106,8 @@ def test_the_final_proposal_is_the_iterate_with_the_lowest_rho_quantile():
 def test_update_is_smoothed_moment_matching_of_the_weighted_elite():
     base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
     rp = RareEventProblem(base, lambda x: x[:, 0], gamma=-10.0)
-    state, info = ce_step(
-        ce_init(base), rp, seed=0, rho=0.2, alpha=0.5, n_per_iter=5000
-    )
+    method = CrossEntropy(CESettings(rho=0.2, alpha=0.5, n_per_iter=5000))
+    state, info = method.step(method.init(rp), rp, EstimationContext(seed=0))
     # the elite of N(0,1) below its 20% quantile q has mean -pdf(q)/cdf(q) = -1.40
     q = stats.norm.ppf(0.2)
     elite_mean = -stats.norm.pdf(q) / 0.2
@@ -192,11 +193,11 @@ def test_zero_iterations_is_plain_monte_carlo_with_unit_weights():
 @pytest.mark.parametrize(
     "kwargs,match",
     [
-        (dict(rho=0.0), "rho must be in \\(0, 1\\)"),
-        (dict(rho=1.5), "rho must be in \\(0, 1\\); got 1.5"),
-        (dict(alpha=0.0), "alpha must be in \\(0, 1\\]"),
-        (dict(n_per_iter=0), "n_per_iter must be an integer >= 1"),
-        (dict(n_iter=-1), "n_iter must be an integer >= 0"),
+        (dict(rho=0.0), "rho: Input should be greater than 0; got 0.0"),
+        (dict(rho=1.5), "rho: Input should be less than 1; got 1.5"),
+        (dict(alpha=0.0), "alpha: Input should be greater than 0"),
+        (dict(n_per_iter=0), "n_per_iter: Input should be greater than or equal to 1"),
+        (dict(n_iter=-1), "n_iter: Input should be greater than or equal to 0"),
         (dict(n_final=2.5), "n_final"),
         (dict(gamma_test=[np.nan]), "gamma_test"),
     ],
@@ -286,5 +287,7 @@ def test_rel_var_predicts_the_final_relative_standard_error():
 
 def test_an_unknown_selection_rule_is_rejected_by_name():
     base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
-    with pytest.raises(ValueError, match="select must be one of"):
+    with pytest.raises(
+        ValueError, match="select: Input should be 'quantile' or 'variance'"
+    ):
         cross_entropy(lambda x: x[:, 0], base, 0.0, select="best")

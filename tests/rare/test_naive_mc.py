@@ -65,7 +65,7 @@ def test_f_returning_the_wrong_shape_is_an_error():
 @pytest.mark.parametrize(
     "kwargs,match",
     [
-        (dict(n=0), "n must be an integer >= 1"),
+        (dict(n=0), "n_final: Input should be greater than or equal to 1"),
         (dict(n=10, seed=-1), "seed"),
         (dict(n=10, batch_size=0), "batch_size"),
         (dict(n=10, interval="exact"), "interval"),

@@ -1,0 +1,238 @@
+"""What ``run``, ``compare``, ``report`` and ``demo`` share: runs, tables, reports.
+
+Every function here works for any registered estimator
+(:func:`avrisk.rare.estimator_names`): labels, progress lines and report
+sections come from the estimator itself.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from rich.markup import escape
+from rich.table import Table
+
+from avrisk.cli.common import CliError, err_console, out_console
+from avrisk.cli.progress import RichRunMonitor
+from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
+from avrisk.pipeline.objective import SimulationObjective
+from avrisk.rare import InvalidOutputError
+from avrisk.rare.estimator import TooManyFailuresError, estimator_class
+from avrisk.report.html import write_report
+from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
+from avrisk.scenario import ScenarioSpecError, build_base_distribution, load_spec
+
+#: Failures reported as one red line (no traceback).
+EXPECTED = (
+    ScenarioSpecError,
+    RunDirectoryError,
+    InvalidOutputError,
+    TooManyFailuresError,
+)
+#: Sub-directories of a comparison besides the tested method's own.
+NAIVE_PART, REFERENCE_PART = "naive", "reference"
+
+
+def method_label(method: str) -> str:
+    """The human name of a registered estimator (``"cross-entropy"``)."""
+    return estimator_class(method).label
+
+
+def settings(method: str, **kwargs: Any) -> RunSettings:
+    """Validated run settings, or a one-line CliError."""
+    try:
+        return RunSettings(method, **kwargs)
+    except (KeyError, ValueError) as err:
+        raise CliError(str(err).strip('"')) from None
+
+
+def execute(
+    label: str,
+    out: Path,
+    objective: SimulationObjective,
+    spec_json: dict[str, Any],
+    run_settings: RunSettings,
+) -> RunDirectory:
+    """Run (or resume, or read back) one estimation into ``out`` with progress."""
+    run_dir = RunDirectory(out, objective.layout.columns)
+    base = build_base_distribution(objective.simulator.spec)
+    with RichRunMonitor(err_console, label) as monitor:
+        run_estimation(
+            run_dir,
+            base,
+            objective,
+            run_settings,
+            context={"scenario": spec_json},
+            monitor=monitor,
+        )
+    return run_dir
+
+
+def print_summary(runs: list[tuple[str, RunDirectory]]) -> None:
+    """One table: every run's estimate at every threshold."""
+    table = Table(title="P(min TTC <= gamma)")
+    columns = ("run", "gamma [s]", "p", "stderr", "95% CI", "hits", "ESS", "Pareto k")
+    for col in (*columns, "rollouts"):
+        table.add_column(escape(col), justify="left" if col == "run" else "right")
+    for label, run_dir in runs:
+        est = run_dir.summary()["estimate"]
+        for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
+            table.add_row(
+                label,
+                f"{g['gamma']:g}",
+                f"{g['p']:.3g}",
+                f"{g['stderr']:.2g}",
+                f"{g['ci'][0]:.2g}..{g['ci'][1]:.2g}",
+                str(g["n_hits"]),
+                f"{g['ess'] or 0:.1f}",
+                "-" if g.get("pareto_k") is None else f"{g['pareto_k']:.2f}",
+                f"{est['n_evals']:,}",
+            )
+    out_console.print(table)
+    for label, run_dir in runs:
+        failed = max((g.get("n_failed", 0) for g in _by_gamma(run_dir)), default=0)
+        if failed:
+            err_console.print(
+                f"[yellow]warning:[/] {escape(label)}: {failed} rollouts failed to "
+                "evaluate; p counts them safe, the interval reaches up to counting "
+                "them dangerous (rerun the command to evaluate them again)",
+                highlight=False,
+            )
+
+
+def _by_gamma(run_dir: RunDirectory) -> list[dict[str, Any]]:
+    return run_dir.summary()["estimate"]["by_gamma"]
+
+
+def write_run_report(
+    out: Path,
+    runs: list[tuple[str, RunDirectory]],
+    objective: SimulationObjective,
+    failures: int,
+    reference: RunDirectory | None = None,
+) -> Path:
+    """The HTML report of ``runs``; failures come from the first run."""
+    spec = objective.simulator.spec
+    path = write_report(
+        out,
+        runs,
+        title=f"avrisk: {spec.name}",
+        subtitle=spec.description or "",
+        reference=reference,
+        failures_from=runs[0][1],
+        n_failures=failures,
+        param_names=objective.layout.columns,
+        animate=lambda row, p: objective.animate([row], p),
+    )
+    err_console.print(f"report: {path}")
+    return path
+
+
+def compare_runs(
+    scenario: str,
+    out: Path,
+    tested: RunSettings,
+    reference_n: int,
+    failures: int,
+    device: str,
+) -> Path:
+    """A method, naive MC at its budget and a naive reference into ``out``; report.
+
+    The tested method's run goes to ``out/<method>``, naive Monte Carlo with
+    the same number of rollouts to ``out/naive`` and the reference (if
+    ``reference_n``) to ``out/reference``.
+    """
+    spec = load_spec(scenario)
+    objective = SimulationObjective(spec, device=device)
+    spec_json = spec.model_dump(mode="json")
+    shared = dict(
+        gamma=tested.gamma, gamma_test=tested.gamma_test, batch_size=tested.batch_size
+    )
+    if tested.method == NAIVE_PART:
+        raise CliError("compare tests a method against naive Monte Carlo: not naive")
+    plan = [
+        (method_label(tested.method), out / tested.method, tested),
+        (
+            "naive MC, same budget",
+            out / NAIVE_PART,
+            settings(
+                "naive", n_final=tested.total_rollouts, seed=tested.seed + 1, **shared
+            ),
+        ),
+    ]
+    if reference_n:
+        plan.append(
+            (
+                "naive MC reference",
+                out / REFERENCE_PART,
+                settings("naive", n_final=reference_n, seed=tested.seed + 2, **shared),
+            )
+        )
+    runs = [
+        (label, execute(label, path, objective, spec_json, s))
+        for label, path, s in plan
+    ]
+    print_summary(runs)
+    reference = runs[2][1] if reference_n else None
+    print_ratios(runs[0], runs[1][1], reference)
+    return write_run_report(out, runs, objective, failures, reference)
+
+
+def comparison_parts(out: Path) -> list[tuple[str, Path]]:
+    """The run directories of a comparison: the tested method first."""
+    parts = (
+        sorted(p.name for p in out.iterdir() if (p / "config.json").is_file())
+        if out.is_dir()
+        else []
+    )
+    rank = {NAIVE_PART: 1, REFERENCE_PART: 2}
+    return [(name, out / name) for name in sorted(parts, key=lambda n: rank.get(n, 0))]
+
+
+def print_ratios(
+    tested: tuple[str, RunDirectory],
+    naive: RunDirectory,
+    reference: RunDirectory | None,
+) -> None:
+    """The method against naive MC at the same budget, per threshold (Fig. 2-3)."""
+    label, run_dir = tested
+    naive_hits = {g["gamma"]: g["n_hits"] for g in _by_gamma(naive)}
+    rows = comparison_rows(
+        run_dir.summary()["estimate"],
+        reference.summary()["estimate"] if reference is not None else None,
+    )
+    caption = (
+        "Expected naive hits and variance p(1-p)/n use p from the "
+        + ("naive reference run." if reference is not None else "method's estimate.")
+        + "\nThe variance ratio trusts the method's own standard error; the spread "
+        "over seeds (benchmarks/ce_vs_naive.py) is the stricter test."
+    )
+    if not all(row["reliable"] for row in rows):
+        caption += "\n" + UNRELIABLE_NOTE + "."
+    table = Table(
+        title=f"{label} against naive Monte Carlo with the same number of rollouts",
+        caption=escape(caption),
+    )
+    for col in (
+        "gamma [s]",
+        "p used",
+        "method hits",
+        "naive hits (seen)",
+        "naive hits (expected)",
+        "rare-event ratio",
+        "variance ratio",
+    ):
+        table.add_column(escape(col), justify="right")
+    for row in rows:
+        table.add_row(
+            f"{row['gamma']:g}",
+            f"{row['p']:.3g}",
+            str(row["ce_hits"]),
+            str(naive_hits.get(row["gamma"], "")),
+            f"{row['naive_hits_expected']:.1f}",
+            f"{row['rare_event_ratio']:.1f}x",
+            f"{row['variance_ratio']:.1f}x"
+            + ("" if row["reliable"] else UNRELIABLE_MARK),
+        )
+    out_console.print(table)

@@ -1,0 +1,393 @@
+"""The estimator protocol: every rare-event estimator, behind one interface.
+
+After BlackJAX's ``init`` / ``step`` pairs with State and Info tuples, an
+estimator is an object configured by its own validated settings that a driver
+runs as::
+
+    state = estimator.init(problem)
+    while not estimator.done(state):
+        state, info = estimator.step(state, problem, context)   # a CE iteration,
+        ...                                                      # a splitting level
+    estimate = estimator.finalize(state, problem, context)
+
+``State`` is whatever the next step needs (a proposal, a particle set);
+``Info`` the diagnostics of one step (``to_dict()`` for a record). Every call
+of ``f`` goes through the :class:`EstimationContext`, which draws a stage's
+samples, hands them to the evaluator and records or replays each chunk, so a
+driver (:mod:`avrisk.pipeline`) can show progress, checkpoint and resume any
+estimator the same way. Samples need not carry importance weights: a splitting
+estimator evaluates MCMC moves through :meth:`EstimationContext.evaluate`.
+
+Estimators are registered by name (:func:`register_estimator`,
+:func:`get_estimator`); a new one is one module that defines its settings
+model, its state and info, and the five methods, plus one registration line.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar, Generic, NamedTuple, Protocol, TypeVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from avrisk.rare.defensive import DefensiveMixture
+from avrisk.rare.evaluation import EvalTask, Evaluator, LocalEvaluator
+from avrisk.rare.families.base import ExponentialFamily, FloatArray
+from avrisk.rare.problem import RareEventProblem, sample_seeds
+from avrisk.rare.results import Estimate
+from avrisk.rare.stages import (
+    BatchCache,
+    BatchRecorder,
+    StageBatch,
+    StageResult,
+    run_stage,
+)
+from avrisk.registry import Registry
+
+__all__ = [
+    "DiagnosticTable",
+    "EstimationContext",
+    "Estimator",
+    "EstimatorSettings",
+    "TooManyFailuresError",
+    "estimator_names",
+    "get_estimator",
+    "register_estimator",
+    "run_estimator",
+]
+
+State = TypeVar("State")
+Info = TypeVar("Info")
+
+#: Share of a stage's samples that may fail before a run stops (see
+#: :mod:`avrisk.rare.evaluation`): failed samples bracket the estimate, and
+#: beyond this share the bracket says nothing useful.
+DEFAULT_MAX_FAILED_SHARE = 0.01
+
+
+class TooManyFailuresError(RuntimeError):
+    """More of a stage's samples failed to evaluate than the run allows."""
+
+
+class EstimatorSettings(BaseModel):
+    """Base of every estimator's settings model (validated, immutable).
+
+    ``OMIT_IF_DEFAULT`` names settings left out of :meth:`recorded` while they
+    hold their default, so that adding an option does not change how earlier
+    runs are recorded.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    OMIT_IF_DEFAULT: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def validated(cls, **values: Any) -> EstimatorSettings:
+        """The settings from ``values``, or a ValueError naming each bad one.
+
+        Examples
+        --------
+        >>> from avrisk.rare.cross_entropy import CESettings
+        >>> CESettings.validated(rho=1.5)
+        Traceback (most recent call last):
+        ...
+        ValueError: rho: Input should be less than 1; got 1.5
+        """
+        try:
+            return cls(**values)
+        except ValidationError as err:
+            problems = "; ".join(
+                f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}"
+                + (f"; got {e['input']!r}" if e["type"] != "extra_forbidden" else "")
+                for e in err.errors()
+            )
+            raise ValueError(problems) from None
+
+    def recorded(self) -> dict[str, Any]:
+        """The settings that define a run, for its record (JSON types)."""
+        out = self.model_dump(mode="json")
+        for name in self.OMIT_IF_DEFAULT:
+            if out[name] == type(self).model_fields[name].default:
+                out.pop(name)
+        return out
+
+
+@dataclass(frozen=True)
+class DiagnosticTable:
+    """Per-step diagnostics an estimator contributes to reports (engine-neutral).
+
+    A report draws ``lines`` against the first column (a top panel, with the
+    threshold ``gamma`` marked) and ``bars`` below it.
+
+    Attributes
+    ----------
+    title : str
+    columns : tuple of str
+        Column names, the step index first; units in brackets.
+    rows : list of tuple
+        One row per step.
+    lines : tuple of str
+        Columns drawn as lines on the top panel (in the unit of ``f``).
+    bars : str or None
+        A column drawn as bars on the bottom panel (counts).
+    """
+
+    title: str
+    columns: tuple[str, ...]
+    rows: list[tuple[Any, ...]]
+    lines: tuple[str, ...] = ()
+    bars: str | None = None
+
+    def column(self, name: str) -> list[Any]:
+        """The values of one column, in step order."""
+        j = self.columns.index(name)
+        return [row[j] for row in self.rows]
+
+
+class EstimationContext(NamedTuple):
+    """How an estimator's samples are evaluated, recorded and replayed.
+
+    Attributes
+    ----------
+    seed : int
+        Run seed: sample ``i`` of stage ``s`` depends only on it, ``s``, ``i``.
+    evaluator : Evaluator or None
+        Where ``f`` runs (default: this process, chunk after chunk).
+    on_batch : callable or None
+        Called with each newly evaluated chunk (a samples table, progress).
+    cache : callable or None
+        Recorded chunks of an interrupted run (resume).
+    max_failed_share : float
+        Largest share of a stage's samples that may fail to evaluate.
+    """
+
+    seed: int = 0
+    evaluator: Evaluator | None = None
+    on_batch: BatchRecorder | None = None
+    cache: BatchCache | None = None
+    max_failed_share: float = DEFAULT_MAX_FAILED_SHARE
+
+    def stage(
+        self,
+        problem: RareEventProblem,
+        proposal: ExponentialFamily | DefensiveMixture,
+        n: int,
+        stage: int,
+        *,
+        keep_stats: bool = False,
+    ) -> StageResult:
+        """``n`` fresh samples of ``proposal`` as stage ``stage``, evaluated.
+
+        Raises
+        ------
+        TooManyFailuresError
+            If more than ``max_failed_share`` of them failed (they are
+            recorded; a resumed run evaluates them again).
+        """
+        result = run_stage(
+            problem,
+            proposal,
+            n,
+            seed=self.seed,
+            stage=stage,
+            keep_stats=keep_stats,
+            on_batch=self.on_batch,
+            cache=self.cache,
+            evaluator=self.evaluator,
+        )
+        self._check_failures(result.failed, stage)
+        return result
+
+    def evaluate(
+        self, problem: RareEventProblem, x: FloatArray, stage: int, chunk: int
+    ) -> tuple[FloatArray, np.ndarray]:
+        """``f`` at given points (e.g. MCMC proposals) as chunk ``chunk`` of ``stage``.
+
+        For estimators whose samples are not fresh draws of one distribution.
+        The points are recorded like any chunk (their weight is 1: ``log q =
+        log p0``) and replayed on resume when the record holds the same points;
+        the caller derives them from its state and the run seed, so a rerun
+        asks for the same points again.
+
+        Returns
+        -------
+        values : ndarray of shape (m,)
+        failed : ndarray of bool, shape (m,)
+        """
+        cached = self.cache(stage, chunk) if self.cache is not None else None
+        if (
+            cached is not None
+            and cached.x.shape == x.shape
+            and np.array_equal(cached.x, x)
+            and not cached.failed.any()
+        ):
+            return cached.values, cached.failed
+        ids = np.arange(len(x), dtype=np.int64)
+        task = EvalTask(stage, chunk, ids, x, sample_seeds(self.seed, stage, ids))
+        evaluator = self.evaluator or LocalEvaluator()
+        (result,) = evaluator.evaluate(problem, [task])
+        log_p0 = problem.base.log_prob(x)
+        batch = StageBatch(
+            stage,
+            chunk,
+            ids,
+            x,
+            result.values,
+            result.extras,
+            log_p0,
+            log_p0,
+            task.seeds,
+        )
+        if self.on_batch is not None:
+            self.on_batch(batch)
+        self._check_failures(batch.failed, stage)
+        return batch.values, batch.failed
+
+    def _check_failures(self, failed: np.ndarray, stage: int) -> None:
+        n_failed = int(np.count_nonzero(failed))
+        if n_failed > self.max_failed_share * failed.size:
+            raise TooManyFailuresError(
+                f"{n_failed} of {failed.size} samples of stage {stage} failed to "
+                f"evaluate (more than {self.max_failed_share:.1%}); they are "
+                "recorded and evaluated again when the run resumes: fix what makes "
+                "f fail (see the 'status' column of the samples), then rerun"
+            )
+
+
+class Estimator(Protocol, Generic[State, Info]):
+    """What every estimator implements (see the module docstring).
+
+    Class attributes
+    ----------------
+    name : str
+        Registry name (``"ce"``, ``"naive"``).
+    label : str
+        Human name for tables and reports (``"cross-entropy"``).
+    Settings : type of EstimatorSettings
+        Its settings model; the instance's are in ``settings``.
+    weighted : bool
+        Whether its hits carry importance weights (their ESS and Pareto k
+        then say how far its standard error can be trusted).
+    """
+
+    name: ClassVar[str]
+    label: ClassVar[str]
+    Settings: ClassVar[type[EstimatorSettings]]
+    weighted: ClassVar[bool]
+    settings: EstimatorSettings
+
+    def budget(self) -> int:
+        """Calls of ``f`` the estimator plans to make (a progress bar's total)."""
+        ...
+
+    def describe(self) -> str:
+        """One line: the method and its budget (``"CE 20x5,000 + 100,000"``)."""
+        ...
+
+    def init(self, problem: RareEventProblem) -> State:
+        """State before the first step."""
+        ...
+
+    def done(self, state: State) -> bool:
+        """Whether the steps are over (``finalize`` comes next)."""
+        ...
+
+    def step(
+        self, state: State, problem: RareEventProblem, context: EstimationContext
+    ) -> tuple[State, Info]:
+        """One step (a search iteration, a level) and its diagnostics."""
+        ...
+
+    def finalize(
+        self, state: State, problem: RareEventProblem, context: EstimationContext
+    ) -> Estimate:
+        """The estimate (``wall_time_s`` is set by :func:`run_estimator`)."""
+        ...
+
+    def progress(self, info: Info) -> str:
+        """A short status line after a step, for a progress display."""
+        ...
+
+    def checkpoint(self, state: State, infos: Sequence[Info]) -> dict[str, Any]:
+        """JSON-ready record of the state and the steps so far."""
+        ...
+
+    @staticmethod
+    def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
+        """Tables for a report, from a summary's ``estimate`` dictionary."""
+        ...
+
+
+_ESTIMATORS = Registry("estimator")
+
+
+def register_estimator(cls: type[Estimator[Any, Any]]) -> type[Estimator[Any, Any]]:
+    """Make an estimator class available by its ``name`` (usable as decorator)."""
+    _ESTIMATORS.register(cls.name, cls)
+    return cls
+
+
+def estimator_names() -> list[str]:
+    """Registered estimator names, sorted."""
+    return _ESTIMATORS.names()
+
+
+def estimator_class(name: str) -> type[Estimator[Any, Any]]:
+    """The class registered as ``name`` (KeyError listing the known names)."""
+    return _ESTIMATORS.get(name)
+
+
+def get_estimator(name: str, **settings: Any) -> Estimator[Any, Any]:
+    """Build the estimator ``name`` with validated ``settings``.
+
+    Raises
+    ------
+    KeyError
+        If ``name`` is not registered (the message lists the known names).
+    ValueError
+        If a setting is unknown or invalid (the message names it).
+    """
+    cls = estimator_class(name)
+    try:
+        return cls(cls.Settings.validated(**settings))
+    except ValueError as err:
+        raise ValueError(f"estimator {name!r}: {err}") from None
+
+
+def run_estimator(
+    estimator: Estimator[Any, Info],
+    problem: RareEventProblem,
+    context: EstimationContext,
+    *,
+    callback: Callable[[Info, Any], None] | None = None,
+) -> Estimate:
+    """Run any estimator to its estimate (the loop of the module docstring).
+
+    Parameters
+    ----------
+    estimator : Estimator
+    problem : RareEventProblem
+    context : EstimationContext
+    callback : callable, optional
+        ``callback(info, state)`` after every step (progress, checkpoints).
+
+    Returns
+    -------
+    Estimate
+        With the steps' infos as ``history`` and ``wall_time_s`` measured here.
+    """
+    start = time.perf_counter()
+    state = estimator.init(problem)
+    history = []
+    while not estimator.done(state):
+        state, info = estimator.step(state, problem, context)
+        history.append(info)
+        if callback is not None:
+            callback(info, state)
+    estimate = estimator.finalize(state, problem, context)
+    return replace(
+        estimate, history=tuple(history), wall_time_s=time.perf_counter() - start
+    )
