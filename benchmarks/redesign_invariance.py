@@ -39,6 +39,8 @@ RUNS = {
         "1000",
         "--n-final",
         "2000",
+        "--rho",
+        "0.05",
     ],
     "defensive": [
         "--method",
@@ -51,10 +53,12 @@ RUNS = {
         "2000",
         "--defensive",
         "0.1",
+        "--rho",
+        "0.05",
     ],
 }
 SCENARIOS = ("highway_idm", "highway_default")
-COMMON = ["--gamma", "0.5", "--gamma-test", "0.1,1.0,2.0", "--rho", "0.05"]
+COMMON = ["--gamma", "0.5", "--gamma-test", "0.1,1.0,2.0"]
 COMMON += ["--seed", "3", "--batch-size", "700", "--failures", "0"]
 
 
@@ -100,7 +104,9 @@ def main() -> None:
                     *COMMON,
                     *options,
                 ]
-                subprocess.run(cmd, check=True, capture_output=True)
+                done = subprocess.run(cmd, capture_output=True, text=True)
+                if done.returncode:
+                    sys.exit(f"{' '.join(cmd)} failed:\n{done.stderr}")
                 line = {"scenario": scenario, "run": name, **fingerprint(out)}
                 print(json.dumps(line), flush=True)
 

@@ -159,6 +159,8 @@ def run_estimation(
     ----------
     run_dir : RunDirectory
         Output directory; a complete run is read back, a partial one resumed.
+        A complete run with rollouts that failed to evaluate is reopened and
+        those rollouts evaluated again (the rest is replayed).
     base : ExponentialFamily
         ``P0``.
     f : callable
@@ -182,7 +184,9 @@ def run_estimation(
     created = not run_dir.path.exists()
     run_dir.claim(config)
     if run_dir.is_complete:
-        return run_dir.summary()
+        if not run_dir.has_failed_samples():
+            return run_dir.summary()
+        run_dir.reopen()
     clock = _Clock()
     start = time.perf_counter()
     monitor.start(settings.total_rollouts, settings.estimator.describe())

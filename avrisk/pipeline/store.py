@@ -139,6 +139,27 @@ class RunDirectory:
         chunks = self.path / CHUNKS_DIR
         return chunks.is_dir() and any(chunks.glob("*.parquet"))
 
+    def has_failed_samples(self) -> bool:
+        """Whether a complete run counted rollouts that failed to evaluate."""
+        estimate = self.summary()["estimate"]
+        return any(g.get("n_failed") for g in estimate["by_gamma"])
+
+    def reopen(self) -> None:
+        """Turn a complete run back into recorded chunks, to evaluate again.
+
+        The samples table is split into its chunk files (the same rows a
+        resumed run replays), then it and the summary are removed: the next
+        run evaluates the chunks with failed rollouts again and finishes anew.
+        """
+        table = self.samples()
+        keys = np.column_stack([table["stage"].to_numpy(), table["chunk"].to_numpy()])
+        (self.path / CHUNKS_DIR).mkdir(exist_ok=True)
+        for stage, chunk in np.unique(keys, axis=0):
+            rows = table.filter(pa.array((keys == (stage, chunk)).all(axis=1)))
+            write_parquet_atomic(rows, self._chunk_path(int(stage), int(chunk)))
+        (self.path / SUMMARY_FILE).unlink()
+        (self.path / SAMPLES_FILE).unlink()
+
     def discard(self) -> None:
         """Remove the directory (a run that failed before recording anything)."""
         shutil.rmtree(self.path, ignore_errors=True)

@@ -132,6 +132,44 @@ def test_bad_input_gives_one_clear_line_and_leaves_nothing(tmp_path):
     assert "Traceback" not in missing.output + bad_rho.output + bad_gamma.output
 
 
+def test_every_registered_method_is_offered_and_foreign_settings_refused(tmp_path):
+    help_text = invoke("run", "--help").output
+    assert "ce, defensive, naive" in help_text
+    out = tmp_path / "run"
+    foreign = invoke(
+        "run", "highway_idm", "--out", out, "--method", "naive", "--rho", 0.1
+    )
+    assert foreign.exit_code == 2
+    assert "rho: not a setting of method 'naive'" in foreign.output
+    assert "its settings: n_final, interval" in foreign.output
+    unknown = invoke("run", "highway_idm", "--out", out, "--method", "splitz")
+    assert unknown.exit_code == 2 and "method must be one of" in unknown.output
+    bad_set = invoke("run", "highway_idm", "--out", out, "--set", "rho")
+    assert bad_set.exit_code == 2 and "--set takes NAME=VALUE" in bad_set.output
+    assert not out.exists()
+
+
+def test_set_passes_any_setting_by_name(short_scenario, tmp_path):
+    out = tmp_path / "run"
+    args = ("--method", "naive", "--n-final", 50, "--gamma", 1.0, "--failures", 0)
+    result = invoke(
+        "run", short_scenario, "--out", out, *args, "--set", "interval=wilson"
+    )
+    assert result.exit_code == 0, result.output
+    settings = json.loads((out / "config.json").read_text())["settings"]
+    assert settings["interval"] == "wilson" and settings["n_final"] == 50
+
+
+def test_the_defensive_method_defaults_to_a_tenth_of_p0(short_scenario, tmp_path):
+    out = tmp_path / "run"
+    result = invoke(
+        "run", short_scenario, "--out", out, *CE_ARGS, "--method", "defensive"
+    )
+    assert result.exit_code == 0, result.output
+    settings = json.loads((out / "config.json").read_text())["settings"]
+    assert settings["method"] == "defensive" and settings["defensive"] == 0.1
+
+
 def test_naive_run_with_zero_hits_reports_an_upper_bound(short_scenario, tmp_path):
     out = tmp_path / "naive"
     result = invoke(

@@ -241,3 +241,75 @@ def test_a_column_float32_exact_in_one_chunk_only_is_gathered_as_float64(tmp_pat
     table = directory.samples()
     assert str(table.schema.field("x0").type) == "double"
     np.testing.assert_array_equal(table["x0"].to_numpy(), [0.5, 0.25, 0.1, 0.2])
+
+
+def test_any_registered_estimator_runs_and_resumes_through_the_pipeline(tmp_path):
+    from tests.rare import toy_splitting  # noqa: F401  (registers toy_splitting)
+
+    toy = RunSettings("toy_splitting", gamma=0.0, seed=2, n_particles=1500)
+    reference = run(tmp_path / "reference", settings=toy)
+    assert reference["method"] == "toy_splitting"
+    levels = reference["estimate"]["details"]["levels"]
+    assert levels in (4, 5)  # 1e-4 = 0.1^4, give or take a level
+    calls = []
+
+    def interrupted(x):
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        calls.append(len(x))
+        return with_crash_flag(x)
+
+    with pytest.raises(KeyboardInterrupt):
+        run(tmp_path / "run", settings=toy, f=interrupted)
+    resumed = run(tmp_path / "run", settings=toy)
+    assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
+    assert resumed["timing"]["rollouts_replayed"] == 2 * 1500
+    checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
+    assert len(checkpoint["levels"]) == levels
+
+
+def flaky(failing):
+    """``f`` whose evaluation fails (status 1, NaN) where ``failing(x)``."""
+
+    def f(x):
+        bad = failing(x)
+        return {
+            "f": np.where(bad, np.nan, PROBLEM.f(x)),
+            "status": bad.astype(np.int8),
+        }
+
+    return f
+
+
+def test_failed_rollouts_bracket_p_and_are_evaluated_again_on_rerun(tmp_path):
+    naive = RunSettings("naive", gamma=0.0, gamma_test=(0.5,), n_final=30_000, seed=1)
+    clean = run(tmp_path / "clean", settings=naive)["estimate"]["by_gamma"][0]
+    # some of the most dangerous-looking rollouts (largest x0) fail: the worst case
+    fails = flaky(lambda x: x[:, 0] > 3.7)
+    summary = run(tmp_path / "run", settings=naive, f=fails)
+    g = summary["estimate"]["by_gamma"][0]
+    assert g["n_failed"] > 0
+    assert g["p"] <= clean["p"] <= g["p_if_failed_dangerous"]
+    assert g["ci"][0] <= clean["p"] <= g["ci"][1]
+    table = pq.read_table(tmp_path / "run" / "samples.parquet")
+    status, chunk = table["status"].to_numpy(), table["chunk"].to_numpy()
+    assert int(status.sum()) == g["n_failed"]
+    to_redo = np.isin(chunk, chunk[status != 0]).sum()
+    # rerunning evaluates the failed rollouts again; they succeed now
+    calls = []
+    again = run(
+        tmp_path / "run",
+        settings=naive,
+        f=lambda x: calls.append(len(x)) or flaky(lambda x: x[:, 0] > 99)(x),
+    )
+    assert 0 < sum(calls) == to_redo < 30_000  # only chunks holding failures
+    assert again["estimate"]["by_gamma"][0]["n_failed"] == 0
+    assert again["estimate"]["by_gamma"][0]["p"] == clean["p"]
+
+
+def test_too_many_failures_stop_the_run_with_a_clear_message(tmp_path):
+    from avrisk.rare.estimator import TooManyFailuresError
+
+    with pytest.raises(TooManyFailuresError, match=r"failed to evaluate .*rerun"):
+        run(tmp_path / "run", f=flaky(lambda x: x[:, 1] > 1.5))
+    assert (tmp_path / "run" / "chunks").is_dir()  # kept for the rerun
