@@ -152,6 +152,7 @@ def run_estimation(
     context: dict[str, Any] | None = None,
     monitor: RunMonitor | None = None,
     evaluator: Evaluator | None = None,
+    provenance: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run (or resume, or just read back) one estimation into ``run_dir``.
 
@@ -173,6 +174,9 @@ def run_estimation(
         Progress display.
     evaluator : Evaluator, optional
         Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
+    provenance : dict, optional
+        The run's provenance stamp (:mod:`avrisk.pipeline.provenance`),
+        recorded in the summary.
 
     Returns
     -------
@@ -200,6 +204,8 @@ def run_estimation(
         raise
     wall = time.perf_counter() - start
     summary = _summary(estimate, settings, clock, wall)
+    if provenance is not None:
+        summary["provenance"] = provenance
     run_dir.finish(summary)
     return run_dir.summary()
 
