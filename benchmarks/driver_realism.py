@@ -51,13 +51,12 @@ from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
 from avrisk.agents.idm import IDMDriver, IDMParams
 from avrisk.learning.demonstrations import LaneCentres, random_highway_scenes
 from avrisk.learning.ngsim import (
-    US101_LANE_WIDTH,
-    episode_bounds,
     lateral_pair_split,
     load_i80_lateral,
     load_i80_pairs,
     load_us101,
 )
+from avrisk.learning.ngsim_samples import US101_LANE_WIDTH, episode_bounds
 from avrisk.learning.replay import (
     CarFollowingWindows,
     car_following_windows,

@@ -45,7 +45,7 @@ from avrisk.agents.drivers.store import (
 )
 from avrisk.cli.app import app
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
-from avrisk.learning.ngsim import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
+from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
 
 if TYPE_CHECKING:
     from avrisk.learning.train import TrainEvent

@@ -2,7 +2,14 @@
 
 Modules (import them directly; this package imports nothing heavy on load):
 
-* :mod:`~avrisk.learning.ngsim` -- loaders for the NGSIM samples, in SI units;
+* :mod:`~avrisk.learning.ngsim_files` -- where the NGSIM files are (names of
+  the original and packed forms, the shipped folder, ``$AVRISK_NGSIM_DIR``);
+* :mod:`~avrisk.learning.ngsim` -- loaders of the NGSIM data sets, in SI
+  units, and the train/test split of the lateral pairs;
+* :mod:`~avrisk.learning.ngsim_packed` -- the packed Parquet form, and reading
+  columns of either form;
+* :mod:`~avrisk.learning.ngsim_samples` -- the loaded data sets: column
+  dataclasses, episodes;
 * :mod:`~avrisk.learning.demonstrations` -- (features, action) pairs from NGSIM
   and from IDM+MOBIL drivers in our simulator, through the simulator's own
   observation code;

@@ -62,7 +62,7 @@ from avrisk.agents.drivers.features import (
 )
 from avrisk.agents.idm import IDMDriver, IDMParams
 from avrisk.agents.policy import Action
-from avrisk.learning.ngsim import (
+from avrisk.learning.ngsim_samples import (
     I80_N_LANES,
     CarFollowingPairs,
     LateralPairs,

@@ -30,7 +30,7 @@ from avrisk.learning.demonstrations import (
     LaneCentres,
     lateral_tracks,
 )
-from avrisk.learning.ngsim import (
+from avrisk.learning.ngsim_samples import (
     I80_N_LANES,
     CarFollowingPairs,
     LateralPairs,

@@ -58,13 +58,11 @@ from avrisk.learning.demonstrations import (
 )
 from avrisk.learning.glasso import fit_sparse_gaussian
 from avrisk.learning.ngsim import (
-    I80_LATERAL,
-    I80_PAIRS,
     lateral_pair_split,
     load_i80_lateral,
     load_i80_pairs,
-    ngsim_file,
 )
+from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_file
 from avrisk.learning.replay import (
     CarFollowingWindows,
     calibrate_noise,
@@ -610,7 +608,7 @@ def load_demonstrations(
     Parameters
     ----------
     data_dir : str or Path or None
-        NGSIM folder (:func:`avrisk.learning.ngsim.ngsim_dir`; None: the data
+        NGSIM folder (:func:`avrisk.learning.ngsim_files.ngsim_dir`; None: the data
         shipped with the package), packed or original files.
     seed : int
         Seeds the simulated scenes (validation uses ``seed + 1``).
@@ -713,7 +711,7 @@ def train_drivers(
         ``training_report.json`` (created if missing).
     data_dir : str or Path, optional
         NGSIM folder; default ``$AVRISK_NGSIM_DIR``, else the data shipped
-        with the package (:func:`avrisk.learning.ngsim.ngsim_dir`).
+        with the package (:func:`avrisk.learning.ngsim_files.ngsim_dir`).
     config : TrainConfig
     progress : callable, optional
         Receives :class:`TrainEvent` reports (for a progress bar).

@@ -14,7 +14,7 @@ from avrisk.learning.demonstrations import (
     simulated_demonstrations,
     steer_from_heading,
 )
-from avrisk.learning.ngsim import CarFollowingPairs
+from avrisk.learning.ngsim_samples import CarFollowingPairs
 from avrisk.sim import Road, VehicleState
 from avrisk.sim.dynamics import BicycleLimits, bicycle_step
 
