@@ -10,9 +10,13 @@ Modules (import them directly; this package imports nothing heavy on load):
   columns of either form;
 * :mod:`~avrisk.learning.ngsim_samples` -- the loaded data sets: column
   dataclasses, episodes;
-* :mod:`~avrisk.learning.demonstrations` -- (features, action) pairs from NGSIM
-  and from IDM+MOBIL drivers in our simulator, through the simulator's own
-  observation code;
+* :mod:`~avrisk.learning.ngsim_lateral` -- lane centres, lateral offsets,
+  headings and steering from the lateral positions;
+* :mod:`~avrisk.learning.demonstrations` -- (features, action) pairs with
+  weights, observed through the simulator's own observation code;
+* :mod:`~avrisk.learning.ngsim_demonstrations` -- pairs from the NGSIM data;
+* :mod:`~avrisk.learning.simulated_demonstrations` -- pairs from lane-keeping
+  IDM drivers among IDM+MOBIL traffic in our simulator;
 * :mod:`~avrisk.learning.dagger` -- expert labels on the states the learned
   drivers visit;
 * :mod:`~avrisk.learning.replay` -- closed-loop replays of human car following
@@ -32,7 +36,7 @@ The NGSIM files hold car-following pairs (a follower and its leader) and
 single-vehicle trajectories: they give human *longitudinal* behaviour and human
 lane keeping, but no lane changes with neighbours and no vehicles in other
 lanes. Those demonstrations come from IDM drivers in our own simulator
-(:func:`~avrisk.learning.demonstrations.simulated_demonstrations`), among
+(:func:`~avrisk.learning.simulated_demonstrations.simulated_demonstrations`), among
 IDM+MOBIL traffic that changes lanes around them, and DAgger labels the
 learner's own states with IDM as the expert: the learned drivers' reactions to
 neighbours and their emergency braking are therefore IDM's, not a human's.

@@ -10,7 +10,7 @@ NGSIM frame: ``Local_Y`` runs along the road in the direction of travel and
 marks the *front* centre of the vehicle; ``Local_X`` is lateral, from the
 left-most edge of the section, increasing to the **right**; lane 1 is the
 left-most lane. (avrisk's road frame has ``y`` increasing to the left and lane
-0 on the right; :mod:`avrisk.learning.demonstrations` converts.)
+0 on the right; :mod:`avrisk.learning.ngsim_demonstrations` converts.)
 """
 
 from __future__ import annotations

@@ -25,11 +25,8 @@ from torch import Tensor
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.policy import Action
-from avrisk.learning.demonstrations import (
-    DEFAULT_WIDTH,
-    LaneCentres,
-    lateral_tracks,
-)
+from avrisk.learning.ngsim_demonstrations import DEFAULT_WIDTH
+from avrisk.learning.ngsim_lateral import LaneCentres, lateral_tracks
 from avrisk.learning.ngsim_samples import (
     I80_N_LANES,
     CarFollowingPairs,

@@ -47,27 +47,25 @@ from avrisk.learning.dagger import (
     dagger_demonstrations,
     replay_dagger_demonstrations,
 )
-from avrisk.learning.demonstrations import (
-    SOURCE_IDM,
-    SOURCE_NAMES,
-    Demonstrations,
-    LaneCentres,
-    i80_pair_demonstrations,
-    lateral_pair_demonstrations,
-    simulated_demonstrations,
-)
+from avrisk.learning.demonstrations import SOURCE_IDM, SOURCE_NAMES, Demonstrations
 from avrisk.learning.glasso import fit_sparse_gaussian
 from avrisk.learning.ngsim import (
     lateral_pair_split,
     load_i80_lateral,
     load_i80_pairs,
 )
+from avrisk.learning.ngsim_demonstrations import (
+    i80_pair_demonstrations,
+    lateral_pair_demonstrations,
+)
 from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_file
+from avrisk.learning.ngsim_lateral import LaneCentres
 from avrisk.learning.replay import (
     CarFollowingWindows,
     calibrate_noise,
     car_following_windows,
 )
+from avrisk.learning.simulated_demonstrations import simulated_demonstrations
 from avrisk.sim import Road
 
 __all__ = [
