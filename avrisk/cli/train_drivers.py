@@ -48,7 +48,7 @@ from avrisk.cli.common import CliError, err_console, out_console, user_errors
 from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
 
 if TYPE_CHECKING:
-    from avrisk.learning.train import TrainEvent
+    from avrisk.learning.train_config import TrainEvent
 
 #: Where ``train-drivers`` writes by default (not the shipped model).
 DEFAULT_OUT = Path("runs") / "drivers"

@@ -19,7 +19,9 @@ the vehicles are learners ("students") and the others are IDM+MOBIL
 background traffic that changes lanes around them. The DAgger labels
 therefore teach *recovery, lane keeping and reactions as IDM does them*;
 human longitudinal behaviour still comes from the NGSIM demonstrations (the
-DAgger acceleration labels carry a lower weight).
+DAgger acceleration labels carry a lower weight). The loop is
+:func:`dagger_rounds`, the DAgger stage of
+:func:`~avrisk.learning.train.train_drivers`.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.idm import IDMDriver, IDMState
 from avrisk.agents.policy import Action
+from avrisk.learning.behaviour_cloning import behaviour_cloning
 from avrisk.learning.demonstrations import Demonstrations
 from avrisk.learning.replay import CarFollowingWindows, replay
 from avrisk.learning.simulated_demonstrations import (
@@ -41,12 +44,14 @@ from avrisk.learning.simulated_demonstrations import (
     record_student_rollouts,
     split_students,
 )
+from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
 from avrisk.sim import Road
 from avrisk.sim.observation import Observation
 
 __all__ = [
     "ExpertLabeller",
     "dagger_demonstrations",
+    "dagger_rounds",
     "replay_dagger_demonstrations",
 ]
 
@@ -215,3 +220,78 @@ def replay_dagger_demonstrations(
     rec = ExpertLabeller(learner, IDMDriver(params, road), student, every=every)
     replay(windows, rec, road, seed=seed)
     return rec.demonstrations(accel_weight, episode_offset)
+
+
+def dagger_rounds(
+    net: DriverNet,
+    train: Demonstrations,
+    val: Demonstrations,
+    config: TrainConfig,
+    seed: int,
+    follow: CarFollowingWindows | None = None,
+    progress: Progress | None = None,
+) -> tuple[Demonstrations, list[dict[str, float]]]:
+    """DAgger: ``config.dagger_iters`` rounds of expert labels and refits.
+
+    Every round the learner drives ``config.dagger_rollouts`` random scenes
+    (:func:`dagger_demonstrations`) and, with ``follow``,
+    ``config.dagger_windows`` of those human windows
+    (:func:`replay_dagger_demonstrations`); the labelled states join the
+    demonstrations and the network is refitted on all of them
+    (:func:`~avrisk.learning.behaviour_cloning.behaviour_cloning`).
+
+    Parameters
+    ----------
+    net : DriverNet
+        The learner, refitted in place.
+    train, val : Demonstrations
+        Demonstrations so far, and validation ones.
+    config : TrainConfig
+    seed : int
+    follow : CarFollowingWindows, optional
+        Training windows to draw the replayed ones from (each round anew).
+    progress : callable, optional
+        Receives a ``"dagger"`` :class:`TrainEvent` after every round.
+
+    Returns
+    -------
+    train : Demonstrations
+        ``train`` and every round's labelled states.
+    history : list of dict
+        Per round: rows added and the last refit epoch's losses.
+    """
+    history = []
+    for k in range(config.dagger_iters):
+        visited = dagger_demonstrations(
+            net,
+            config.dagger_rollouts,
+            seed * 1000 + 10 + k,
+            accel_weight=config.dagger_accel_weight,
+            episode_offset=(100 + k) * 1_000_000,
+        )
+        if follow is not None:
+            replay_seed = seed * 1000 + 500 + k
+            followed = replay_dagger_demonstrations(
+                net,
+                follow.sample(config.dagger_windows, replay_seed),
+                replay_seed,
+                accel_weight=config.dagger_accel_weight,
+                episode_offset=(200 + k) * 1_000_000,
+            )
+            visited = Demonstrations.concat([visited, followed])
+        train = Demonstrations.concat([train, visited])
+        refit = behaviour_cloning(
+            net,
+            train,
+            epochs=config.dagger_epochs,
+            batch_size=config.batch_size,
+            lr=config.dagger_lr,
+            weight_decay=config.weight_decay,
+            seed=seed + 1 + k,
+            val=val,
+        )
+        row = {"round": float(k + 1), "rows_added": float(len(visited)), **refit[-1]}
+        history.append(row)
+        if progress is not None:
+            progress(TrainEvent("dagger", k + 1, config.dagger_iters, row))
+    return train, history
