@@ -49,20 +49,20 @@ from scipy.ndimage import uniform_filter1d
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
 from avrisk.agents.idm import IDMDriver, IDMParams
-from avrisk.learning.demonstrations import LaneCentres, random_highway_scenes
 from avrisk.learning.ngsim import (
-    US101_LANE_WIDTH,
-    episode_bounds,
     lateral_pair_split,
     load_i80_lateral,
     load_i80_pairs,
     load_us101,
 )
+from avrisk.learning.ngsim_lateral import LaneCentres
+from avrisk.learning.ngsim_samples import US101_LANE_WIDTH, episode_bounds
 from avrisk.learning.replay import (
     CarFollowingWindows,
     car_following_windows,
     replay,
 )
+from avrisk.learning.simulated_demonstrations import random_highway_scenes
 from avrisk.scenario import xi_base_family
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 from avrisk.sim.collision import pairwise_overlap

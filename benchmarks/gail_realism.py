@@ -41,7 +41,7 @@ from avrisk.agents.drivers.driver import LearnedDriver  # noqa: E402
 from avrisk.agents.drivers.store import load_driver_net, load_xi_prior  # noqa: E402
 from avrisk.learning.gail import GailConfig, gail_finetune, translate_prior  # noqa: E402
 from avrisk.learning.replay import ReplayResult, replay  # noqa: E402
-from avrisk.learning.train import training_windows  # noqa: E402
+from avrisk.learning.training_data import training_windows  # noqa: E402
 from avrisk.scenario import xi_base_family  # noqa: E402
 from avrisk.sim import Road  # noqa: E402
 

@@ -8,10 +8,10 @@ reads the original files (``i80_cf_pairs.csv.gz`` and
 ``i80_0400_0415_emd_cf_pairs.parquet``; provenance in the source folder's
 ``SOURCE.md``) and writes, into ``--out`` (default the package's folder):
 
-* one zstd Parquet file per data set (:data:`avrisk.learning.ngsim.I80_PAIRS`
-  and :data:`~avrisk.learning.ngsim.I80_LATERAL`), every row, only the columns
+* one zstd Parquet file per data set (:data:`avrisk.learning.ngsim_files.I80_PAIRS`
+  and :data:`~avrisk.learning.ngsim_files.I80_LATERAL`), every row, only the columns
   the loaders read; the I-80 pairs file's ``spacing`` and ``dv`` are left out
-  when they equal :func:`~avrisk.learning.ngsim.i80_derived_columns` bit for
+  when they equal :func:`~avrisk.learning.ngsim_packed.i80_derived_columns` bit for
   bit (the loader recomputes them). A float column whose values are decimals
   with ``k`` places is stored as the integers ``value * 10**k`` (field
   metadata ``DECIMALS_KEY``), with the values that are not (e.g. ``-0.0`` or
@@ -41,19 +41,23 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from avrisk.learning.ngsim import (
-    DECIMALS_KEY,
-    EXCEPTIONS_SUFFIX,
     I80_FEET_COLUMNS,
-    I80_LATERAL,
     I80_LATERAL_COLUMNS,
-    I80_PAIRS,
     I80_PAIRS_COLUMNS,
-    NgsimFiles,
-    default_ngsim_dir,
-    i80_derived_columns,
     load_i80_lateral,
     load_i80_pairs,
     read_i80_pairs_table,
+)
+from avrisk.learning.ngsim_files import (
+    I80_LATERAL,
+    I80_PAIRS,
+    NgsimFiles,
+    default_ngsim_dir,
+)
+from avrisk.learning.ngsim_packed import (
+    DECIMALS_KEY,
+    EXCEPTIONS_SUFFIX,
+    i80_derived_columns,
 )
 
 #: Most decimals tried for a float column (10**15 * |value| must stay < 2**53).

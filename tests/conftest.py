@@ -15,7 +15,7 @@ def rng():
 @pytest.fixture
 def tiny_train_config():
     """A ``TrainConfig`` small enough for a test (seconds, not minutes)."""
-    from avrisk.learning.train import TrainConfig
+    from avrisk.learning.train_config import TrainConfig
 
     return TrainConfig(
         n_members=3,

@@ -44,10 +44,10 @@ from avrisk.agents.drivers.store import (
     default_drivers_dir,
 )
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
-from avrisk.learning.ngsim import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
+from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
 
 if TYPE_CHECKING:
-    from avrisk.learning.train import TrainEvent
+    from avrisk.learning.train_config import TrainEvent
 
 #: Where ``train-drivers`` writes by default (not the shipped model).
 DEFAULT_OUT = Path("runs") / "drivers"

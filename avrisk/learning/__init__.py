@@ -1,23 +1,56 @@
 """Learning the environment drivers and their ``xi`` distribution from data.
 
-Modules (import them directly; this package imports nothing heavy on load):
+Modules (import them directly; this package imports nothing heavy on load),
+by job:
 
-* :mod:`~avrisk.learning.ngsim` -- loaders for the NGSIM samples, in SI units;
-* :mod:`~avrisk.learning.demonstrations` -- (features, action) pairs from NGSIM
-  and from IDM+MOBIL drivers in our simulator, through the simulator's own
-  observation code;
-* :mod:`~avrisk.learning.dagger` -- expert labels on the states the learned
-  drivers visit;
+Data sources
+
+* :mod:`~avrisk.learning.ngsim_files` -- where the NGSIM files are (names of
+  the original and packed forms, the shipped folder, ``$AVRISK_NGSIM_DIR``);
+* :mod:`~avrisk.learning.ngsim` -- loaders of the NGSIM data sets, in SI
+  units, and the train/test split of the lateral pairs;
+* :mod:`~avrisk.learning.ngsim_packed` -- the packed Parquet form, and reading
+  columns of either form;
+* :mod:`~avrisk.learning.ngsim_samples` -- the loaded data sets: column
+  dataclasses, episodes;
+* :mod:`~avrisk.learning.ngsim_lateral` -- lane centres, lateral offsets,
+  headings and steering from the lateral positions;
+
+Demonstrations
+
+* :mod:`~avrisk.learning.demonstrations` -- (features, action) pairs with
+  weights, observed through the simulator's own observation code;
+* :mod:`~avrisk.learning.ngsim_demonstrations` -- pairs from the NGSIM data;
+* :mod:`~avrisk.learning.simulated_demonstrations` -- pairs from lane-keeping
+  IDM drivers among IDM+MOBIL traffic in our simulator;
 * :mod:`~avrisk.learning.replay` -- closed-loop replays of human car following
-  (realism, and the calibration of the sampling noise);
-* :mod:`~avrisk.learning.train` -- behaviour cloning, DAgger, the bootstrap
-  ensemble of heads, :func:`~avrisk.learning.train.train_drivers`;
+  (realism);
+
+Training stages (:func:`~avrisk.learning.train.train_drivers` runs them in
+order, with the settings of :mod:`~avrisk.learning.train_config`)
+
+* :mod:`~avrisk.learning.training_data` -- the training and validation
+  demonstrations and car-following windows;
+* :mod:`~avrisk.learning.imitation_loss` -- the weighted Gaussian NLL;
+* :mod:`~avrisk.learning.behaviour_cloning` -- behaviour cloning of a new
+  network;
+* :mod:`~avrisk.learning.sampling_noise` -- the noise's persistence from human
+  residuals and its scale by replays;
+* :mod:`~avrisk.learning.dagger` -- expert labels on the states the learned
+  drivers visit, and the DAgger rounds;
+* :mod:`~avrisk.learning.bootstrap_heads` -- the bootstrap ensemble of heads;
+* :mod:`~avrisk.learning.xi_prior_fit` -- ``P0(xi)`` fitted to the heads, and
+  the validation NLLs;
 * :mod:`~avrisk.learning.glasso` -- Ledoit-Wolf + graphical lasso fit of a
   sparse precision;
+* :mod:`~avrisk.learning.training_report` -- the written files and the
+  training report;
+
+Not part of :func:`~avrisk.learning.train.train_drivers`
+
 * :mod:`~avrisk.learning.gail` -- GAIL with PPO: fine-tunes the acceleration
-  head of a trained network in replays of human car following (not part of
-  :func:`~avrisk.learning.train.train_drivers`; the shipped weights are BC +
-  DAgger);
+  head of a trained network in replays of human car following (the shipped
+  weights are BC + DAgger).
 
 What the data can and cannot teach
 ----------------------------------
@@ -25,7 +58,7 @@ The NGSIM files hold car-following pairs (a follower and its leader) and
 single-vehicle trajectories: they give human *longitudinal* behaviour and human
 lane keeping, but no lane changes with neighbours and no vehicles in other
 lanes. Those demonstrations come from IDM drivers in our own simulator
-(:func:`~avrisk.learning.demonstrations.simulated_demonstrations`), among
+(:func:`~avrisk.learning.simulated_demonstrations.simulated_demonstrations`), among
 IDM+MOBIL traffic that changes lanes around them, and DAgger labels the
 learner's own states with IDM as the expert: the learned drivers' reactions to
 neighbours and their emergency braking are therefore IDM's, not a human's.

@@ -19,7 +19,9 @@ the vehicles are learners ("students") and the others are IDM+MOBIL
 background traffic that changes lanes around them. The DAgger labels
 therefore teach *recovery, lane keeping and reactions as IDM does them*;
 human longitudinal behaviour still comes from the NGSIM demonstrations (the
-DAgger acceleration labels carry a lower weight).
+DAgger acceleration labels carry a lower weight). The loop is
+:func:`dagger_rounds`, the DAgger stage of
+:func:`~avrisk.learning.train.train_drivers`.
 """
 
 from __future__ import annotations
@@ -28,32 +30,34 @@ from typing import Any
 
 import numpy as np
 import torch
-from numpy.typing import NDArray
 
 from avrisk.agents.drivers.driver import LearnedDriver
-from avrisk.agents.drivers.features import (
-    N_FEATURES,
-    features_from_observation,
-)
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.idm import IDMDriver, IDMState
 from avrisk.agents.policy import Action
-from avrisk.learning.demonstrations import (
-    SOURCE_IDM,
-    Demonstrations,
-    observing_simulator,
+from avrisk.learning.behaviour_cloning import behaviour_cloning
+from avrisk.learning.demonstrations import Demonstrations
+from avrisk.learning.replay import CarFollowingWindows, replay
+from avrisk.learning.simulated_demonstrations import (
+    RecordingDriver,
     random_highway_scenes,
+    record_student_rollouts,
     split_students,
 )
-from avrisk.learning.replay import CarFollowingWindows, replay
+from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
 from avrisk.sim import Road
 from avrisk.sim.observation import Observation
 
-__all__ = ["ExpertLabeller", "dagger_demonstrations", "replay_dagger_demonstrations"]
+__all__ = [
+    "ExpertLabeller",
+    "dagger_demonstrations",
+    "dagger_rounds",
+    "replay_dagger_demonstrations",
+]
 
 
-class ExpertLabeller:
-    """A driver model: learners act, the expert's actions are recorded.
+class ExpertLabeller(RecordingDriver):
+    """A recording driver whose students the learner drives; the expert labels them.
 
     Parameters
     ----------
@@ -70,68 +74,24 @@ class ExpertLabeller:
     def __init__(
         self, learner: Any, expert: IDMDriver, student: torch.Tensor, every: int = 2
     ) -> None:
+        super().__init__(expert, student, every)
         self.learner = learner
-        self.expert = expert
-        self.student = student
-        self.every = every
-        self.features: list[NDArray[np.float32]] = []
-        self.accel: list[NDArray[np.float32]] = []
-        self.steer: list[NDArray[np.float32]] = []
-        self.usable: list[NDArray[np.bool_]] = []
 
     def init(self, obs: Observation) -> tuple[Any, IDMState]:
         """Both models' initial states."""
-        return self.learner.init(obs), self.expert.init(obs)
+        return self.learner.init(obs), self.inner.init(obs)
 
     def act(self, obs: Observation, state: tuple[Any, IDMState]) -> tuple[Action, Any]:
         """Students follow the learner, others the expert; labels are stored."""
         learner_state, expert_state = state
         mine, learner_state = self.learner.act(obs, learner_state)
-        label, expert_state = self.expert.act(obs, expert_state)
+        label, expert_state = self.inner.act(obs, expert_state)
         action = Action(
             accel=torch.where(self.student, mine.accel, label.accel),
             steer=torch.where(self.student, mine.steer, label.steer),
         )
-        if obs.step % self.every == 0:
-            self.features.append(features_from_observation(obs).float().cpu().numpy())
-            self.accel.append(label.accel.float().cpu().numpy())
-            self.steer.append(label.steer.float().cpu().numpy())
-            frozen = obs.collided[:, :1].expand_as(obs.collided)
-            usable = ~(obs.collided | frozen) & self.student
-            self.usable.append(usable.cpu().numpy())
+        self.record(obs, label)
         return action, (learner_state, expert_state)
-
-    def demonstrations(self, accel_weight: float, first_episode: int) -> Demonstrations:
-        """The recorded students' features and expert labels.
-
-        Parameters
-        ----------
-        accel_weight : float
-            Weight of the expert's acceleration labels (steering weighs 1).
-        first_episode : int
-            Vehicle ``a`` of rollout ``b`` is episode ``first_episode + b A + a``.
-
-        Returns
-        -------
-        Demonstrations
-            Source ``SOURCE_IDM``.
-        """
-        feats = np.stack(self.features, 1)  # (B, T', A, F)
-        usable = np.stack(self.usable, 1)
-        b, _, a = usable.shape
-        ids = first_episode + np.arange(b)[:, None] * a + np.arange(a)
-        ids = np.broadcast_to(ids[:, None, :], usable.shape)
-        m = usable.reshape(-1)
-        n = int(m.sum())
-        return Demonstrations(
-            features=feats.reshape(-1, N_FEATURES)[m],
-            accel=np.stack(self.accel, 1).reshape(-1)[m],
-            steer=np.stack(self.steer, 1).reshape(-1)[m],
-            accel_weight=np.full(n, accel_weight, np.float32),
-            steer_weight=np.ones(n, np.float32),
-            episode=ids.reshape(-1)[m].astype(np.int64),
-            source=np.full(n, SOURCE_IDM, np.int8),
-        )
 
 
 def dagger_demonstrations(
@@ -153,14 +113,15 @@ def dagger_demonstrations(
 
     Half of the vehicles of every scene are learners (students, recorded); the
     others are IDM+MOBIL traffic (see
-    :func:`~avrisk.learning.demonstrations.split_students`).
+    :func:`~avrisk.learning.simulated_demonstrations.split_students`).
 
     Parameters
     ----------
     net : DriverNet
         The current learner.
     n_rollouts : int
-        Random scenes (:func:`~avrisk.learning.demonstrations.random_highway_scenes`).
+        Random scenes
+        (:func:`~avrisk.learning.simulated_demonstrations.random_highway_scenes`).
     seed : int
         Seeds the scenes and the action noise.
     road : Road, optional
@@ -186,24 +147,23 @@ def dagger_demonstrations(
         Source ``SOURCE_IDM``: the labels are IDM+MOBIL's.
     """
     road = Road() if road is None else road
-    rng = np.random.default_rng(seed)
-    sim = observing_simulator(road, horizon)
-    parts = []
-    for start in range(0, n_rollouts, batch):
-        b = min(batch, n_rollouts - start)
-        initial, params = random_highway_scenes(b, n_vehicles, road, rng)
-        params, student = split_students(params, rng)
-        learner = LearnedDriver(net, xi, stochastic=stochastic)
-        rec = ExpertLabeller(
-            learner, IDMDriver(params, road), torch.as_tensor(student), every=every
-        )
-        seeds = torch.as_tensor(
-            seed * 1_000_003 + start + np.arange(b), dtype=torch.int64
-        )
-        sim.run(initial, rec, seeds)
-        first = episode_offset + start * n_vehicles
-        parts.append(rec.demonstrations(accel_weight, first))
-    return Demonstrations.concat(parts)
+    return record_student_rollouts(
+        lambda params, student: ExpertLabeller(
+            LearnedDriver(net, xi, stochastic=stochastic),
+            IDMDriver(params, road),
+            student,
+            every=every,
+        ),
+        n_rollouts,
+        seed,
+        road=road,
+        n_vehicles=n_vehicles,
+        horizon=horizon,
+        accel_weight=accel_weight,
+        episode_offset=episode_offset,
+        batch=batch,
+        rollout_seed_offset=seed * 1_000_003,
+    )
 
 
 def replay_dagger_demonstrations(
@@ -260,3 +220,78 @@ def replay_dagger_demonstrations(
     rec = ExpertLabeller(learner, IDMDriver(params, road), student, every=every)
     replay(windows, rec, road, seed=seed)
     return rec.demonstrations(accel_weight, episode_offset)
+
+
+def dagger_rounds(
+    net: DriverNet,
+    train: Demonstrations,
+    val: Demonstrations,
+    config: TrainConfig,
+    seed: int,
+    follow: CarFollowingWindows | None = None,
+    progress: Progress | None = None,
+) -> tuple[Demonstrations, list[dict[str, float]]]:
+    """DAgger: ``config.dagger_iters`` rounds of expert labels and refits.
+
+    Every round the learner drives ``config.dagger_rollouts`` random scenes
+    (:func:`dagger_demonstrations`) and, with ``follow``,
+    ``config.dagger_windows`` of those human windows
+    (:func:`replay_dagger_demonstrations`); the labelled states join the
+    demonstrations and the network is refitted on all of them
+    (:func:`~avrisk.learning.behaviour_cloning.behaviour_cloning`).
+
+    Parameters
+    ----------
+    net : DriverNet
+        The learner, refitted in place.
+    train, val : Demonstrations
+        Demonstrations so far, and validation ones.
+    config : TrainConfig
+    seed : int
+    follow : CarFollowingWindows, optional
+        Training windows to draw the replayed ones from (each round anew).
+    progress : callable, optional
+        Receives a ``"dagger"`` :class:`TrainEvent` after every round.
+
+    Returns
+    -------
+    train : Demonstrations
+        ``train`` and every round's labelled states.
+    history : list of dict
+        Per round: rows added and the last refit epoch's losses.
+    """
+    history = []
+    for k in range(config.dagger_iters):
+        visited = dagger_demonstrations(
+            net,
+            config.dagger_rollouts,
+            seed * 1000 + 10 + k,
+            accel_weight=config.dagger_accel_weight,
+            episode_offset=(100 + k) * 1_000_000,
+        )
+        if follow is not None:
+            replay_seed = seed * 1000 + 500 + k
+            followed = replay_dagger_demonstrations(
+                net,
+                follow.sample(config.dagger_windows, replay_seed),
+                replay_seed,
+                accel_weight=config.dagger_accel_weight,
+                episode_offset=(200 + k) * 1_000_000,
+            )
+            visited = Demonstrations.concat([visited, followed])
+        train = Demonstrations.concat([train, visited])
+        refit = behaviour_cloning(
+            net,
+            train,
+            epochs=config.dagger_epochs,
+            batch_size=config.batch_size,
+            lr=config.dagger_lr,
+            weight_decay=config.weight_decay,
+            seed=seed + 1 + k,
+            val=val,
+        )
+        row = {"round": float(k + 1), "rows_added": float(len(visited)), **refit[-1]}
+        history.append(row)
+        if progress is not None:
+            progress(TrainEvent("dagger", k + 1, config.dagger_iters, row))
+    return train, history

@@ -62,7 +62,7 @@ from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import XiPrior
 from avrisk.agents.policy import Action
 from avrisk.learning.replay import DT, CarFollowingWindows, replay
-from avrisk.learning.train import Progress, TrainEvent
+from avrisk.learning.train_config import Progress, TrainEvent
 from avrisk.sim import Road
 from avrisk.sim.observation import Observation
 

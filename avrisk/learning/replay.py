@@ -1,11 +1,12 @@
-"""Closed-loop replays of human car following, and the noise calibration on them.
+"""Closed-loop replays of human car following, and their distances to the record.
 
 A *window* is ``T`` steps of one NGSIM car-following episode. In a replay the
 follower starts from its recorded state and is driven by a model in the
 simulator while its leader replays the recorded speed profile (a classic
 car-following validation; the follower's actions change its own future
 states, so it is closed loop). Comparing the simulated follower with the
-recorded one measures realism; :func:`calibrate_noise` uses replays of
+recorded one measures realism (:func:`replay_distances`);
+:func:`avrisk.learning.sampling_noise.calibrate_noise` uses replays of
 *training* windows to choose how much of the network's action noise to sample.
 """
 
@@ -22,15 +23,10 @@ from numpy.typing import NDArray
 from scipy import stats
 from torch import Tensor
 
-from avrisk.agents.drivers.driver import LearnedDriver
-from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.policy import Action
-from avrisk.learning.demonstrations import (
-    DEFAULT_WIDTH,
-    LaneCentres,
-    lateral_tracks,
-)
-from avrisk.learning.ngsim import (
+from avrisk.learning.ngsim_demonstrations import DEFAULT_WIDTH
+from avrisk.learning.ngsim_lateral import LaneCentres, lateral_tracks
+from avrisk.learning.ngsim_samples import (
     I80_N_LANES,
     CarFollowingPairs,
     LateralPairs,
@@ -43,7 +39,6 @@ __all__ = [
     "CarFollowingWindows",
     "ReplayLeader",
     "ReplayResult",
-    "calibrate_noise",
     "car_following_windows",
     "replay",
     "replay_distances",
@@ -100,6 +95,11 @@ class CarFollowingWindows:
             self,
             **{f.name: getattr(self, f.name)[index] for f in dataclasses.fields(self)},
         )
+
+    def sample(self, n: int, seed: int) -> CarFollowingWindows:
+        """``n`` windows drawn at random without replacement, in their order."""
+        pick = np.random.default_rng(seed).permutation(len(self))
+        return self.take(np.sort(pick[:n]))
 
 
 def _cut(starts: NDArray[Any], ends: NDArray[Any], n_steps: int) -> Iterator[int]:
@@ -326,71 +326,3 @@ def replay_distances(
         sim_off = result.offset[lat][result.alive[lat]]
         out["offset"] = stats.ks_2samp(sim_off, windows.offset[lat].ravel()).statistic
     return {k: float(v) for k, v in out.items()}
-
-
-def calibrate_noise(
-    net: DriverNet,
-    windows: CarFollowingWindows,
-    road: Road,
-    *,
-    grid: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3, 0.5, 1.0),
-    crash_penalty: float = 5.0,
-    seed: int = 0,
-) -> tuple[tuple[float, float], list[dict[str, float]]]:
-    """Choose ``net.noise_scale`` by closed-loop replays of human windows.
-
-    Coordinate search over ``grid``: first the acceleration scale (steering
-    noise off) by ``KS(accel) + KS(jerk) + KS(speed) + KS(gap) +
-    crash_penalty * crash_rate``, then the steering scale (acceleration scale
-    fixed) by ``KS(offset) + crash_penalty * crash_rate``. The network's
-    ``noise_correlation`` is used as it is.
-
-    Parameters
-    ----------
-    net : DriverNet
-        Its ``noise_scale`` is set to the result.
-    windows : CarFollowingWindows
-        Training windows (never the evaluation ones).
-    road : Road
-    grid : tuple of float
-        Candidate scales.
-    crash_penalty : float, default=5.0
-        Weight of the collision rate in both objectives.
-    seed : int, default=0
-
-    Returns
-    -------
-    scale : tuple of float
-        ``(c_accel, c_steer)``.
-    trials : list of dict
-        Every evaluated candidate with its distances.
-    """
-    done: dict[tuple[float, float], dict[str, float]] = {}
-
-    def run(c_a: float, c_s: float) -> dict[str, float]:
-        if (c_a, c_s) not in done:
-            net.noise_scale.copy_(torch.tensor([c_a, c_s]))
-            res = replay(windows, LearnedDriver(net), road, seed=seed)
-            done[c_a, c_s] = {
-                "c_accel": c_a,
-                "c_steer": c_s,
-                **replay_distances(windows, res),
-            }
-        return done[c_a, c_s]
-
-    def longitudinal(r: dict[str, float]) -> float:
-        return (
-            r["accel"]
-            + r["jerk"]
-            + r["speed"]
-            + r["gap"]
-            + crash_penalty * r["crash_rate"]
-        )
-
-    def lateral(r: dict[str, float]) -> float:
-        return r.get("offset", 0.0) + crash_penalty * r["crash_rate"]
-
-    best_a = min(grid, key=lambda c: longitudinal(run(c, 0.0)))
-    best_s = min(grid, key=lambda c: lateral(run(best_a, c)))
-    net.noise_scale.copy_(torch.tensor([best_a, best_s]))
-    return (float(best_a), float(best_s)), list(done.values())

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from avrisk.learning.ngsim import LateralPairs
+from avrisk.learning.ngsim_samples import LateralPairs
 
 
 @pytest.fixture

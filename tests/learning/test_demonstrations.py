@@ -3,18 +3,18 @@ import pytest
 import torch
 
 from avrisk.agents.drivers.features import FEATURE_INDEX, N_FEATURES
-from avrisk.learning.demonstrations import (
-    SOURCE_I80,
-    SOURCE_IDM,
-    Demonstrations,
-    LaneCentres,
+from avrisk.learning.demonstrations import SOURCE_I80, SOURCE_IDM, Demonstrations
+from avrisk.learning.ngsim_demonstrations import (
     car_following_features,
     i80_pair_demonstrations,
+)
+from avrisk.learning.ngsim_lateral import (
+    LaneCentres,
     lateral_tracks,
-    simulated_demonstrations,
     steer_from_heading,
 )
-from avrisk.learning.ngsim import CarFollowingPairs
+from avrisk.learning.ngsim_samples import CarFollowingPairs
+from avrisk.learning.simulated_demonstrations import simulated_demonstrations
 from avrisk.sim import Road, VehicleState
 from avrisk.sim.dynamics import BicycleLimits, bicycle_step
 

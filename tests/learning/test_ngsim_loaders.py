@@ -10,23 +10,22 @@ import pytest
 
 import avrisk
 from avrisk.learning.ngsim import (
-    DECIMALS_KEY,
-    EXCEPTIONS_SUFFIX,
-    FT,
-    I80_LATERAL,
-    I80_PAIRS,
-    NGSIM_DIR_ENV,
-    US101_FILE,
-    CarFollowingPairs,
-    episode_bounds,
     lateral_pair_split,
     load_i80_lateral,
     load_i80_pairs,
     load_us101,
-    ngsim_dir,
-    ngsim_file,
     read_i80_pairs_table,
 )
+from avrisk.learning.ngsim_files import (
+    I80_LATERAL,
+    I80_PAIRS,
+    NGSIM_DIR_ENV,
+    US101_FILE,
+    ngsim_dir,
+    ngsim_file,
+)
+from avrisk.learning.ngsim_packed import DECIMALS_KEY, EXCEPTIONS_SUFFIX
+from avrisk.learning.ngsim_samples import FT, CarFollowingPairs, episode_bounds
 
 #: The original NGSIM files (see their SOURCE.md): on the project's machines
 #: only, not in CI.

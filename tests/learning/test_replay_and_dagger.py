@@ -4,12 +4,13 @@ import torch
 from avrisk.agents.idm import IDMDriver, IDMParams
 from avrisk.agents.policy import Action
 from avrisk.learning.dagger import ExpertLabeller
-from avrisk.learning.demonstrations import NO_LANE_CHANGE, SOURCE_IDM
+from avrisk.learning.demonstrations import SOURCE_IDM
 from avrisk.learning.replay import (
     CarFollowingWindows,
     replay,
     replay_distances,
 )
+from avrisk.learning.simulated_demonstrations import NO_LANE_CHANGE
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 
 

@@ -1,0 +1,129 @@
+"""What :func:`~avrisk.learning.train.train_drivers` is told, and what it reports.
+
+:class:`TrainConfig` holds the settings of every training stage (the defaults
+made the shipped files); every stage reports its progress in
+:class:`TrainEvent` reports to an optional :data:`Progress` callback (the CLI
+draws them as progress bars).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NamedTuple
+
+__all__ = ["Progress", "TrainConfig", "TrainEvent"]
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Settings of :func:`~avrisk.learning.train.train_drivers`.
+
+    The defaults made the shipped files.
+
+    Parameters
+    ----------
+    n_members : int, default=20
+        Ensemble heads ``m``.
+    trunk_epochs : int, default=12
+        Behaviour-cloning epochs of the whole network.
+    head_epochs : int, default=20
+        Epochs of every bootstrap head (trunk frozen).
+    batch_size : int, default=1024
+        Rows per step of behaviour cloning.
+    head_batch_size : int, default=4096
+        Rows per step of the heads.
+    lr : float, default=1e-3
+        Adam learning rate of behaviour cloning.
+    head_lr : float, default=3e-4
+        Adam learning rate of the heads.
+    weight_decay : float, default=1e-5
+        Adam weight decay.
+    n_sim_rollouts : int, default=256
+        IDM+MOBIL rollouts for training demonstrations (8 vehicles, 15 s).
+    n_sim_val_rollouts : int, default=32
+        IDM+MOBIL rollouts for validation (another seed).
+    sim_accel_weight : float, default=0.25
+        Loss weight of the simulated (non-human) acceleration targets.
+    dagger_iters : int, default=4
+        DAgger rounds after behaviour cloning (0: plain behaviour cloning).
+    dagger_rollouts : int, default=128
+        Learner rollouts per round in random traffic (8 vehicles, 15 s).
+    dagger_windows : int, default=0
+        Learner replays per round of human car-following training windows
+        (15 s), labelled by IDM
+        (:func:`avrisk.learning.dagger.replay_dagger_demonstrations`). Off by
+        default: with 256 per round the IDM labels contradicted the human ones
+        on nearly the same states and closed-loop realism got worse.
+    dagger_epochs : int, default=3
+        Refit epochs per round, on all demonstrations so far.
+    dagger_lr : float, default=5e-4
+        Adam learning rate of the refits.
+    dagger_accel_weight : float, default=0.5
+        Loss weight of the expert's acceleration labels on visited states (the
+        human data have no emergency braking; only the expert shows it).
+    calibration_windows : int, default=160
+        Training car-following windows replayed to calibrate the sampling
+        noise (:func:`avrisk.learning.sampling_noise.calibrate_noise`); 0 skips it and
+        keeps the network's own Gaussian (``noise_scale = 1``).
+    calibration_steps : int, default=100
+        Steps per calibration window.
+    target_density : float, default=0.01
+        Graphical lasso: fraction of coordinate pairs that may be linked.
+    max_shift : float, default=0.01
+        CE search box of the ``xi`` block, recorded in the prior's metadata.
+    """
+
+    n_members: int = 20
+    trunk_epochs: int = 12
+    head_epochs: int = 20
+    batch_size: int = 1024
+    head_batch_size: int = 4096
+    lr: float = 1e-3
+    head_lr: float = 3e-4
+    weight_decay: float = 1e-5
+    n_sim_rollouts: int = 256
+    n_sim_val_rollouts: int = 32
+    sim_accel_weight: float = 0.25
+    dagger_iters: int = 4
+    dagger_rollouts: int = 128
+    dagger_windows: int = 0
+    dagger_epochs: int = 3
+    dagger_lr: float = 5e-4
+    dagger_accel_weight: float = 0.5
+    calibration_windows: int = 160
+    calibration_steps: int = 100
+    target_density: float = 0.01
+    max_shift: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.n_members < 2:
+            raise ValueError(f"n_members must be >= 2; got {self.n_members}")
+        for name in ("trunk_epochs", "head_epochs", "batch_size", "head_batch_size"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
+
+
+class TrainEvent(NamedTuple):
+    """One progress report of a training stage.
+
+    Attributes
+    ----------
+    stage : str
+        ``"data"``, ``"trunk"``, ``"dagger"``, ``"noise"``, ``"heads"`` or
+        ``"prior"``.
+    step : int
+        Steps of the stage done.
+    total : int
+        Steps of the stage.
+    metrics : dict of str to float
+        E.g. the training loss and validation NLLs.
+    """
+
+    stage: str
+    step: int
+    total: int
+    metrics: dict[str, float]
+
+
+Progress = Callable[[TrainEvent], None]

@@ -1,0 +1,151 @@
+"""What :func:`~avrisk.learning.train.train_drivers` reads: demonstrations and windows.
+
+The NGSIM I-80 car-following pairs and lateral pairs of an NGSIM folder
+(:mod:`avrisk.learning.ngsim`), split into train and test as the source splits
+them (:func:`~avrisk.learning.ngsim.lateral_pair_split` for the lateral file):
+
+* :func:`load_demonstrations` -- training demonstrations (the NGSIM train
+  splits and IDM+MOBIL scenes) and validation ones (the test splits and
+  IDM+MOBIL scenes of another seed), with the files' sha256;
+* :func:`training_windows` -- car-following windows of the train splits, for
+  the noise calibration and the replayed DAgger rounds.
+
+Only the train splits are trained or calibrated on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from avrisk.learning.demonstrations import Demonstrations
+from avrisk.learning.ngsim import lateral_pair_split, load_i80_lateral, load_i80_pairs
+from avrisk.learning.ngsim_demonstrations import (
+    i80_pair_demonstrations,
+    lateral_pair_demonstrations,
+)
+from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_file
+from avrisk.learning.ngsim_lateral import LaneCentres
+from avrisk.learning.ngsim_samples import CarFollowingPairs, LateralPairs
+from avrisk.learning.replay import CarFollowingWindows, car_following_windows
+from avrisk.learning.simulated_demonstrations import simulated_demonstrations
+from avrisk.learning.train_config import TrainConfig
+from avrisk.sim import Road
+
+__all__ = ["load_demonstrations", "training_windows"]
+
+
+class _I80(NamedTuple):
+    """The I-80 files of an NGSIM folder, loaded, and the lateral pairs' split."""
+
+    files: tuple[Path, Path]
+    pairs: CarFollowingPairs
+    lateral: LateralPairs
+    lateral_split: NDArray[np.str_]
+
+    def part(self, split: str) -> tuple[CarFollowingPairs, LateralPairs]:
+        """The car-following and lateral pairs of ``split`` (train or test)."""
+        return (
+            self.pairs.take(self.pairs.split == split),
+            self.lateral.take(self.lateral_split == split),
+        )
+
+
+def _load_i80(data_dir: str | Path | None) -> _I80:
+    files = (ngsim_file(I80_PAIRS, data_dir), ngsim_file(I80_LATERAL, data_dir))
+    pairs = load_i80_pairs(files[0])
+    lateral = load_i80_lateral(files[1])
+    return _I80(files, pairs, lateral, lateral_pair_split(lateral, pairs))
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def load_demonstrations(
+    data_dir: str | Path | None,
+    seed: int,
+    config: TrainConfig | None = None,
+    road: Road | None = None,
+) -> tuple[Demonstrations, Demonstrations, dict[str, Any]]:
+    """Training and validation demonstrations from NGSIM and the simulator.
+
+    Parameters
+    ----------
+    data_dir : str or Path or None
+        NGSIM folder (:func:`avrisk.learning.ngsim_files.ngsim_dir`; None: the
+        data shipped with the package), packed or original files.
+    seed : int
+        Seeds the simulated scenes (validation uses ``seed + 1``).
+    config : TrainConfig, optional
+        ``n_sim_rollouts``, ``n_sim_val_rollouts`` and ``sim_accel_weight``;
+        default ``TrainConfig()``.
+    road : Road, optional
+        Default the scenario road ``Road()`` (6 lanes of 3.7 m).
+
+    Returns
+    -------
+    train, val : Demonstrations
+        NGSIM train splits + IDM+MOBIL; NGSIM test splits + IDM+MOBIL (other
+        seed).
+    meta : dict
+        Files and their sha256, lane centres, per-source counts.
+    """
+    config = TrainConfig() if config is None else config
+    road = Road() if road is None else road
+    data = _load_i80(data_dir)
+    centres = LaneCentres.fit(data.part("train")[1])
+    offsets = iter(range(0, 10_000_000, 1_000_000))
+    parts: dict[str, list[Demonstrations]] = {"train": [], "test": []}
+    for name in ("train", "test"):
+        pairs, lateral = data.part(name)
+        parts[name].append(
+            i80_pair_demonstrations(pairs, road, episode_offset=next(offsets))
+        )
+        parts[name].append(
+            lateral_pair_demonstrations(
+                lateral, road, centres=centres, episode_offset=next(offsets)
+            )
+        )
+    for name, n_rollouts, scene_seed in (
+        ("train", config.n_sim_rollouts, seed),
+        ("test", config.n_sim_val_rollouts, seed + 1),
+    ):
+        parts[name].append(
+            simulated_demonstrations(
+                n_rollouts,
+                scene_seed,
+                road=road,
+                accel_weight=config.sim_accel_weight,
+                episode_offset=next(offsets),
+            )
+        )
+    train = Demonstrations.concat(parts["train"])
+    val = Demonstrations.concat(parts["test"])
+    meta = {
+        "files": {f.name: _sha256(f) for f in data.files},
+        "lane_centres_m": centres.to_dict(),
+        "train": train.summary(),
+        "val": val.summary(),
+    }
+    return train, val, meta
+
+
+def training_windows(data_dir: str | Path | None, n_steps: int) -> CarFollowingWindows:
+    """Car-following windows of ``n_steps`` steps of the training splits.
+
+    For the noise calibration and the replayed DAgger rounds; the lane centres
+    are fitted to the training lateral pairs.
+    """
+    pairs, lateral = _load_i80(data_dir).part("train")
+    return car_following_windows(
+        pairs, lateral, LaneCentres.fit(lateral), n_steps, Road()
+    )

@@ -1,0 +1,124 @@
+"""What :func:`~avrisk.learning.train.train_drivers` writes and reports.
+
+The run's outputs in its folder: the network (:data:`DRIVER_NET_FILE`), the
+``xi`` prior (:data:`XI_PRIOR_FILE`) and a JSON :class:`TrainingReport` of
+what the run did and measured (:data:`TRAINING_REPORT_FILE`), written by
+:func:`write_training_outputs`.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from avrisk.agents.drivers.network import DriverNet
+from avrisk.agents.drivers.store import DRIVER_NET_FILE, XI_PRIOR_FILE, XiPrior
+
+__all__ = [
+    "TRAINING_REPORT_FILE",
+    "TrainingReport",
+    "training_environment",
+    "write_training_outputs",
+]
+
+#: The report's file name in the output folder.
+TRAINING_REPORT_FILE = "training_report.json"
+
+
+@dataclass(frozen=True)
+class TrainingReport:
+    """What :func:`~avrisk.learning.train.train_drivers` did and measured (JSON).
+
+    Attributes
+    ----------
+    seed : int
+    out_dir : str
+    files : dict of str to int
+        Written files and their sizes [bytes].
+    data : dict
+        Input files (sha256) and demonstrations per source.
+    trunk_history : list of dict
+        Per epoch: training loss, validation NLL per source and target.
+    dagger_history : list of dict
+        Per DAgger round: rows added and the last refit epoch's losses.
+    head_history : list of dict
+        Per head epoch: mean training loss over the heads.
+    validation : dict
+        Validation NLL of the shared head and of ``mu0``, per source/target.
+    calibration : dict
+        Sampling-noise scale chosen on replays of training windows, and the
+        distances of every candidate.
+    prior : dict
+        The prior's metadata: the graphical-lasso fit
+        (:meth:`~avrisk.learning.glasso.SparseGaussianFit.to_meta`) and more.
+    config : dict
+    environment : dict
+        Versions and thread count.
+    seconds : dict of str to float
+        Wall time per stage.
+    """
+
+    seed: int
+    out_dir: str
+    files: dict[str, int]
+    data: dict[str, Any]
+    trunk_history: list[dict[str, float]]
+    dagger_history: list[dict[str, float]]
+    head_history: list[dict[str, float]]
+    validation: dict[str, Any]
+    calibration: dict[str, Any]
+    prior: dict[str, Any]
+    config: dict[str, Any]
+    environment: dict[str, Any]
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict."""
+        return asdict(self)
+
+
+def training_environment() -> dict[str, Any]:
+    """Versions, torch's thread count and the machine, for the report."""
+    import sklearn
+
+    return {
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "numpy": np.__version__,
+        "scikit-learn": sklearn.__version__,
+        "torch_threads": torch.get_num_threads(),
+        "machine": platform.machine(),
+    }
+
+
+def write_training_outputs(
+    out: Path, net: DriverNet, prior: XiPrior, report: TrainingReport
+) -> TrainingReport:
+    """Write the network, the prior and the report (with the files' sizes) to ``out``.
+
+    Parameters
+    ----------
+    out : Path
+        An existing folder; files of the same names are replaced.
+    net : DriverNet
+    prior : XiPrior
+    report : TrainingReport
+        Its ``files`` are replaced by the written files and their sizes.
+
+    Returns
+    -------
+    TrainingReport
+        As written.
+    """
+    net.save(out / DRIVER_NET_FILE)
+    prior.save(out / XI_PRIOR_FILE)
+    files = {f: (out / f).stat().st_size for f in (DRIVER_NET_FILE, XI_PRIOR_FILE)}
+    report = replace(report, files=files)
+    (out / TRAINING_REPORT_FILE).write_text(json.dumps(report.to_dict(), indent=2))
+    return report
