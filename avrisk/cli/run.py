@@ -26,8 +26,12 @@ from avrisk.rare import InvalidOutputError
 from avrisk.rare.cross_entropy import SELECTION_RULES
 from avrisk.report.html import write_report
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
-from avrisk.scenario import ScenarioSpecError, build_base_distribution, load_spec
-from avrisk.scenario.spec import spec_from_dict
+from avrisk.scenario import (
+    ScenarioSpecError,
+    build_base_distribution,
+    load_spec,
+    spec_from_dict,
+)
 
 EXPECTED = (ScenarioSpecError, RunDirectoryError, InvalidOutputError)
 DEFAULT_SCENARIO = "highway_default"

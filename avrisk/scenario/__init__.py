@@ -14,16 +14,16 @@ from avrisk.scenario.base_distribution import (
     marginal_family,
     xi_base_family,
 )
-from avrisk.scenario.params import FIELD_UNITS, ParamLayout, ScenarioParams
-from avrisk.scenario.spec import (
+from avrisk.scenario.errors import ScenarioSpecError
+from avrisk.scenario.loading import (
     MAX_SPEC_BYTES,
-    VEHICLE_FIELDS,
-    ScenarioSpec,
-    ScenarioSpecError,
     bundled_scenarios,
     load_spec,
     spec_from_dict,
 )
+from avrisk.scenario.params import FIELD_UNITS, ParamLayout, ScenarioParams
+from avrisk.scenario.scene import VEHICLE_FIELDS
+from avrisk.scenario.spec import ScenarioSpec
 
 __all__ = [
     "FIELD_UNITS",

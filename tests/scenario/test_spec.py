@@ -7,13 +7,13 @@ import yaml
 
 from avrisk.scenario import (
     MAX_SPEC_BYTES,
+    VEHICLE_FIELDS,
     ScenarioSpec,
     ScenarioSpecError,
     bundled_scenarios,
     load_spec,
     spec_from_dict,
 )
-from avrisk.scenario.spec import VEHICLE_FIELDS
 
 
 def _minimal() -> dict:
