@@ -21,6 +21,14 @@ measure. Example (the bundled ``highway_default`` is the full one)::
       - {lane: 2, offset: 50.0, driver: normal}
       - {lane: 3, offset: 20.0, driver: human}
 
+Drivers, the ego policy and the safety measure are each a registered name or
+an import path ``package.module:attribute`` to the user's own class, with its
+parameters under ``params``, which the component checks when the scenario is
+built (:mod:`avrisk.scenario.components`)::
+
+    ego: {policy: "mypkg.egos:MyEgo", params: {gain: 0.8}}
+    safety: {measure: min_ttc, n_rays: 360}
+
 A scenario with any ``learned`` driver adds the network's last layer ``xi``
 (one draw per rollout, shared by all its learned drivers) to the sample ``X``;
 its ``learned_drivers`` section (:class:`LearnedDriversSpec`) says whether they
@@ -28,12 +36,12 @@ sample their actions and how far the cross-entropy method may move ``xi``::
 
     learned_drivers: {actions: mean, xi_search: 0.0, xi_search_unit: prior_sd}
 
-Files are read with ``yaml.safe_load``; unknown keys are rejected and every
-error names the field, the allowed range and the value given.
-
-The models live in :mod:`avrisk.scenario.scene` (road, vehicle slots, initial
-conditions) and :mod:`avrisk.scenario.components` (drivers, ego, safety
-measure); :mod:`avrisk.scenario.loading` reads files and
+Unknown keys are rejected and every error names the field, the allowed range
+and the value given. This module holds the whole scenario
+(:class:`ScenarioSpec`, with the simulator settings); its parts are in
+:mod:`avrisk.scenario.scene` (road, vehicle slots, initial conditions) and
+:mod:`avrisk.scenario.components` (drivers, ego, safety measure);
+:mod:`avrisk.scenario.loading` reads files (``yaml.safe_load``) and
 :mod:`avrisk.scenario.errors` words the validation errors.
 """
 
@@ -51,6 +59,7 @@ from pydantic import (
     model_validator,
 )
 
+from avrisk.registry import is_import_path
 from avrisk.scenario.components import (
     DriverSpec,
     EgoSpec,
@@ -247,9 +256,10 @@ class ScenarioSpec(SpecModel):
         Returns
         -------
         IDMSpec
-            ``ego.params`` for slot 0, else the slot's :class:`DriverSpec`.
+            :attr:`EgoSpec.idm` for slot 0 (``ego.params`` of an idm_mobil
+            ego, else the defaults), else the slot's :class:`DriverSpec`.
         """
-        return self.ego.params if slot == 0 else self._driver_type(slot)
+        return self.ego.idm if slot == 0 else self._driver_type(slot)
 
     def _driver_type(self, slot: int) -> DriverSpec:
         """The driver type of environment slot ``slot >= 1``."""
@@ -272,6 +282,26 @@ class ScenarioSpec(SpecModel):
     def has_learned_drivers(self) -> bool:
         """Whether any environment vehicle is a learned driver (``X`` has ``xi``)."""
         return any(self.learned_slots)
+
+    def import_paths(self) -> list[str]:
+        """The components this spec names by import path, each once, in order.
+
+        Building them imports user code, which avrisk does only for a spec
+        given explicitly (:func:`avrisk.registry.load_component`); a spec read
+        back from a run directory that names one must be given again.
+
+        Returns
+        -------
+        list of str
+            E.g. ``["mypkg.egos:MyEgo"]``: the ego policy, then the driver
+            models in the order of ``drivers``, then the safety measure.
+        """
+        names = [
+            self.ego.policy,
+            *(driver.model for driver in self.drivers.values()),
+            self.safety.measure,
+        ]
+        return list(dict.fromkeys(name for name in names if is_import_path(name)))
 
     @model_serializer(mode="wrap")
     def _dump(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
