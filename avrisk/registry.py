@@ -22,7 +22,7 @@ network, a device) are passed to the factory as they are::
 
         def __init__(self, gain: float = 0.5) -> None: ...
 
-    POLICIES.build("mypkg.egos:MyEgo", {"gain": 0.8}, allow_import=True)
+    get_policy("mypkg.egos:MyEgo", {"gain": 0.8}, allow_import=True)  # avrisk.agents
 
 This module is a leaf (it imports nothing of avrisk), so the pure-data
 scenario layer checks the form of names with it.
@@ -133,7 +133,8 @@ def load_component(
     ------
     ComponentError
         If ``path`` is not an import path, importing is not allowed, the
-        module cannot be imported or has no such attribute.
+        module cannot be imported, or has no such attribute or one that cannot
+        be called.
     """
     if not is_import_path(path):
         raise ComponentError(
@@ -159,7 +160,7 @@ def load_component(
     except ImportError as exc:
         raise ComponentError(f"{kind} {path!r}: importing failed: {exc}") from exc
     try:
-        return getattr(module, attribute)
+        component = getattr(module, attribute)
     except AttributeError:
         public = [n for n in vars(module) if not n.startswith("_")]
         close = difflib.get_close_matches(attribute, public, n=1)
@@ -168,6 +169,11 @@ def load_component(
             f"{kind} {path!r}: module {module_name!r} has no attribute "
             f"{attribute!r}{hint}"
         ) from None
+    if not callable(component):
+        raise ComponentError(
+            f"{kind} {path!r} is {component!r}, not a class or factory"
+        )
+    return component
 
 
 class Registry:

@@ -107,6 +107,8 @@ def test_an_import_path_loads_the_users_class_and_validates_its_params():
     )
     with pytest.raises(ComponentError, match="must be a subclass of pydantic"):
         get_policy("tests.user_components:MisdeclaredEgo", allow_import=True)
+    with pytest.raises(ComponentError, match="is 30.0, not a class or factory"):
+        get_policy("tests.user_components:SPEED_LIMIT", allow_import=True)
 
 
 def test_a_missing_module_or_attribute_is_named(tmp_path, monkeypatch):

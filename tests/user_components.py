@@ -39,3 +39,7 @@ class MisdeclaredEgo:
     """An ego whose ``Params`` is not a Pydantic model."""
 
     Params = dict
+
+
+#: Not a component: what an import path must not name.
+SPEED_LIMIT = 30.0

@@ -1,6 +1,8 @@
 """Scenario sampler: the YAML spec, the base distribution ``P0`` and named ``X``.
 
-* :func:`load_spec` -- read and validate a scenario (a file or a bundled name);
+* :func:`load_spec` -- read and validate a scenario (a file or a bundled name)
+  into a :class:`ScenarioSpec` (:mod:`avrisk.scenario.spec`; its parts in
+  :mod:`~avrisk.scenario.scene` and :mod:`~avrisk.scenario.components`);
 * :func:`build_base_distribution` -- ``P0`` as an :class:`avrisk.rare.Product`
   (:func:`xi_base_family`: its learned-driver block);
 * :class:`ParamLayout`, :class:`ScenarioParams` -- flat ``X`` (B, D) <-> named
