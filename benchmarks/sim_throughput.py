@@ -71,9 +71,8 @@ def worker_avrisk(
     """Time rollouts of ``batch_size`` scenarios; returns a JSON-able dict."""
     _set_one_thread()
     from avrisk.rare.problem import chunk_rng, sample_seeds
-    from avrisk.scenario import build_base_distribution, load_spec
+    from avrisk.scenario import build_base_distribution, load_spec, spec_from_dict
     from avrisk.scenario.builder import ScenarioSimulator
-    from avrisk.scenario.spec import spec_from_dict
     from avrisk.sim.simulator import compile_requested
 
     raw = load_spec(scenario).model_dump(mode="json")

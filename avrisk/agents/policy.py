@@ -33,11 +33,12 @@ attribute a model is assumed to read it (:func:`reads_lidar`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import torch
+from pydantic import BaseModel, ConfigDict
 from torch import Tensor
 
 from avrisk.registry import Registry
@@ -123,7 +124,17 @@ class ConstantPolicy:
     --------
     >>> ConstantPolicy(accel=1.0).accel
     1.0
+    >>> get_policy("constant", {"accel": "-2"}).accel  # from YAML: validated
+    -2.0
     """
+
+    class Params(BaseModel):
+        """``params`` of ``ego: {policy: constant}`` (see the class)."""
+
+        model_config = ConfigDict(frozen=True)
+
+        accel: float = 0.0
+        steer: float = 0.0
 
     reads_lidar = False
 
@@ -143,27 +154,49 @@ class ConstantPolicy:
         ), None
 
 
-_POLICIES = Registry("policy")
+_POLICIES = Registry("ego policy")
 
 
-def register_policy(name: str, factory: Callable[..., Any]) -> None:
-    """Make ``factory(**kwargs)`` available as ``get_policy(name, ...)``."""
-    _POLICIES.register(name, factory)
+def register_policy(
+    name: str, factory: Callable[..., Any], *, params: type[BaseModel] | None = None
+) -> None:
+    """Make ``factory`` available as ``get_policy(name, ...)``.
+
+    ``params`` is its params model (default: ``factory.Params``, if any); see
+    :meth:`avrisk.registry.Registry.register`.
+    """
+    _POLICIES.register(name, factory, params=params)
 
 
-def get_policy(name: str, **kwargs: Any) -> Policy:
-    """Build a registered ego policy by name (e.g. ``"idm_mobil"``, ``"constant"``).
+def get_policy(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    /,
+    *,
+    allow_import: bool = False,
+    **context: Any,
+) -> Policy:
+    """Build an ego policy by registered name or import path.
+
+    Parameters
+    ----------
+    name : str
+        E.g. ``"idm_mobil"``, ``"constant"``, or ``"mypkg.egos:MyEgo"``.
+    params : mapping, optional
+        The policy's ``params`` from a scenario, validated by its params model.
+    allow_import : bool, default=False
+        Whether an import path may be imported.
+    **context
+        The caller's arguments (``net``, ``road``, ...), passed as they are.
 
     Raises
     ------
-    KeyError
-        If ``name`` is not registered; the message lists the known names.
+    avrisk.registry.ComponentError
+        If ``name`` is unknown (also a ``KeyError``; the message lists the
+        known names), cannot be imported, or ``params`` do not validate; see
+        :meth:`avrisk.registry.Registry.build`.
     """
-    return _POLICIES.build(name, **kwargs)
+    return _POLICIES.build(name, params, allow_import=allow_import, **context)
 
 
-def _constant_factory(**kwargs: Any) -> ConstantPolicy:
-    return ConstantPolicy(**kwargs)
-
-
-register_policy("constant", _constant_factory)
+register_policy("constant", ConstantPolicy)

@@ -36,8 +36,7 @@ from avrisk.pipeline import RunDirectory
 from avrisk.pipeline.objective import SimulationObjective
 from avrisk.rare import estimator_names
 from avrisk.rare.estimator import estimator_class
-from avrisk.scenario import load_spec
-from avrisk.scenario.spec import spec_from_dict
+from avrisk.scenario import load_spec, spec_from_dict
 
 DEFAULT_SCENARIO = "highway_default"
 #: Where the command line's defaults differ from an estimator's own.

@@ -14,9 +14,10 @@ rollout's carry untouched where ``alive`` is false (it stopped).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
+from pydantic import BaseModel
 from torch import Tensor
 
 from avrisk.registry import Registry
@@ -58,20 +59,46 @@ class SafetyMeasure(Protocol):
 _MEASURES = Registry("safety measure")
 
 
-def register_safety_measure(name: str, factory: Callable[..., Any]) -> None:
-    """Make ``factory(**kwargs)`` available as ``get_safety_measure(name, ...)``."""
-    _MEASURES.register(name, factory)
+def register_safety_measure(
+    name: str, factory: Callable[..., Any], *, params: type[BaseModel] | None = None
+) -> None:
+    """Make ``factory`` available as ``get_safety_measure(name, ...)``.
+
+    ``params`` is its params model (default: ``factory.Params``, if any); see
+    :meth:`avrisk.registry.Registry.register`.
+    """
+    _MEASURES.register(name, factory, params=params)
 
 
-def get_safety_measure(name: str, **kwargs: Any) -> SafetyMeasure:
-    """Build a registered safety measure by name (e.g. ``"min_ttc"``).
+def get_safety_measure(
+    name: str,
+    params: Mapping[str, Any] | None = None,
+    /,
+    *,
+    allow_import: bool = False,
+    **context: Any,
+) -> SafetyMeasure:
+    """Build a safety measure by registered name or import path.
+
+    Parameters
+    ----------
+    name : str
+        E.g. ``"min_ttc"``, ``"min_box_ttc"``, or ``"mypkg.measures:MyTTC"``.
+    params : mapping, optional
+        The measure's ``params`` from a scenario, validated by its params model.
+    allow_import : bool, default=False
+        Whether an import path may be imported.
+    **context
+        The caller's arguments (``n_rays``, ``device``, ...), passed as they are.
 
     Raises
     ------
-    KeyError
-        If ``name`` is not registered; the message lists the known names.
+    avrisk.registry.ComponentError
+        If ``name`` is unknown (also a ``KeyError``; the message lists the
+        known names), cannot be imported, or ``params`` do not validate; see
+        :meth:`avrisk.registry.Registry.build`.
     """
-    return _MEASURES.build(name, **kwargs)
+    return _MEASURES.build(name, params, allow_import=allow_import, **context)
 
 
 register_safety_measure("min_ttc", MinTTC)

@@ -1,6 +1,8 @@
 """Scenario sampler: the YAML spec, the base distribution ``P0`` and named ``X``.
 
-* :func:`load_spec` -- read and validate a scenario (a file or a bundled name);
+* :func:`load_spec` -- read and validate a scenario (a file or a bundled name)
+  into a :class:`ScenarioSpec` (:mod:`avrisk.scenario.spec`; its parts in
+  :mod:`~avrisk.scenario.scene` and :mod:`~avrisk.scenario.components`);
 * :func:`build_base_distribution` -- ``P0`` as an :class:`avrisk.rare.Product`
   (:func:`xi_base_family`: its learned-driver block);
 * :class:`ParamLayout`, :class:`ScenarioParams` -- flat ``X`` (B, D) <-> named
@@ -14,16 +16,16 @@ from avrisk.scenario.base_distribution import (
     marginal_family,
     xi_base_family,
 )
-from avrisk.scenario.params import FIELD_UNITS, ParamLayout, ScenarioParams
-from avrisk.scenario.spec import (
+from avrisk.scenario.errors import ScenarioSpecError
+from avrisk.scenario.loading import (
     MAX_SPEC_BYTES,
-    VEHICLE_FIELDS,
-    ScenarioSpec,
-    ScenarioSpecError,
     bundled_scenarios,
     load_spec,
     spec_from_dict,
 )
+from avrisk.scenario.params import FIELD_UNITS, ParamLayout, ScenarioParams
+from avrisk.scenario.scene import VEHICLE_FIELDS
+from avrisk.scenario.spec import ScenarioSpec
 
 __all__ = [
     "FIELD_UNITS",

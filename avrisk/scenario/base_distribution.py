@@ -24,7 +24,8 @@ from typing import TYPE_CHECKING, Literal
 
 from avrisk.rare import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
 from avrisk.scenario.params import ParamLayout
-from avrisk.scenario.spec import VEHICLE_FIELDS, MarginalSpec, ScenarioSpec
+from avrisk.scenario.scene import VEHICLE_FIELDS, MarginalSpec
+from avrisk.scenario.spec import ScenarioSpec
 
 if TYPE_CHECKING:
     from avrisk.agents.drivers.store import XiPrior
@@ -70,7 +71,7 @@ def xi_base_family(
         ``max_shift`` in the units of ``xi``, or in prior standard deviations
         ``sqrt(diag Sigma0)`` of each coordinate (one box that is equally
         tight for every coordinate; see
-        :class:`~avrisk.scenario.spec.LearnedDriversSpec`).
+        :class:`~avrisk.scenario.components.LearnedDriversSpec`).
 
     Returns
     -------

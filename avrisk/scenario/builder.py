@@ -39,8 +39,9 @@ from avrisk.agents import (
 )
 from avrisk.agents.drivers import DriverNet, load_driver_net
 from avrisk.safety import SafetyMeasure, get_safety_measure
+from avrisk.scenario.components import IDM_MOBIL
 from avrisk.scenario.params import ParamLayout, ScenarioParams
-from avrisk.scenario.spec import IDM_MOBIL, ScenarioSpec
+from avrisk.scenario.spec import ScenarioSpec
 from avrisk.sim.road import Road
 from avrisk.sim.simulator import RolloutResult, SimConfig, Simulator
 from avrisk.sim.state import VehicleState
@@ -173,7 +174,7 @@ def driver_params(
     -------
     IDMParams
         Each field a tensor of shape (B, A) in the units of
-        :class:`~avrisk.scenario.spec.IDMSpec`; a learned driver's slot holds
+        :class:`~avrisk.scenario.components.IDMSpec`; a learned driver's slot holds
         the defaults (MOBIL's model of it), as does the slot of an ego that is
         not ``idm_mobil``.
     """

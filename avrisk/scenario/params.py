@@ -31,7 +31,8 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from avrisk.scenario.spec import VEHICLE_FIELDS, ScenarioSpec
+from avrisk.scenario.scene import VEHICLE_FIELDS
+from avrisk.scenario.spec import ScenarioSpec
 
 FloatArray = NDArray[np.float64]
 

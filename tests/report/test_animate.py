@@ -10,7 +10,7 @@ from avrisk.report.animate import (
     box_corners,
     save_frame_png,
 )
-from avrisk.scenario.spec import RoadSpec
+from avrisk.scenario.scene import RoadSpec
 
 
 def _trace(n_steps: int = 12, crashed: bool = False, label: str = "") -> RolloutTrace:
