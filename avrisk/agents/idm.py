@@ -33,7 +33,7 @@ Lateral: HighwayEnv's cascade [3]_ -- lateral position error to lateral speed
 the inverse kinematic bicycle.
 
 IDM is deterministic: it uses no randomness (the simulator still hands every
-policy its rollout seeds for counter-based noise; see :mod:`avrisk.sim.noise`).
+policy its rollout seeds for counter-based noise; see :mod:`avrisk.tensors.noise`).
 
 References
 ----------
@@ -56,10 +56,10 @@ from torch import Tensor
 
 from avrisk.agents.policy import Action, register_policy
 from avrisk.sim.geometry import min_argmin
-from avrisk.sim.mathops import asin, atan, sqrt, wrap_angle
 from avrisk.sim.observation import Observation
 from avrisk.sim.road import Road
-from avrisk.sim.tensors import TensorDataclass
+from avrisk.tensors.mathops import asin, atan, sqrt, wrap_angle
+from avrisk.tensors.tensors import TensorDataclass
 
 __all__ = [
     "ACC_MAX",

@@ -21,7 +21,7 @@ dataclass of tensors). Two roles:
 
 Contract: a rollout's actions must depend only on that rollout's rows of
 ``obs`` and ``policy_state`` (and its seed): only elementwise work along the
-batch dimension, randomness from :mod:`avrisk.sim.noise`. That is what keeps a
+batch dimension, randomness from :mod:`avrisk.tensors.noise`. That is what keeps a
 rollout's result independent of the batch it shares.
 
 Lidar on demand: scanning every vehicle's lidar is the simulator's costliest
@@ -42,7 +42,7 @@ from torch import Tensor
 
 from avrisk.registry import Registry
 from avrisk.sim.observation import Observation
-from avrisk.sim.tensors import TensorDataclass
+from avrisk.tensors.tensors import TensorDataclass
 
 __all__ = [
     "Action",

@@ -4,7 +4,7 @@ Leaf modules (import them directly): :mod:`~avrisk.sim.road`,
 :mod:`~avrisk.sim.state`, :mod:`~avrisk.sim.geometry`,
 :mod:`~avrisk.sim.dynamics`, :mod:`~avrisk.sim.lidar`,
 :mod:`~avrisk.sim.collision`, :mod:`~avrisk.sim.observation`,
-:mod:`~avrisk.sim.noise`, :mod:`~avrisk.sim.mathops`. The simulator itself,
+:mod:`~avrisk.tensors.noise`, :mod:`~avrisk.tensors.mathops`. The simulator itself,
 :mod:`~avrisk.sim.simulator`, builds on :mod:`avrisk.agents` and
 :mod:`avrisk.safety`; its names are loaded on first access so that those
 packages can import the leaf modules without a cycle.

@@ -8,10 +8,10 @@ import torch
 from torch import Tensor
 
 from avrisk.sim.lidar import LidarScan
-from avrisk.sim.mathops import wrap_angle
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
-from avrisk.sim.tensors import TensorDataclass
+from avrisk.tensors.mathops import wrap_angle
+from avrisk.tensors.tensors import TensorDataclass
 
 __all__ = ["LaneFeatures", "Observation", "lane_features"]
 
@@ -105,7 +105,7 @@ class Observation:
     reversing : Tensor of bool, shape (B, A)
         The vehicle moves against the road direction now.
     seeds : Tensor of int64, shape (B,)
-        Per-rollout seeds, for counter-based noise (:mod:`avrisk.sim.noise`).
+        Per-rollout seeds, for counter-based noise (:mod:`avrisk.tensors.noise`).
     step : int
         Index ``t`` of this step; the action applies from ``t`` to ``t + 1``.
     dt : float

@@ -26,7 +26,7 @@ seed. Every operation is elementwise along the batch dimension or reduces over
 vehicles and rays within one rollout (``min``/``max``, which are exact), and
 every floating-point operation is one that IEEE 754 rounds correctly (``+ - *
 /``, a correctly rounded square root, and trigonometry built from those in
-:mod:`avrisk.sim.mathops`). So results are bit-identical alone, in any batch,
+:mod:`avrisk.tensors.mathops`). So results are bit-identical alone, in any batch,
 in any order, in eager mode and under ``torch.compile``, and should be on any
 device (float32; the tests check all but the device). The loop ends early once
 every rollout of the batch has stopped; eager ray casting goes through large

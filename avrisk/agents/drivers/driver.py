@@ -4,7 +4,7 @@
 vehicle of rollout ``b`` is driven by the network with last layer ``xi[b]``
 (one draw of ``xi ~ N(mu0, Sigma0)`` per rollout, DESIGN.md §2). Actions are
 sampled from the network's Gaussians with counter-based noise
-(:mod:`avrisk.sim.noise`), a pure function of the rollout's seed, the step,
+(:mod:`avrisk.tensors.noise`), a pure function of the rollout's seed, the step,
 the vehicle and the action, so a rollout gets the same noise alone or in any
 batch. :class:`LearnedEgoPolicy` drives vehicle 0 with the same network (the
 paper's non-vision ego, DESIGN.md §5), by default with its mean action.
@@ -46,8 +46,8 @@ from avrisk.agents.drivers.features import features_from_observation
 from avrisk.agents.drivers.network import ActionDistribution, DriverNet
 from avrisk.agents.drivers.xi import XI_DIM
 from avrisk.agents.policy import Action, register_policy
-from avrisk.sim.noise import normal
 from avrisk.sim.observation import Observation
+from avrisk.tensors.noise import normal
 
 __all__ = [
     "DRIVER_NOISE_STREAM",
@@ -59,7 +59,7 @@ __all__ = [
     "sample_actions",
 ]
 
-#: Counter-based noise stream of the environment drivers (:mod:`avrisk.sim.noise`).
+#: Counter-based noise stream of the environment drivers (:mod:`avrisk.tensors.noise`).
 DRIVER_NOISE_STREAM = 0x4C44  # "LD"
 #: Noise stream of the learned ego (distinct from the drivers').
 EGO_NOISE_STREAM = 0x4C45
@@ -81,7 +81,7 @@ def reproducible_exp(x: Tensor) -> Tensor:
 
     ``torch.exp`` may round an element differently depending on where it sits
     in a tensor (vectorised body or scalar tail); this function, like
-    :mod:`avrisk.sim.mathops`, uses only ``+ - * /``, ``round`` and an exact
+    :mod:`avrisk.tensors.mathops`, uses only ``+ - * /``, ``round`` and an exact
     power of two, so it does not (Cephes ``expf``: a few ulp in float32).
 
     Parameters

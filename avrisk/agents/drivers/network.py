@@ -53,8 +53,8 @@ from avrisk.agents.drivers.xi import (
     pack_xi,
     unpack_xi,
 )
-from avrisk.sim.mathops import log
-from avrisk.sim.tensors import TensorDataclass
+from avrisk.tensors.mathops import log
+from avrisk.tensors.tensors import TensorDataclass
 
 __all__ = [
     "FORMAT_VERSION",
