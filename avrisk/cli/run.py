@@ -17,16 +17,17 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
+from avrisk.assembly import SimulationObjective, base_distribution
 from avrisk.cli.app import app
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
 from avrisk.cli.progress import RichRunMonitor
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
-from avrisk.pipeline.objective import SimulationObjective
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.cross_entropy import SELECTION_RULES
+from avrisk.report.animate import animate_samples
 from avrisk.report.html import write_report
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
-from avrisk.scenario import ScenarioSpecError, build_base_distribution, load_spec
+from avrisk.scenario import ScenarioSpecError, load_spec
 from avrisk.scenario.spec import spec_from_dict
 
 EXPECTED = (ScenarioSpecError, RunDirectoryError, InvalidOutputError)
@@ -91,7 +92,7 @@ def _execute(
     settings: RunSettings,
 ) -> RunDirectory:
     run_dir = RunDirectory(out, objective.layout.columns)
-    base = build_base_distribution(objective.simulator.spec)
+    base = base_distribution(objective.simulator.spec)
     with RichRunMonitor(err_console, label) as monitor:
         run_estimation(
             run_dir,
@@ -146,7 +147,7 @@ def _report(
         failures_from=failures_from,
         n_failures=failures,
         param_names=objective.layout.columns,
-        animate=lambda row, p: objective.animate([row], p),
+        animate=lambda row, p: animate_samples(objective.simulator, [row], p),
     )
     err_console.print(f"report: {path}")
     return path

@@ -37,7 +37,6 @@ from avrisk.agents.drivers.features import (
 )
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.idm import IDMDriver, IDMState
-from avrisk.agents.policy import Action
 from avrisk.learning.demonstrations import (
     SOURCE_IDM,
     Demonstrations,
@@ -47,20 +46,22 @@ from avrisk.learning.demonstrations import (
 )
 from avrisk.learning.replay import CarFollowingWindows, replay
 from avrisk.sim import Road
+from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
 __all__ = ["ExpertLabeller", "dagger_demonstrations", "replay_dagger_demonstrations"]
 
 
 class ExpertLabeller:
-    """A driver model: learners act, the expert's actions are recorded.
+    """An actor of every vehicle: learners act, the expert's actions are recorded.
 
     Parameters
     ----------
-    learner : DriverModel
+    learner : Actor
         Drives the students (its actions go to the simulator).
     expert : IDMDriver
-        Labels the students' states and drives everyone else.
+        Labels the students' states and drives everyone else (it controls
+        every vehicle).
     student : Tensor of bool, shape (B, A)
         Vehicles driven by the learner (and recorded).
     every : int, default=2
@@ -72,6 +73,8 @@ class ExpertLabeller:
     ) -> None:
         self.learner = learner
         self.expert = expert
+        self.controlled = expert.controlled
+        self.noise = learner.noise
         self.student = student
         self.every = every
         self.features: list[NDArray[np.float32]] = []
@@ -79,15 +82,17 @@ class ExpertLabeller:
         self.steer: list[NDArray[np.float32]] = []
         self.usable: list[NDArray[np.bool_]] = []
 
-    def init(self, obs: Observation) -> tuple[Any, IDMState]:
-        """Both models' initial states."""
-        return self.learner.init(obs), self.expert.init(obs)
+    def init(self, obs: Observation, params: Any) -> tuple[Any, IDMState]:
+        """Both models' initial states (``params`` are the learner's)."""
+        return self.learner.init(obs, params), self.expert.init(obs, None)
 
-    def act(self, obs: Observation, state: tuple[Any, IDMState]) -> tuple[Action, Any]:
+    def act(
+        self, obs: Observation, state: tuple[Any, IDMState], noise: Any
+    ) -> tuple[Action, Any]:
         """Students follow the learner, others the expert; labels are stored."""
         learner_state, expert_state = state
-        mine, learner_state = self.learner.act(obs, learner_state)
-        label, expert_state = self.expert.act(obs, expert_state)
+        mine, learner_state = self.learner.act(obs, learner_state, noise)
+        label, expert_state = self.expert.act(obs, expert_state, None)
         action = Action(
             accel=torch.where(self.student, mine.accel, label.accel),
             steer=torch.where(self.student, mine.steer, label.steer),
@@ -193,14 +198,15 @@ def dagger_demonstrations(
         b = min(batch, n_rollouts - start)
         initial, params = random_highway_scenes(b, n_vehicles, road, rng)
         params, student = split_students(params, rng)
-        learner = LearnedDriver(net, xi, stochastic=stochastic)
+        everyone = torch.ones(n_vehicles, dtype=torch.bool)
+        learner = LearnedDriver(net, xi, controlled=everyone, stochastic=stochastic)
         rec = ExpertLabeller(
             learner, IDMDriver(params, road), torch.as_tensor(student), every=every
         )
         seeds = torch.as_tensor(
             seed * 1_000_003 + start + np.arange(b), dtype=torch.int64
         )
-        sim.run(initial, rec, seeds)
+        sim.run(initial, [rec], seeds)
         first = episode_offset + start * n_vehicles
         parts.append(rec.demonstrations(accel_weight, first))
     return Demonstrations.concat(parts)
@@ -256,7 +262,8 @@ def replay_dagger_demonstrations(
     params, _ = split_students(params, rng, fraction=1.0)  # nobody changes lanes
     student = torch.zeros(n, 2, dtype=torch.bool)
     student[:, 0] = True
-    learner = LearnedDriver(net, stochastic=stochastic)
+    everyone = torch.ones(2, dtype=torch.bool)
+    learner = LearnedDriver(net, controlled=everyone, stochastic=stochastic)
     rec = ExpertLabeller(learner, IDMDriver(params, road), student, every=every)
     replay(windows, rec, road, seed=seed)
     return rec.demonstrations(accel_weight, episode_offset)

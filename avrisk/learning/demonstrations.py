@@ -61,14 +61,15 @@ from avrisk.agents.drivers.features import (
     features_from_observation,
 )
 from avrisk.agents.idm import IDMDriver, IDMParams
-from avrisk.agents.policy import Action
 from avrisk.learning.ngsim import (
     I80_N_LANES,
     CarFollowingPairs,
     LateralPairs,
     episode_bounds,
 )
+from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
+from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
 __all__ = [
@@ -201,10 +202,8 @@ def observing_simulator(road: Road, horizon: float = SimConfig.horizon) -> Simul
     ``N_BEAMS`` beams of ``LIDAR_RANGE`` m, as the features expect; one TTC ray,
     since demonstrations never read the safety measure. ``horizon`` in s.
     """
-    config = SimConfig(
-        horizon=horizon, n_lidar_beams=N_BEAMS, lidar_range=LIDAR_RANGE, n_ttc_rays=1
-    )
-    return Simulator(road, config)
+    config = SimConfig(horizon=horizon, n_lidar_beams=N_BEAMS, lidar_range=LIDAR_RANGE)
+    return Simulator(road, config, measure=MinTTC(n_rays=1))
 
 
 def car_following_features(
@@ -577,33 +576,36 @@ def lateral_pair_demonstrations(
 
 
 class RecordingDriver:
-    """A driver model that records what an inner driver sees and does.
+    """An actor that records what an inner actor sees and does.
 
     Every ``every`` steps it stores the driver features of all vehicles, their
     actions and their ``collided`` flags (numpy, on the CPU).
 
     Parameters
     ----------
-    inner : DriverModel
+    inner : Actor
+        Controls every vehicle.
     every : int, default=1
         Record every this many steps.
     """
 
     def __init__(self, inner: Any, every: int = 1) -> None:
         self.inner = inner
+        self.controlled = inner.controlled
+        self.noise = inner.noise
         self.every = every
         self.features: list[NDArray[np.float32]] = []
         self.accel: list[NDArray[np.float32]] = []
         self.steer: list[NDArray[np.float32]] = []
         self.usable: list[NDArray[np.bool_]] = []
 
-    def init(self, obs: Observation) -> Any:
+    def init(self, obs: Observation, params: Any) -> Any:
         """The inner driver's initial state."""
-        return self.inner.init(obs)
+        return self.inner.init(obs, params)
 
-    def act(self, obs: Observation, state: Any) -> tuple[Action, Any]:
+    def act(self, obs: Observation, state: Any, noise: Any) -> tuple[Action, Any]:
         """The inner driver's action, recorded."""
-        action, state = self.inner.act(obs, state)
+        action, state = self.inner.act(obs, state, noise)
         if obs.step % self.every == 0:
             self.features.append(features_from_observation(obs).float().cpu().numpy())
             self.accel.append(action.accel.float().cpu().numpy())
@@ -770,7 +772,7 @@ def simulated_demonstrations(
         initial, params = random_highway_scenes(b, n_vehicles, road, rng)
         params, student = split_students(params, rng)
         rec = RecordingDriver(IDMDriver(params, road), every=every)
-        sim.run(initial, rec, torch.arange(start, start + b, dtype=torch.int64))
+        sim.run(initial, [rec], torch.arange(start, start + b, dtype=torch.int64))
         feats = np.stack(rec.features, 1)  # (b, T', A, F)
         usable = np.stack(rec.usable, 1) & student[:, None, :]
         ids = (
