@@ -1,4 +1,4 @@
-"""What a policy sees at one step: privileged state, lidar, lane features, flags."""
+"""What an actor sees at one step: privileged state, lidar, lane features, flags."""
 
 from __future__ import annotations
 
@@ -82,10 +82,11 @@ def lane_features(state: VehicleState, road: Road) -> LaneFeatures:
 
 @dataclass(frozen=True)
 class Observation:
-    """Everything a policy may use at one step, for every vehicle.
+    """Everything an actor may use at one step, for every vehicle.
 
     An ego policy reads vehicle 0's rows (``lidar.range[:, 0]``, ...) and may
-    use the rest as privileged information; a driver model acts for all.
+    use the rest as privileged information; a driver reads the rows of the
+    vehicles it controls.
 
     Attributes
     ----------
@@ -93,9 +94,8 @@ class Observation:
         Privileged ground truth, fields of shape (B, A).
     lidar : LidarScan or None
         Each vehicle's lidar, fields of shape (B, A, R); None when the
-        simulator runs without lidar (``n_lidar_beams = 0``) or when neither
-        the drivers nor the ego read it (``reads_lidar = False``, see
-        :mod:`avrisk.agents.policy`).
+        simulator runs without lidar (``n_lidar_beams = 0``) or when no actor
+        reads it (``reads_lidar = False``, see :mod:`avrisk.sim.interfaces`).
     lane : LaneFeatures
         Fields of shape (B, A).
     collided : Tensor of bool, shape (B, A)
