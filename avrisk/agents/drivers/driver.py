@@ -246,6 +246,9 @@ class LearnedDriver:
         otherwise back cars up).
     """
 
+    #: The features include every vehicle's lidar.
+    reads_lidar = True
+
     def __init__(
         self,
         net: DriverNet,
@@ -320,6 +323,9 @@ class LearnedEgoPolicy:
     allow_reverse : bool, default=False
         See :class:`LearnedDriver`.
     """
+
+    #: The features include the ego's lidar.
+    reads_lidar = True
 
     def __init__(
         self,

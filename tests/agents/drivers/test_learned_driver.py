@@ -14,7 +14,7 @@ from avrisk.agents.drivers.xi import XI_DIM
 from avrisk.agents.policy import get_policy
 from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
-from avrisk.sim.interfaces import NoiseRequest
+from avrisk.sim.interfaces import Actor, NoiseRequest
 from avrisk.tensors.noise import normal
 
 ROAD = Road(n_lanes=3)
@@ -75,6 +75,7 @@ def test_a_rollout_is_bit_identical_alone_and_in_a_batch(net, stochastic):
 
 def test_the_drivers_ask_the_simulator_for_noise_only_when_they_sample(net):
     driver = LearnedDriver(net, controlled=ALL3)
+    assert isinstance(driver, Actor) and isinstance(LearnedEgoPolicy(net, 3), Actor)
     assert driver.noise == NoiseRequest(DRIVER_NOISE_STREAM, (3, 2), torch.float32)
     assert LearnedDriver(net, controlled=ALL3, stochastic=False).noise is None
     ego = LearnedEgoPolicy(net, 3, stochastic=True)
