@@ -4,10 +4,15 @@ The package is split the way the data flows (see ``DESIGN.md``):
 
 * :mod:`avrisk.rare` -- the estimation engine. It knows nothing of cars: it
   sees a base distribution and a batched black-box function ``f``.
-* :mod:`avrisk.sim`, :mod:`avrisk.safety` -- the batched highway simulator and
-  the safety measure (minimum time-to-collision). They know nothing of
-  estimators.
-* :mod:`avrisk.scenario` -- the scenario spec and its base distribution ``P0``.
+* :mod:`avrisk.sim` -- the batched highway simulator. It owns the interfaces
+  that plug into it (actors, the safety measure) and knows nothing of
+  estimators; :mod:`avrisk.tensors` holds the tensor helpers it shares.
+* :mod:`avrisk.agents`, :mod:`avrisk.safety` -- the actors (drivers, ego
+  policies) and the safety measures (minimum time-to-collision).
+* :mod:`avrisk.scenario` -- the scenario spec and its base distribution ``P0``,
+  as data.
+* :mod:`avrisk.assembly` -- a scenario built into a simulator, its actors and
+  its measure: the estimator's black box.
 * :mod:`avrisk.cli` -- the ``avrisk`` command.
 """
 

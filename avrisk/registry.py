@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import difflib
 import importlib
+import inspect
 import re
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -260,9 +261,11 @@ class Registry:
         allow_import : bool, default=False
             Whether an import path may be imported.
         **context
-            The caller's own arguments (a network, a device), passed as they
-            are; they override the params model's defaults, and a key may not
-            also be given in ``params``.
+            What avrisk offers every component of this kind (a network, the
+            number of vehicles, a device): the factory receives those its
+            signature names (all of them if it takes ``**kwargs``), as they
+            are; they override the params model's defaults, and a key it
+            receives may not also be given in ``params``.
 
         Returns
         -------
@@ -290,6 +293,7 @@ class Registry:
                 "(or an import path 'package.module:attribute')"
             )
         params = params or {}
+        context = _accepted(factory, context)
         clash = sorted(params.keys() & context.keys())
         if clash:
             raise ComponentError(
@@ -298,6 +302,17 @@ class Registry:
             )
         kwargs = _validate_params(f"{self.kind} {name!r}", model, params)
         return factory(**(kwargs | context))
+
+
+def _accepted(factory: Callable[..., Any], context: dict[str, Any]) -> dict[str, Any]:
+    """The part of ``context`` that ``factory``'s signature takes."""
+    try:
+        parameters = inspect.signature(factory).parameters
+    except (TypeError, ValueError):  # no signature to read: offer everything
+        return context
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()):
+        return context
+    return {k: v for k, v in context.items() if k in parameters}
 
 
 def _declared_params(factory: Callable[..., Any]) -> type[BaseModel] | None:

@@ -39,10 +39,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from avrisk.assembly import SimulationObjective, base_distribution
 from avrisk.pipeline import RunDirectory
-from avrisk.pipeline.objective import SimulationObjective
 from avrisk.rare import cross_entropy, naive_mc
-from avrisk.scenario import build_base_distribution, load_spec
+from avrisk.scenario import load_spec
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> None:
 
     spec = load_spec(args.scenario)
     objective = SimulationObjective(spec)
-    base = build_base_distribution(spec)
+    base = base_distribution(spec)
     gamma_test = tuple(float(g) for g in args.gamma_test.split(","))
     gammas = (args.gamma, *gamma_test)
     if not (args.reference / "config.json").exists():

@@ -29,15 +29,11 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from avrisk.assembly import ScenarioSimulator, base_distribution, param_layout
 from avrisk.rare import Product, ScaledBeta, cross_entropy, naive_mc
 from avrisk.rare.final_stage import importance_estimates
 from avrisk.rare.problem import chunk_rng, sample_seeds
-from avrisk.scenario import (
-    ParamLayout,
-    build_base_distribution,
-    load_spec,
-)
-from avrisk.scenario.builder import ScenarioSimulator
+from avrisk.scenario import ParamLayout, load_spec
 
 GAMMAS = (0.1, 0.2, 0.3)
 
@@ -128,7 +124,7 @@ def main(argv: list[str] | None = None) -> None:
         torch.set_num_threads(args.threads)
     spec = load_spec(args.scenario)
     sim = ScenarioSimulator(spec)
-    p0 = build_base_distribution(spec)
+    p0 = base_distribution(spec)
     rows, record = [], {"scenario": spec.name, "command": " ".join(sys.argv)}
 
     naive_f = None
@@ -154,7 +150,7 @@ def main(argv: list[str] | None = None) -> None:
         # Defensive mixture (Hesterberg 1995): half the rollouts from P0, half
         # from the corner proposal q, all weighted by p0 / (p0/2 + q/2) <= 2, so
         # mechanisms outside the corner are still estimated without blow-ups.
-        layout = ParamLayout.from_spec(spec)
+        layout = param_layout(spec)
         q = shifted_proposal(p0, layout, CORNER_SHIFT)
         half = args.shifted // 2
         x = np.concatenate(

@@ -63,6 +63,7 @@ from avrisk.learning.replay import (
     replay,
 )
 from avrisk.learning.simulated_demonstrations import random_highway_scenes
+from avrisk.safety import MinTTC
 from avrisk.scenario import xi_base_family
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 from avrisk.sim.collision import pairwise_overlap
@@ -149,20 +150,24 @@ def fmt_q(x: np.ndarray) -> str:
     return f"{q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f}"
 
 
-def learned_drivers(net, fam, n: int, rng) -> dict[str, Any]:
+def learned_drivers(net, fam, n: int, rng, n_vehicles: int) -> dict[str, Any]:
     """The learned drivers compared: at mu0, and with xi ~ P0 per rollout.
 
-    The last one acts on its mean actions, as in the bundled default scenario
-    (``learned_drivers: {actions: mean}``); the others sample, as in the paper.
+    Each drives all ``n_vehicles``. The last one acts on its mean actions, as in
+    the bundled default scenario (``learned_drivers: {actions: mean}``); the
+    others sample, as in the paper.
     """
+    every = torch.ones(n_vehicles, dtype=torch.bool)
     if fam is None:
-        return {"learned (own head)": LearnedDriver(net)}
+        return {"learned (own head)": LearnedDriver(net, controlled=every)}
     xi_draw = torch.as_tensor(fam.sample(n, rng), dtype=torch.float32)
     mu0 = torch.as_tensor(fam.mean, dtype=torch.float32)
     return {
-        "learned mu0": LearnedDriver(net, mu0),
-        "learned xi~P0": LearnedDriver(net, xi_draw),
-        "learned xi~P0, mean actions": LearnedDriver(net, xi_draw, stochastic=False),
+        "learned mu0": LearnedDriver(net, mu0, controlled=every),
+        "learned xi~P0": LearnedDriver(net, xi_draw, controlled=every),
+        "learned xi~P0, mean actions": LearnedDriver(
+            net, xi_draw, controlled=every, stochastic=False
+        ),
     }
 
 
@@ -184,7 +189,7 @@ def part_a(net, fam, n_steps: int, seed: int) -> tuple[str, dict, dict]:
         "offset": win.offset[win.has_lateral].ravel(),
         "hard": hard_brake_events(ha_full, h_ok) / hours,
     }
-    drivers = learned_drivers(net, fam, n, np.random.default_rng(seed))
+    drivers = learned_drivers(net, fam, n, np.random.default_rng(seed), 2)
     # Car following only: MOBIL would overtake the replayed leader.
     drivers["IDM"] = IDMDriver(
         IDMParams.full((n, 2), **{**IDM_NORMAL, "lane_change_threshold": 1e3}),
@@ -354,14 +359,14 @@ def part_b(net, fam, n_scenes: int, seed: int, horizon: float) -> str:
     rng = np.random.default_rng(seed)
     a_veh = 6
     init, params = random_highway_scenes(n_scenes, a_veh, road, rng)
-    drivers = learned_drivers(net, fam, n_scenes, rng)
+    drivers = learned_drivers(net, fam, n_scenes, rng, a_veh)
     drivers["IDM+MOBIL"] = IDMDriver(params, road)
     human = us101_reference()
-    sim = Simulator(road, SimConfig(horizon=horizon, n_ttc_rays=1))
+    sim = Simulator(road, SimConfig(horizon=horizon), measure=MinTTC(n_rays=1))
     results = {}
     for name, drv in drivers.items():
         res = sim.run(
-            init, drv, torch.arange(n_scenes, dtype=torch.int64), record_trace=True
+            init, [drv], torch.arange(n_scenes, dtype=torch.int64), record_trace=True
         )
         tr = res.trace
         alive = tr.alive.numpy()[:, :, None].repeat(a_veh, 2)  # (B, T+1, A)
@@ -447,28 +452,30 @@ def part_b(net, fam, n_scenes: int, seed: int, horizon: float) -> str:
 def part_c(net, fam, n: int, seed: int) -> str:
     """The bundled scenario with learned environment drivers (ego: IDM+MOBIL)."""
     from avrisk.agents.idm import IDMPolicy
-    from avrisk.scenario import build_base_distribution, load_spec
-    from avrisk.scenario.builder import (
+    from avrisk.assembly.builder import (
         ScenarioSimulator,
+        base_distribution,
         driver_params,
         initial_state,
     )
-    from avrisk.scenario.params import ParamLayout, ScenarioParams
+    from avrisk.scenario import load_spec
+    from avrisk.scenario.params import ScenarioParams
 
     spec = load_spec("highway_idm")
     ss = ScenarioSimulator(spec)
     rng = np.random.default_rng(seed)
-    x = build_base_distribution(spec).sample(n, rng)
-    params = ScenarioParams.from_flat(x, ParamLayout.from_spec(spec))
+    x = base_distribution(spec).sample(n, rng)
+    params = ScenarioParams.from_flat(x, ss.layout)
     state = initial_state(params, spec)
     idm = driver_params(spec, n)
     seeds = torch.arange(n, dtype=torch.int64)
     ego = IDMPolicy(idm, ss.road)
-    drivers = learned_drivers(net, fam, n, rng)
+    drivers = learned_drivers(net, fam, n, rng, spec.n_vehicles)
     rows = {}
     for name, drv in drivers.items():
-        rows[name] = ss.simulator.run(state, drv, seeds, ego_policy=ego)
-    rows["IDM+MOBIL (bundled)"] = ss.simulator.rollout(state, idm, seeds)
+        rows[name] = ss.simulator.run(state, [drv, ego], seeds)
+    bundled = IDMDriver(idm, ss.road)
+    rows["IDM+MOBIL (bundled)"] = ss.simulator.run(state, [bundled], seeds)
     lines = [
         f"**C. Bundled scenario `highway_idm`** ({n} draws of the initial "
         "conditions from P0; ego IDM+MOBIL; environment drivers as named)",

@@ -82,12 +82,14 @@ def human_samples(win) -> dict:
 def drivers(bc, gail, fam_bc, fam_gail, n: int, seed: int) -> dict:
     """BC and BC+GAIL at mu0 and with the same standard draws of xi ~ P0."""
     out = {}
+    both = torch.ones(2, dtype=torch.bool)  # follower and leader of a replay
     for tag, net, fam in (("BC", bc, fam_bc), ("BC+GAIL", gail, fam_gail)):
         xi = torch.as_tensor(
             fam.sample(n, np.random.default_rng(seed)), dtype=torch.float32
         )
-        out[f"{tag} mu0"] = LearnedDriver(net, torch.as_tensor(fam.mean).float())
-        out[f"{tag} xi~P0"] = LearnedDriver(net, xi)
+        mu0 = torch.as_tensor(fam.mean).float()
+        out[f"{tag} mu0"] = LearnedDriver(net, mu0, controlled=both)
+        out[f"{tag} xi~P0"] = LearnedDriver(net, xi, controlled=both)
     return out
 
 

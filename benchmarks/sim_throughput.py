@@ -70,16 +70,16 @@ def worker_avrisk(
 ) -> dict:
     """Time rollouts of ``batch_size`` scenarios; returns a JSON-able dict."""
     _set_one_thread()
+    from avrisk.assembly import ScenarioSimulator, base_distribution
     from avrisk.rare.problem import chunk_rng, sample_seeds
-    from avrisk.scenario import build_base_distribution, load_spec, spec_from_dict
-    from avrisk.scenario.builder import ScenarioSimulator
+    from avrisk.scenario import load_spec, spec_from_dict
     from avrisk.sim.simulator import compile_requested
 
     raw = load_spec(scenario).model_dump(mode="json")
     raw["safety"]["measure"] = measure
     spec = spec_from_dict(raw)
     sim = ScenarioSimulator(spec)
-    p0 = build_base_distribution(spec)
+    p0 = base_distribution(spec)
     x = p0.sample(batch_size, chunk_rng(0, 0, 0))
     seeds = sample_seeds(0, 0, np.arange(batch_size))
     # warm up at the timed batch size: first-call costs (allocator, kernels), and

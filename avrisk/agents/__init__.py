@@ -1,33 +1,28 @@
-"""Drivers and ego policies: observations in, actions out.
+"""Drivers and ego policies: actors of the simulator (observations in, actions out).
 
-Importing the package registers every ego policy by name (``"constant"``,
-``"idm_mobil"``, ``"lidar_imitation"``; :func:`get_policy`).
+Each implements :class:`avrisk.sim.interfaces.Actor` for the vehicles it
+controls. Importing the package registers every ego policy by name
+(``"constant"``, ``"idm_mobil"``, ``"lidar_imitation"``; :func:`get_policy`);
+other driver models than IDM+MOBIL and the learned one come by name or import
+path through :func:`get_driver_model`.
 """
 
+from avrisk.agents.driver_models import get_driver_model, register_driver_model
 from avrisk.agents.drivers import LearnedDriver, LearnedEgoPolicy
 from avrisk.agents.idm import IDMDriver, IDMParams, IDMPolicy, IDMState
-from avrisk.agents.mixed import MixedDriver
-from avrisk.agents.policy import (
-    Action,
-    ConstantPolicy,
-    DriverModel,
-    Policy,
-    get_policy,
-    register_policy,
-)
+from avrisk.agents.policy import ConstantPolicy, ego_only, get_policy, register_policy
 
 __all__ = [
-    "Action",
     "ConstantPolicy",
-    "DriverModel",
     "IDMDriver",
     "IDMParams",
     "IDMPolicy",
     "IDMState",
     "LearnedDriver",
     "LearnedEgoPolicy",
-    "MixedDriver",
-    "Policy",
+    "ego_only",
+    "get_driver_model",
     "get_policy",
+    "register_driver_model",
     "register_policy",
 ]

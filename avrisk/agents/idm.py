@@ -3,8 +3,8 @@
 Vectorised over rollouts and vehicles at once: every vehicle of every rollout
 is a driver; there is no Python loop over either. Parameters are per vehicle
 (:class:`IDMParams`, shape (B, A)) so traffic is heterogeneous, and the same
-model drives the environment (:class:`IDMDriver`) or the ego under test
-(:class:`IDMPolicy`).
+model drives the environment (:class:`IDMDriver`, an actor of the simulator
+for the vehicles it controls) or the ego under test (:class:`IDMPolicy`).
 
 Longitudinal: the Intelligent Driver Model [1]_ with bumper-to-bumper gap ``s``
 to the leader and approach rate ``dv = v - v_lead``,
@@ -32,8 +32,7 @@ Lateral: HighwayEnv's cascade [3]_ -- lateral position error to lateral speed
 ``MAX_HEADING_COMMAND``), to yaw rate (``TAU_HEADING``), to steering through
 the inverse kinematic bicycle.
 
-IDM is deterministic: it uses no randomness (the simulator still hands every
-policy its rollout seeds for counter-based noise; see :mod:`avrisk.sim.noise`).
+IDM is deterministic: it asks the simulator for no noise.
 
 References
 ----------
@@ -54,12 +53,13 @@ from typing import Any
 import torch
 from torch import Tensor
 
-from avrisk.agents.policy import Action, register_policy
+from avrisk.agents.policy import ego_only, register_policy
 from avrisk.sim.geometry import min_argmin
-from avrisk.sim.mathops import asin, atan, sqrt, wrap_angle
+from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 from avrisk.sim.road import Road
-from avrisk.sim.tensors import TensorDataclass
+from avrisk.tensors.mathops import asin, atan, sqrt, wrap_angle
+from avrisk.tensors.tensors import TensorDataclass
 
 __all__ = [
     "ACC_MAX",
@@ -301,7 +301,10 @@ def _gather(t: Tensor, index: Tensor) -> Tensor:
 
 
 class IDMDriver:
-    """IDM + MOBIL + lane keeping for every vehicle (a :class:`DriverModel`).
+    """IDM + MOBIL + lane keeping (an actor of the simulator).
+
+    It computes every vehicle's action, shape (B, A); the simulator uses those
+    of the vehicles it ``controlled``.
 
     Parameters
     ----------
@@ -311,16 +314,17 @@ class IDMDriver:
     wheelbase_fraction : float, default=0.6
         Wheelbase over length of the vehicles [-], as in the simulator's
         bicycle model (used by the steering controller).
-    drives : Tensor of bool, shape (A,), optional
-        The vehicles this model drives; default all. The others are driven by
-        another model (:class:`~avrisk.agents.mixed.MixedDriver`): IDM+MOBIL
-        sees them in the lane they are in, never changing lanes, and their
-        actions here are computed but not used. Their ``params`` are how MOBIL
-        predicts their reactions.
+    controlled : Tensor of bool, shape (A,), optional
+        The vehicles this actor drives; default all. The others are driven by
+        another actor: IDM+MOBIL sees them in the lane they are in, never
+        changing lanes. Their ``params`` are how MOBIL predicts their
+        reactions.
     """
 
     #: IDM and MOBIL find leaders and followers from the privileged state.
     reads_lidar = False
+    #: Deterministic.
+    noise = None
 
     def __init__(
         self,
@@ -328,15 +332,21 @@ class IDMDriver:
         road: Road,
         *,
         wheelbase_fraction: float = 0.6,
-        drives: Tensor | None = None,
+        controlled: Tensor | None = None,
     ):
         self.params = params
         self.road = road
         self.wheelbase_fraction = wheelbase_fraction
-        self.drives = drives
+        if controlled is None:
+            device = params.desired_speed.device
+            controlled = torch.ones(params.shape[-1], dtype=torch.bool, device=device)
+        self.controlled = controlled
 
-    def init(self, obs: Observation) -> IDMState:
-        """Every vehicle keeps the lane it starts in, ready to decide."""
+    def init(self, obs: Observation, params: None) -> IDMState:
+        """Every vehicle keeps the lane it starts in, ready to decide.
+
+        The parameters come with the constructor (``params`` must be None).
+        """
         lane = self.road.lane_index(obs.state.y)
         delay = self._delay_steps(obs.dt)
         return IDMState(target_lane=lane, since_change=torch.full_like(lane, delay))
@@ -345,15 +355,15 @@ class IDMDriver:
     def _delay_steps(dt: float) -> int:
         return max(1, round(LANE_CHANGE_DELAY / dt))
 
-    def act(self, obs: Observation, state: IDMState) -> tuple[Action, IDMState]:
+    def act(
+        self, obs: Observation, state: IDMState, noise: None
+    ) -> tuple[Action, IDMState]:
         """Accelerations and steering of all vehicles, shape (B, A), and new memory."""
         s, p, road = obs.state, self.params, self.road
         n = s.n_vehicles
         lane = self.road.lane_index(s.y)
-        target = state.target_lane
-        if self.drives is not None:
-            # Another model's vehicles occupy only their lane (see __init__).
-            target = torch.where(self.drives, target, lane)
+        # Other actors' vehicles occupy only their lane (see __init__).
+        target = torch.where(self.controlled, state.target_lane, lane)
         # Queries per vehicle: own lane, target lane, left lane, right lane.
         query = torch.stack([lane, target, lane + 1, lane - 1], dim=-1)  # (B, A, 4)
 
@@ -445,10 +455,11 @@ class IDMDriver:
 
 
 class IDMPolicy:
-    """IDM + MOBIL as the ego policy (a :class:`~avrisk.agents.policy.Policy`).
+    """IDM + MOBIL as the ego policy: an actor that controls vehicle 0.
 
-    It drives vehicle 0 exactly as :class:`IDMDriver` would, with privileged
-    knowledge of everyone's parameters (for MOBIL's predictions).
+    It drives the ego exactly as an :class:`IDMDriver` of every vehicle would,
+    with privileged knowledge of everyone's parameters (MOBIL predicts every
+    vehicle, the ego's own lane changes included, as IDM+MOBIL).
 
     Parameters
     ----------
@@ -459,20 +470,23 @@ class IDMPolicy:
     """
 
     reads_lidar = False
+    noise = None
 
     def __init__(
         self, params: IDMParams, road: Road, *, wheelbase_fraction: float = 0.6
     ):
         self.driver = IDMDriver(params, road, wheelbase_fraction=wheelbase_fraction)
+        self.controlled = ego_only(params.shape[-1], device=params.desired_speed.device)
 
-    def init(self, obs: Observation) -> IDMState:
+    def init(self, obs: Observation, params: None) -> IDMState:
         """See :meth:`IDMDriver.init`."""
-        return self.driver.init(obs)
+        return self.driver.init(obs, params)
 
-    def act(self, obs: Observation, state: IDMState) -> tuple[Action, IDMState]:
-        """The ego's action, fields of shape (B,)."""
-        action, state = self.driver.act(obs, state)
-        return Action(accel=action.accel[:, 0], steer=action.steer[:, 0]), state
+    def act(
+        self, obs: Observation, state: IDMState, noise: None
+    ) -> tuple[Action, IDMState]:
+        """Every vehicle's IDM+MOBIL action, (B, A); the ego's column counts."""
+        return self.driver.act(obs, state, noise)
 
 
 def _idm_policy_factory(**kwargs: Any) -> IDMPolicy:

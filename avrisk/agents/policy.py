@@ -1,120 +1,52 @@
-"""The ego-policy and driver-model plug-in interfaces.
+"""Ego policies by name, and the constant-command actor.
 
-A policy is a pair of pure functions over tensors (after Waymax's actor core
-and BlackJAX's ``init``/``step``):
+Every driver and ego policy here is an actor of the simulator
+(:class:`avrisk.sim.interfaces.Actor`): it sets the actions of the vehicles it
+``controlled``. An ego policy is an actor that controls vehicle 0 only
+(:func:`ego_only`); it may use everything in the observation: the ego's own
+lidar and lane features (``obs.lidar.range[:, 0]``) as a real vehicle would,
+the full state as privileged information. A neural net, a vision net or a
+client of an external process all fit.
 
-    policy_state = policy.init(obs)
-    action, policy_state = policy.act(obs, policy_state)   # every step
-
-``obs`` is an :class:`~avrisk.sim.observation.Observation` of the whole batch;
-``policy_state`` is whatever the policy needs to remember (None, a tensor, a
-dataclass of tensors). Two roles:
-
-* :class:`Policy` -- the **ego** under test: returns the ego's action, fields
-  of shape (B,). It may use everything in ``obs``: the ego's own lidar and
-  lane features (``obs.lidar.range[:, 0]``) as a real vehicle would, the full
-  state as privileged information. A neural net, a vision net or a client of an
-  external process all fit.
-* :class:`DriverModel` -- the **environment**: returns every vehicle's action,
-  fields of shape (B, A). The simulator overrides column 0 with the ego
-  policy's action when an ego policy is given.
-
-Contract: a rollout's actions must depend only on that rollout's rows of
-``obs`` and ``policy_state`` (and its seed): only elementwise work along the
-batch dimension, randomness from :mod:`avrisk.sim.noise`. That is what keeps a
-rollout's result independent of the batch it shares.
-
-Lidar on demand: scanning every vehicle's lidar is the simulator's costliest
-step. A policy or driver model that never reads ``obs.lidar`` may say so with a
-class attribute ``reads_lidar = False``; when neither the drivers nor the ego
-read it, the simulator skips the scan and ``obs.lidar`` is None. Without the
-attribute a model is assumed to read it (:func:`reads_lidar`).
+Ego policies are registered by name (``"constant"``, ``"idm_mobil"``,
+``"lidar_imitation"``) for scenario files and the command line
+(:func:`get_policy`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
 import torch
 from pydantic import BaseModel, ConfigDict
 from torch import Tensor
 
 from avrisk.registry import Registry
+from avrisk.sim.interfaces import Action, Actor
 from avrisk.sim.observation import Observation
-from avrisk.sim.tensors import TensorDataclass
 
-__all__ = [
-    "Action",
-    "ConstantPolicy",
-    "DriverModel",
-    "Policy",
-    "get_policy",
-    "reads_lidar",
-    "register_policy",
-]
+__all__ = ["ConstantPolicy", "ego_only", "get_policy", "register_policy"]
 
 
-@dataclass(frozen=True)
-class Action(TensorDataclass):
-    """Actuation commands.
-
-    Attributes
-    ----------
-    accel : Tensor of shape (B,) or (B, A)
-        Acceleration along the heading [m/s^2]; the simulator clips it to its
-        physical limits.
-    steer : Tensor of shape (B,) or (B, A)
-        Front-wheel angle [rad], positive turns left; clipped likewise.
-    """
-
-    accel: Tensor  # [B] or [B, A] m/s^2
-    steer: Tensor  # [B] or [B, A] rad
-
-
-@runtime_checkable
-class Policy(Protocol):
-    """The ego policy under test (see module docstring)."""
-
-    def init(self, obs: Observation) -> Any:
-        """Initial policy state for the batch, from the observation at ``t = 0``."""
-        ...
-
-    def act(self, obs: Observation, state: Any) -> tuple[Action, Any]:
-        """The ego's action, fields of shape (B,), and the next policy state."""
-        ...
-
-
-@runtime_checkable
-class DriverModel(Protocol):
-    """The environment's drivers (see module docstring)."""
-
-    def init(self, obs: Observation) -> Any:
-        """Initial driver state for the batch, from the observation at ``t = 0``."""
-        ...
-
-    def act(self, obs: Observation, state: Any) -> tuple[Action, Any]:
-        """Every vehicle's action, fields of shape (B, A), and the next state."""
-        ...
-
-
-def reads_lidar(model: Any) -> bool:
-    """Whether a policy or driver model reads ``obs.lidar`` (default True).
+def ego_only(n_vehicles: int, *, device: str | torch.device = "cpu") -> Tensor:
+    """The ``controlled`` mask of an ego policy: vehicle 0 of ``n_vehicles``.
 
     Examples
     --------
-    >>> reads_lidar(ConstantPolicy()), reads_lidar(object())
-    (False, True)
+    >>> ego_only(3).tolist()
+    [True, False, False]
     """
-    return bool(getattr(model, "reads_lidar", True))
+    return torch.arange(n_vehicles, device=device) == 0
 
 
 class ConstantPolicy:
-    """An ego that holds fixed commands (cruise control, test double).
+    """Vehicles that hold fixed commands (cruise control, test double).
 
     Parameters
     ----------
+    controlled : Tensor of bool, shape (A,)
+        The vehicles it drives (:func:`ego_only` for an ego).
     accel : float, default=0.0
         Acceleration [m/s^2].
     steer : float, default=0.0
@@ -122,9 +54,9 @@ class ConstantPolicy:
 
     Examples
     --------
-    >>> ConstantPolicy(accel=1.0).accel
+    >>> ConstantPolicy(ego_only(2), accel=1.0).accel
     1.0
-    >>> get_policy("constant", {"accel": "-2"}).accel  # from YAML: validated
+    >>> get_policy("constant", {"accel": "-2"}, n_vehicles=2).accel  # YAML: validated
     -2.0
     """
 
@@ -137,18 +69,20 @@ class ConstantPolicy:
         steer: float = 0.0
 
     reads_lidar = False
+    noise = None
 
-    def __init__(self, accel: float = 0.0, steer: float = 0.0) -> None:
+    def __init__(self, controlled: Tensor, accel: float = 0.0, steer: float = 0.0):
+        self.controlled = controlled
         self.accel = accel
         self.steer = steer
 
-    def init(self, obs: Observation) -> None:
-        """No memory."""
+    def init(self, obs: Observation, params: None) -> None:
+        """No memory, no parameters."""
         return None
 
-    def act(self, obs: Observation, state: None) -> tuple[Action, None]:
-        """The fixed commands for every rollout, fields of shape (B,)."""
-        x = obs.state.x[:, 0]
+    def act(self, obs: Observation, state: None, noise: None) -> tuple[Action, None]:
+        """The fixed commands, fields of shape (B, A)."""
+        x = obs.state.x
         return Action(
             accel=torch.full_like(x, self.accel), steer=torch.full_like(x, self.steer)
         ), None
@@ -175,7 +109,7 @@ def get_policy(
     *,
     allow_import: bool = False,
     **context: Any,
-) -> Policy:
+) -> Actor:
     """Build an ego policy by registered name or import path.
 
     Parameters
@@ -199,4 +133,8 @@ def get_policy(
     return _POLICIES.build(name, params, allow_import=allow_import, **context)
 
 
-register_policy("constant", ConstantPolicy)
+def _constant_factory(*, n_vehicles: int, **params: Any) -> ConstantPolicy:
+    return ConstantPolicy(ego_only(n_vehicles), **params)
+
+
+register_policy("constant", _constant_factory, params=ConstantPolicy.Params)

@@ -21,6 +21,7 @@ from typing import Annotated, Any
 import typer
 import yaml
 
+from avrisk.assembly import SimulationObjective
 from avrisk.cli.common import CliError, user_errors
 from avrisk.cli.workflow import (
     EXPECTED,
@@ -33,7 +34,6 @@ from avrisk.cli.workflow import (
     write_run_report,
 )
 from avrisk.pipeline import RunDirectory
-from avrisk.pipeline.objective import SimulationObjective
 from avrisk.rare import estimator_names
 from avrisk.rare.estimator import estimator_class
 from avrisk.scenario import load_spec, spec_from_dict

@@ -34,8 +34,14 @@ from rich.progress import (
 from rich.table import Table
 
 import avrisk
+from avrisk.assembly import (
+    EVENT_COLUMNS,
+    ScenarioSimulator,
+    SimulationObjective,
+    base_distribution,
+    param_layout,
+)
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
-from avrisk.pipeline.objective import EVENT_COLUMNS
 from avrisk.pipeline.store import write_parquet_atomic
 from avrisk.rare import RareEventProblem, StageBatch, run_stage
 from avrisk.rare.problem import FINAL_STAGE
@@ -43,7 +49,6 @@ from avrisk.scenario import (
     ParamLayout,
     ScenarioSpec,
     ScenarioSpecError,
-    build_base_distribution,
     load_spec,
     spec_from_dict,
 )
@@ -109,10 +114,8 @@ def simulate_rollouts(
     -------
     SimulationRun
     """
-    from avrisk.pipeline.objective import SimulationObjective
-
     objective = SimulationObjective(spec, device=device)
-    p0 = build_base_distribution(spec)
+    p0 = base_distribution(spec)
     problem = RareEventProblem(p0, objective, gamma=0.0, batch_size=batch_size)
     batches: list[StageBatch] = []
 
@@ -337,7 +340,7 @@ def replay(
         except (pa.ArrowInvalid, OSError) as exc:
             raise CliError(f"{file}: not a readable Parquet file: {exc}") from None
         spec = load_spec(scenario) if scenario else spec_from_parquet(file)
-        layout = ParamLayout.from_spec(spec)
+        layout = param_layout(spec)
         if (rows is None) == (worst is None):
             raise CliError("give exactly one of --rows i,j,... or --worst K")
         if rows is not None:
@@ -354,8 +357,6 @@ def replay(
         sub = table.take(picked)
         x = np.stack([sub.column(c).to_numpy() for c in layout.columns], axis=1)
         seeds = sub.column("seed").to_numpy()
-        from avrisk.scenario.builder import ScenarioSimulator
-
         sim = ScenarioSimulator(spec)
         result = sim.rollout(x, seeds, record_trace=True)
         labels = [f"row {r}" for r in picked]

@@ -13,15 +13,16 @@ from typing import Any
 from rich.markup import escape
 from rich.table import Table
 
+from avrisk.assembly import SimulationObjective, base_distribution
 from avrisk.cli.common import CliError, err_console, out_console
 from avrisk.cli.progress import RichRunMonitor
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
-from avrisk.pipeline.objective import SimulationObjective
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
+from avrisk.report.animate import animate_samples
 from avrisk.report.html import write_report
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
-from avrisk.scenario import ScenarioSpecError, build_base_distribution, load_spec
+from avrisk.scenario import ScenarioSpecError, load_spec
 
 #: Failures reported as one red line (no traceback).
 EXPECTED = (
@@ -56,7 +57,7 @@ def execute(
 ) -> RunDirectory:
     """Run (or resume, or read back) one estimation into ``out`` with progress."""
     run_dir = RunDirectory(out, objective.layout.columns)
-    base = build_base_distribution(objective.simulator.spec)
+    base = base_distribution(objective.simulator.spec)
     with RichRunMonitor(err_console, label) as monitor:
         run_estimation(
             run_dir,
@@ -123,7 +124,7 @@ def write_run_report(
         failures_from=runs[0][1],
         n_failures=failures,
         param_names=objective.layout.columns,
-        animate=lambda row, p: objective.animate([row], p),
+        animate=lambda row, p: animate_samples(objective.simulator, [row], p),
     )
     err_console.print(f"report: {path}")
     return path

@@ -34,7 +34,6 @@ import torch
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.idm import IDMDriver, IDMState
-from avrisk.agents.policy import Action
 from avrisk.learning.behaviour_cloning import behaviour_cloning
 from avrisk.learning.demonstrations import Demonstrations
 from avrisk.learning.replay import CarFollowingWindows, replay
@@ -46,6 +45,7 @@ from avrisk.learning.simulated_demonstrations import (
 )
 from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
 from avrisk.sim import Road
+from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
 __all__ = [
@@ -61,10 +61,12 @@ class ExpertLabeller(RecordingDriver):
 
     Parameters
     ----------
-    learner : DriverModel
-        Drives the students (its actions go to the simulator).
+    learner : Actor
+        Drives the students (its actions go to the simulator); its noise is
+        the one the simulator draws for this actor.
     expert : IDMDriver
-        Labels the students' states and drives everyone else.
+        Labels the students' states and drives everyone else (it controls
+        every vehicle).
     student : Tensor of bool, shape (B, A)
         Vehicles driven by the learner (and recorded).
     every : int, default=2
@@ -76,16 +78,19 @@ class ExpertLabeller(RecordingDriver):
     ) -> None:
         super().__init__(expert, student, every)
         self.learner = learner
+        self.noise = learner.noise
 
-    def init(self, obs: Observation) -> tuple[Any, IDMState]:
-        """Both models' initial states."""
-        return self.learner.init(obs), self.inner.init(obs)
+    def init(self, obs: Observation, params: Any) -> tuple[Any, IDMState]:
+        """Both models' initial states (``params`` are the learner's)."""
+        return self.learner.init(obs, params), self.inner.init(obs, None)
 
-    def act(self, obs: Observation, state: tuple[Any, IDMState]) -> tuple[Action, Any]:
+    def act(
+        self, obs: Observation, state: tuple[Any, IDMState], noise: Any
+    ) -> tuple[Action, Any]:
         """Students follow the learner, others the expert; labels are stored."""
         learner_state, expert_state = state
-        mine, learner_state = self.learner.act(obs, learner_state)
-        label, expert_state = self.inner.act(obs, expert_state)
+        mine, learner_state = self.learner.act(obs, learner_state, noise)
+        label, expert_state = self.inner.act(obs, expert_state, None)
         action = Action(
             accel=torch.where(self.student, mine.accel, label.accel),
             steer=torch.where(self.student, mine.steer, label.steer),
@@ -149,7 +154,12 @@ def dagger_demonstrations(
     road = Road() if road is None else road
     return record_student_rollouts(
         lambda params, student: ExpertLabeller(
-            LearnedDriver(net, xi, stochastic=stochastic),
+            LearnedDriver(
+                net,
+                xi,
+                controlled=torch.ones(student.shape[1], dtype=torch.bool),
+                stochastic=stochastic,
+            ),
             IDMDriver(params, road),
             student,
             every=every,
@@ -216,7 +226,8 @@ def replay_dagger_demonstrations(
     params, _ = split_students(params, rng, fraction=1.0)  # nobody changes lanes
     student = torch.zeros(n, 2, dtype=torch.bool)
     student[:, 0] = True
-    learner = LearnedDriver(net, stochastic=stochastic)
+    everyone = torch.ones(2, dtype=torch.bool)
+    learner = LearnedDriver(net, controlled=everyone, stochastic=stochastic)
     rec = ExpertLabeller(learner, IDMDriver(params, road), student, every=every)
     replay(windows, rec, road, seed=seed)
     return rec.demonstrations(accel_weight, episode_offset)

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from avrisk.agents.drivers.features import N_BEAMS, N_FEATURES
+from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator
 
 __all__ = [
@@ -151,7 +152,5 @@ def observing_simulator(road: Road, horizon: float = SimConfig.horizon) -> Simul
     ``N_BEAMS`` beams of ``LIDAR_RANGE`` m, as the features expect; one TTC ray,
     since demonstrations never read the safety measure. ``horizon`` in s.
     """
-    config = SimConfig(
-        horizon=horizon, n_lidar_beams=N_BEAMS, lidar_range=LIDAR_RANGE, n_ttc_rays=1
-    )
-    return Simulator(road, config)
+    config = SimConfig(horizon=horizon, n_lidar_beams=N_BEAMS, lidar_range=LIDAR_RANGE)
+    return Simulator(road, config, measure=MinTTC(n_rays=1))

@@ -56,14 +56,14 @@ import torch.nn.functional as F
 from numpy.typing import NDArray
 from torch import Tensor, nn
 
-from avrisk.agents.drivers.driver import LearnedDriver
+from avrisk.agents.drivers.driver import LearnedDriver, LearnedState
 from avrisk.agents.drivers.features import features_from_observation
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import XiPrior
-from avrisk.agents.policy import Action
 from avrisk.learning.replay import DT, CarFollowingWindows, replay
 from avrisk.learning.train_config import Progress, TrainEvent
 from avrisk.sim import Road
+from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
 __all__ = [
@@ -193,21 +193,26 @@ def _human_transitions(windows: CarFollowingWindows) -> Tensor:
 
 
 class _Recorder:
-    """A driver model that drives with a learned driver and records vehicle 0."""
+    """An actor that drives with a learned driver and records vehicle 0."""
 
     def __init__(self, driver: LearnedDriver) -> None:
         self.driver = driver
+        self.controlled = driver.controlled
+        self.noise = driver.noise
         self.features: list[Tensor] = []
         self.eps: list[Tensor] = []
 
-    def init(self, obs: Observation) -> None:
-        return self.driver.init(obs)
+    def init(self, obs: Observation, params: Tensor | None) -> LearnedState:
+        return self.driver.init(obs, params)
 
-    def act(self, obs: Observation, state: Tensor | None) -> tuple[Action, Tensor]:
-        action, eps = self.driver.act(obs, state)
+    def act(
+        self, obs: Observation, state: LearnedState, noise: Tensor | None
+    ) -> tuple[Action, LearnedState]:
+        action, state = self.driver.act(obs, state, noise)
+        assert state.eps is not None  # the driver samples
         self.features.append(features_from_observation(obs)[:, 0].float())
-        self.eps.append(eps[:, 0, 0].float())
-        return action, eps
+        self.eps.append(state.eps[:, 0, 0].float())
+        return action, state
 
 
 @dataclass(frozen=True)
@@ -224,7 +229,7 @@ class _Rollouts:
 def _rollouts(
     net: DriverNet, windows: CarFollowingWindows, road: Road, seed: int
 ) -> _Rollouts:
-    rec = _Recorder(LearnedDriver(net))
+    rec = _Recorder(LearnedDriver(net, controlled=torch.ones(2, dtype=torch.bool)))
     res = replay(windows, rec, road, seed=seed)
     n, t = len(windows), windows.n_steps
     feats = torch.zeros(n, t, rec.features[0].shape[-1])

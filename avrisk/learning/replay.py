@@ -23,7 +23,6 @@ from numpy.typing import NDArray
 from scipy import stats
 from torch import Tensor
 
-from avrisk.agents.policy import Action
 from avrisk.learning.ngsim_demonstrations import DEFAULT_WIDTH
 from avrisk.learning.ngsim_lateral import LaneCentres, lateral_tracks
 from avrisk.learning.ngsim_samples import (
@@ -32,7 +31,9 @@ from avrisk.learning.ngsim_samples import (
     LateralPairs,
     episode_bounds,
 )
+from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
+from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
 __all__ = [
@@ -184,23 +185,26 @@ class ReplayLeader:
 
     Parameters
     ----------
-    follower : DriverModel
-        Acts for both vehicles; its vehicle-1 action is overridden.
+    follower : Actor
+        Acts for both vehicles (controls both); its vehicle-1 action is
+        overridden.
     leader_accel : Tensor of shape (W, T)
         Leader acceleration per step [m/s^2] (steering 0: straight ahead).
     """
 
     def __init__(self, follower: Any, leader_accel: Tensor) -> None:
         self.follower = follower
+        self.controlled = follower.controlled
+        self.noise = follower.noise
         self.leader_accel = leader_accel
 
-    def init(self, obs: Observation) -> Any:
+    def init(self, obs: Observation, params: Any) -> Any:
         """The follower model's initial state."""
-        return self.follower.init(obs)
+        return self.follower.init(obs, params)
 
-    def act(self, obs: Observation, state: Any) -> tuple[Action, Any]:
+    def act(self, obs: Observation, state: Any, noise: Any) -> tuple[Action, Any]:
         """Follower's action in column 0, the replayed leader's in column 1."""
-        action, state = self.follower.act(obs, state)
+        action, state = self.follower.act(obs, state, noise)
         accel, steer = action.accel.clone(), action.steer.clone()
         accel[:, 1] = self.leader_accel[:, obs.step].to(accel)
         steer[:, 1] = 0.0
@@ -238,8 +242,8 @@ def replay(
     Parameters
     ----------
     windows : CarFollowingWindows
-    follower_model : DriverModel
-        Built for ``B = len(windows)`` rollouts of 2 vehicles.
+    follower_model : Actor
+        Built for ``B = len(windows)`` rollouts of 2 vehicles, controlling both.
     road : Road
     seed : int, default=0
         Rollout ``w`` has seed ``seed * 1_000_003 + w``.
@@ -265,10 +269,10 @@ def replay(
     rows = np.stack([np.stack(follower, -1), np.stack(leader, -1)], axis=1)
     state = VehicleState.from_rows(rows.tolist())
     leader_accel = torch.as_tensor(np.diff(w.v_l, axis=1) / DT, dtype=torch.float32)
-    sim = Simulator(road, SimConfig(horizon=w.n_steps * DT, n_ttc_rays=1))
+    sim = Simulator(road, SimConfig(horizon=w.n_steps * DT), measure=MinTTC(n_rays=1))
     seeds = torch.as_tensor(seed * 1_000_003 + np.arange(n), dtype=torch.int64)
     driver = ReplayLeader(follower_model, leader_accel)
-    res = sim.run(state, driver, seeds, record_trace=True)
+    res = sim.run(state, [driver], seeds, record_trace=True)
     tr = res.trace
     gap = (tr.x[..., 1] - tr.x[..., 0]).double().numpy() - 0.5 * (w.len_f + w.len_l)[
         :, None

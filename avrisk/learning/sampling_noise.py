@@ -118,7 +118,8 @@ def calibrate_noise(
     def run(c_a: float, c_s: float) -> dict[str, float]:
         if (c_a, c_s) not in done:
             net.noise_scale.copy_(torch.tensor([c_a, c_s]))
-            res = replay(windows, LearnedDriver(net), road, seed=seed)
+            both = torch.ones(2, dtype=torch.bool)
+            res = replay(windows, LearnedDriver(net, controlled=both), road, seed=seed)
             done[c_a, c_s] = {
                 "c_accel": c_a,
                 "c_steer": c_s,

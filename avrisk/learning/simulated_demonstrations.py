@@ -29,13 +29,13 @@ from numpy.typing import NDArray
 
 from avrisk.agents.drivers.features import N_FEATURES, features_from_observation
 from avrisk.agents.idm import IDMDriver, IDMParams
-from avrisk.agents.policy import Action
 from avrisk.learning.demonstrations import (
     SOURCE_IDM,
     Demonstrations,
     observing_simulator,
 )
 from avrisk.sim import Road, VehicleState
+from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
 __all__ = [
@@ -52,7 +52,7 @@ NO_LANE_CHANGE = 1e3
 
 
 class RecordingDriver:
-    """A driver model that records what its students see and what it does.
+    """An actor that records what its students see and what it does.
 
     Every ``every`` steps it stores the driver features of all vehicles, the
     actions and which vehicles are usable rows: students, not overlapping
@@ -60,8 +60,8 @@ class RecordingDriver:
 
     Parameters
     ----------
-    inner : DriverModel
-        Drives every vehicle; its actions are the recorded labels.
+    inner : Actor
+        Controls every vehicle; its actions are the recorded labels.
     student : Tensor of bool, shape (B, A)
         Vehicles whose rows are kept.
     every : int, default=1
@@ -70,6 +70,8 @@ class RecordingDriver:
 
     def __init__(self, inner: Any, student: torch.Tensor, every: int = 1) -> None:
         self.inner = inner
+        self.controlled = inner.controlled
+        self.noise = inner.noise
         self.student = student
         self.every = every
         self.features: list[NDArray[np.float32]] = []
@@ -77,13 +79,13 @@ class RecordingDriver:
         self.steer: list[NDArray[np.float32]] = []
         self.usable: list[NDArray[np.bool_]] = []
 
-    def init(self, obs: Observation) -> Any:
+    def init(self, obs: Observation, params: Any) -> Any:
         """The inner driver's initial state."""
-        return self.inner.init(obs)
+        return self.inner.init(obs, params)
 
-    def act(self, obs: Observation, state: Any) -> tuple[Action, Any]:
+    def act(self, obs: Observation, state: Any, noise: Any) -> tuple[Action, Any]:
         """The inner driver's action, recorded."""
-        action, state = self.inner.act(obs, state)
+        action, state = self.inner.act(obs, state, noise)
         self.record(obs, action)
         return action, state
 
@@ -287,7 +289,7 @@ def record_student_rollouts(
         seeds = torch.as_tensor(
             rollout_seed_offset + start + np.arange(b), dtype=torch.int64
         )
-        sim.run(initial, rec, seeds)
+        sim.run(initial, [rec], seeds)
         parts.append(
             rec.demonstrations(accel_weight, episode_offset + start * n_vehicles)
         )

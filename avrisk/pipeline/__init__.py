@@ -1,4 +1,4 @@
-"""Wiring: the only layer that joins the estimation engine and the simulator."""
+"""Run directories: an estimator run against a black box, recorded and resumable."""
 
 from avrisk.pipeline.run import RunMonitor, RunSettings, SilentMonitor, run_estimation
 from avrisk.pipeline.store import SUMMARY_SCHEMA, RunDirectory, RunDirectoryError

@@ -9,7 +9,7 @@ ended early (crash) holds its last frame, marked in red.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -20,6 +20,8 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
+
+    from avrisk.assembly import ScenarioSimulator
 
 FloatArray = NDArray[np.float64]
 
@@ -339,15 +341,42 @@ def save_frame_png(
     return out
 
 
+def ttc_series(result: Any) -> FloatArray:
+    """Minimum time-to-collision so far at every recorded step [s].
+
+    Parameters
+    ----------
+    result : avrisk.sim.simulator.RolloutResult
+        Recorded with ``record_trace=True``.
+
+    Returns
+    -------
+    ndarray of shape (B, T+1)
+        Running minimum over steps ``0..k`` of the instantaneous safety value
+        (TTC); constant after a rollout ends; ``inf`` while nothing approaches.
+    """
+    trace = result.trace
+    if trace is None:
+        raise ValueError("the rollout was run without record_trace=True")
+    series = trace.ttc.detach().cpu().numpy().astype(np.float64)
+    alive = trace.alive.detach().cpu().numpy().astype(bool)
+    series = np.where(alive, series, np.inf)
+    return np.minimum.accumulate(series, axis=1)
+
+
 def traces_from_rollout(
-    sim: Any, x: FloatArray, result: Any, *, labels: Sequence[str] | None = None
+    sim: ScenarioSimulator,
+    x: FloatArray,
+    result: Any,
+    *,
+    labels: Sequence[str] | None = None,
 ) -> list[RolloutTrace]:
     """Turn a recorded batch rollout into per-rollout traces.
 
     Parameters
     ----------
-    sim : avrisk.scenario.builder.ScenarioSimulator
-        The simulator that produced ``result`` (for vehicle sizes and TTC).
+    sim : avrisk.assembly.ScenarioSimulator
+        The simulator that produced ``result`` (for vehicle sizes).
     x : ndarray of shape (B, D)
         The flat scenario samples that were simulated.
     result : avrisk.sim.simulator.RolloutResult
@@ -360,8 +389,6 @@ def traces_from_rollout(
     list of RolloutTrace
         Length ``B``.
     """
-    from avrisk.scenario.builder import ttc_series
-
     trace = result.trace
     if trace is None:
         raise ValueError("the rollout was run without record_trace=True")
@@ -374,7 +401,7 @@ def traces_from_rollout(
         for k in ("x", "y", "heading", "speed")
     )
     alive = np_(trace.alive).astype(bool)
-    ttc = ttc_series(sim, result)  # (B, T+1), running minimum
+    ttc = ttc_series(result)  # (B, T+1), running minimum
     spec = sim.spec
     length = np.array([v.length for v in spec.vehicles], dtype=np.float64)
     width = np.array([v.width for v in spec.vehicles], dtype=np.float64)
@@ -397,3 +424,33 @@ def traces_from_rollout(
             )
         )
     return out
+
+
+def animate_samples(
+    sim: ScenarioSimulator, rows: Sequence[Mapping[str, Any]], path: Path
+) -> Path:
+    """Re-simulate samples-table rows with traces and write a top-down GIF.
+
+    Parameters
+    ----------
+    sim : avrisk.assembly.ScenarioSimulator
+        The scenario the rows were simulated in.
+    rows : sequence of mapping
+        Samples-table rows: the columns of ``sim.layout``, ``seed`` and ``f``.
+    path : Path
+        GIF to write (its folder is created).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
+    x = np.array([[row[c] for c in sim.layout.columns] for row in rows])
+    seeds = np.array([row["seed"] for row in rows], dtype=np.int64)
+    result = sim.rollout(x, seeds, record_trace=True)
+    labels = [f"min TTC {row['f']:.2f} s" for row in rows]
+    traces = traces_from_rollout(sim, x, result, labels=labels)
+    spec = sim.spec
+    path.parent.mkdir(parents=True, exist_ok=True)
+    animate_rollouts(traces, spec.road, spec.simulation.dt, path)
+    return path

@@ -1,17 +1,16 @@
-"""Safety measures: what makes a rollout dangerous (minimum TTC: ray or box)."""
+"""Safety measures: what makes a rollout dangerous (minimum TTC: ray or box).
 
-from avrisk.safety.base import (
-    SafetyMeasure,
-    get_safety_measure,
-    register_safety_measure,
-)
+Each implements :class:`avrisk.sim.interfaces.SafetyMeasure`; importing the
+package registers them by name (:func:`get_safety_measure`).
+"""
+
+from avrisk.safety.base import get_safety_measure, register_safety_measure
 from avrisk.safety.box_ttc import MinBoxTTC, box_ttc
 from avrisk.safety.ttc import MinTTC, ray_ttc
 
 __all__ = [
     "MinBoxTTC",
     "MinTTC",
-    "SafetyMeasure",
     "box_ttc",
     "get_safety_measure",
     "ray_ttc",

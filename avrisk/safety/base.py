@@ -1,59 +1,24 @@
-"""The safety-measure interface and its registry.
+"""The registry of safety measures, by the name a scenario gives.
 
-A safety measure maps a rollout to one number ``f`` per rollout, low meaning
-dangerous. It is evaluated online, one state at a time, so the simulator never
-keeps a rollout's history:
-
-    carry = measure.init(measure.instant(state_0))
-    carry = measure.update(carry, measure.instant(state_t), alive)  # t = 1..T
-    f = measure.finalize(carry)
-
-``instant`` maps a state (..., A) to a value (...); ``update`` must leave a
-rollout's carry untouched where ``alive`` is false (it stopped).
+A safety measure implements :class:`avrisk.sim.interfaces.SafetyMeasure` (the
+simulator's interface, documented there): it maps a rollout to one number
+``f`` per rollout, low meaning dangerous, evaluated online one state at a
+time.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
 from pydantic import BaseModel
-from torch import Tensor
 
 from avrisk.registry import Registry
 from avrisk.safety.box_ttc import MinBoxTTC
 from avrisk.safety.ttc import MinTTC
-from avrisk.sim.state import VehicleState
+from avrisk.sim.interfaces import SafetyMeasure
 
-__all__ = ["SafetyMeasure", "get_safety_measure", "register_safety_measure"]
-
-
-@runtime_checkable
-class SafetyMeasure(Protocol):
-    """What the simulator needs of a safety measure (see module docstring)."""
-
-    name: str
-    #: Primitive geometric tests per (ego, other vehicle) pair and instant; the
-    #: simulator sizes its eager batch slices by it (cache-sized temporaries).
-    tests_per_pair: int
-
-    def instant(
-        self, state: VehicleState, cos: Tensor | None = None, sin: Tensor | None = None
-    ) -> Tensor:
-        """Value at one instant, shape (B,), for a state of shape (B, A)."""
-        ...
-
-    def init(self, value: Tensor) -> Tensor:
-        """Carry from the value at ``t = 0``."""
-        ...
-
-    def update(self, carry: Tensor, value: Tensor, alive: Tensor) -> Tensor:
-        """Fold in one more step's value where ``alive`` (B,)."""
-        ...
-
-    def finalize(self, carry: Tensor) -> Tensor:
-        """``f`` per rollout, shape (B,)."""
-        ...
+__all__ = ["get_safety_measure", "register_safety_measure"]
 
 
 _MEASURES = Registry("safety measure")

@@ -12,7 +12,7 @@ class RunningMin:
     """``f`` = minimum over the simulated steps of ``instant(state_t)``.
 
     Subclasses define ``name``, ``tests_per_pair`` and ``instant``; this class
-    folds the instants in (see :mod:`avrisk.safety.base`), leaving a stopped
+    folds the instants in (see :mod:`avrisk.sim.interfaces`), leaving a stopped
     rollout's value as it was at its last simulated step.
     """
 

@@ -1,17 +1,20 @@
-"""Scenario sampler: the YAML spec, the base distribution ``P0`` and named ``X``.
+"""Scenarios as data: the YAML spec, the base distribution ``P0`` and named ``X``.
 
 * :func:`load_spec` -- read and validate a scenario (a file or a bundled name)
   into a :class:`ScenarioSpec` (:mod:`avrisk.scenario.spec`; its parts in
   :mod:`~avrisk.scenario.scene` and :mod:`~avrisk.scenario.components`);
 * :func:`build_base_distribution` -- ``P0`` as an :class:`avrisk.rare.Product`
-  (:func:`xi_base_family`: its learned-driver block);
+  (:func:`xi_base_family`: its learned-driver block, from a given prior);
 * :class:`ParamLayout`, :class:`ScenarioParams` -- flat ``X`` (B, D) <-> named
-  per-vehicle parameters;
-* :mod:`avrisk.scenario.builder` -- to the simulator's inputs and rollouts
-  (imported on demand: it needs :mod:`avrisk.sim`).
+  per-vehicle parameters.
+
+It knows nothing of the simulator, the drivers or the safety measures:
+:mod:`avrisk.assembly` turns a spec into those, and passes in what ``P0`` and
+the layout need of the learned drivers (their ``xi`` prior and dimension).
 """
 
 from avrisk.scenario.base_distribution import (
+    NormalPrior,
     build_base_distribution,
     marginal_family,
     xi_base_family,
@@ -31,6 +34,7 @@ __all__ = [
     "FIELD_UNITS",
     "MAX_SPEC_BYTES",
     "VEHICLE_FIELDS",
+    "NormalPrior",
     "ParamLayout",
     "ScenarioParams",
     "ScenarioSpec",

@@ -15,20 +15,36 @@ with learned drivers appends one more block, the driver network's last layer
     xi ~ N(mu0, Sigma0)                  in R^404, one draw per rollout
 
 with the ensemble mean ``mu0`` and the sparse graphical-lasso precision
-``Sigma0^-1`` of the shipped driver model (:func:`xi_base_family`).
+``Sigma0^-1`` of the shipped driver model (:func:`xi_base_family`), which the
+caller passes in (:func:`avrisk.assembly.base_distribution` passes the shipped
+one).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Literal
+from typing import Any, Literal, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
 
 from avrisk.rare import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
 from avrisk.scenario.params import ParamLayout
 from avrisk.scenario.scene import VEHICLE_FIELDS, MarginalSpec
 from avrisk.scenario.spec import ScenarioSpec
 
-if TYPE_CHECKING:
-    from avrisk.agents.drivers.store import XiPrior
+
+class NormalPrior(Protocol):
+    """A normal distribution by its mean and precision (e.g. ``XiPrior``)."""
+
+    @property
+    def mean(self) -> NDArray[np.float64]:
+        """Mean, shape (d,)."""
+        ...
+
+    @property
+    def precision(self) -> Any:
+        """Inverse covariance, (d, d), symmetric positive definite; may be sparse."""
+        ...
 
 
 def marginal_family(marginal: MarginalSpec) -> ScaledBeta:
@@ -53,7 +69,7 @@ def marginal_family(marginal: MarginalSpec) -> ScaledBeta:
 
 
 def xi_base_family(
-    prior: XiPrior | None = None,
+    prior: NormalPrior,
     *,
     max_shift: float | None = 0.01,
     unit: Literal["absolute", "prior_sd"] = "absolute",
@@ -62,8 +78,9 @@ def xi_base_family(
 
     Parameters
     ----------
-    prior : XiPrior, optional
-        Default the shipped one (:func:`avrisk.agents.drivers.load_xi_prior`).
+    prior : NormalPrior
+        ``N(mu0, Sigma0)``, e.g. the shipped
+        :func:`avrisk.agents.drivers.load_xi_prior`.
     max_shift : float or None, default=0.01
         CE search box half-width around ``mu0`` (paper: 0.01 absolute); None
         for no box.
@@ -76,21 +93,19 @@ def xi_base_family(
     Returns
     -------
     avrisk.rare.FixedCovNormal
-        Dimension ``XI_DIM = 404``; the precision is kept sparse; samples are
-        rounded to float32 (the precision of the simulator's network).
+        Dimension ``len(prior.mean)`` (404 for the shipped driver network);
+        the precision is kept sparse; samples are rounded to float32 (the
+        precision of the simulator's network).
 
     Examples
     --------
-    >>> import numpy as np
-    >>> fam = xi_base_family()
+    >>> from types import SimpleNamespace
+    >>> from scipy import sparse
+    >>> prior = SimpleNamespace(mean=np.zeros(3), precision=sparse.eye_array(3))
+    >>> fam = xi_base_family(prior)
     >>> fam.dim, fam.sample(2, np.random.default_rng(0)).shape
-    (404, (2, 404))
+    (3, (2, 3))
     """
-    if prior is None:
-        # Imported here: the driver package needs torch (see ParamLayout.from_spec).
-        from avrisk.agents.drivers.store import load_xi_prior
-
-        prior = load_xi_prior()
     if unit not in ("absolute", "prior_sd"):
         raise ValueError(f"unit must be 'absolute' or 'prior_sd'; got {unit!r}")
     # The simulator reads xi in float32: float32 samples change no rollout and
@@ -101,12 +116,17 @@ def xi_base_family(
     return family.with_max_shift(max_shift)
 
 
-def build_base_distribution(spec: ScenarioSpec) -> Product:
+def build_base_distribution(
+    spec: ScenarioSpec, xi_prior: NormalPrior | None = None
+) -> Product:
     """Build ``P0`` for a scenario.
 
     Parameters
     ----------
     spec : ScenarioSpec
+    xi_prior : NormalPrior or None
+        ``N(mu0, Sigma0)`` of the learned drivers' ``xi``; required when the
+        scenario has learned drivers, unused otherwise.
 
     Returns
     -------
@@ -118,6 +138,11 @@ def build_base_distribution(spec: ScenarioSpec) -> Product:
         ``dim == layout.dim``. ``sample(n, rng)`` gives ``X`` of shape (n, D);
         ``log_prob(X)`` gives ``log p0`` of shape (n,) [log of 1 / (m m deg
         m/s) per vehicle, plus the log-density of ``xi``].
+
+    Raises
+    ------
+    ValueError
+        If the scenario has learned drivers and ``xi_prior`` is None.
 
     Examples
     --------
@@ -134,13 +159,21 @@ def build_base_distribution(spec: ScenarioSpec) -> Product:
         for j in range(spec.n_vehicles)
         for name in VEHICLE_FIELDS
     ]
+    xi_dim = None
     if spec.has_learned_drivers:
+        if xi_prior is None:
+            raise ValueError(
+                f"scenario {spec.name!r} has learned drivers: pass xi_prior, the "
+                "distribution of their xi (avrisk.assembly.base_distribution does)"
+            )
         search = spec.learned_drivers
-        blocks.append(
-            xi_base_family(max_shift=search.xi_search, unit=search.xi_search_unit)
+        xi = xi_base_family(
+            xi_prior, max_shift=search.xi_search, unit=search.xi_search_unit
         )
+        blocks.append(xi)
+        xi_dim = xi.dim
     p0 = Product(blocks)
-    layout = ParamLayout.from_spec(spec)
+    layout = ParamLayout.from_spec(spec, xi_dim)
     if p0.dim != layout.dim:  # pragma: no cover - guards the two orderings
         raise AssertionError(f"P0 has dim {p0.dim}, layout has {layout.dim}")
     return p0

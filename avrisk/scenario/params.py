@@ -3,8 +3,9 @@
 The estimation engine sees one scenario realisation as a flat float64 row of
 length ``D``; everything else sees it by name. The layout is vehicle-major,
 four coordinates per vehicle, then the learned-driver block ``xi`` (the
-``Dxi = 404`` numbers of the driver network's last layer, in the order of
-:mod:`avrisk.agents.drivers.xi`; empty when no vehicle is a learned driver)::
+learned drivers' per-rollout parameters: the ``Dxi = 404`` numbers of the
+driver network's last layer, in the order of :mod:`avrisk.agents.drivers.xi`;
+empty when no vehicle is a learned driver)::
 
     veh0.s, veh0.t, veh0.heading, veh0.speed, veh1.s, ..., veh{A-1}.speed,
     xi.0, ..., xi.{Dxi-1}
@@ -85,19 +86,31 @@ class ParamLayout:
         )
 
     @classmethod
-    def from_spec(cls, spec: ScenarioSpec) -> ParamLayout:
+    def from_spec(cls, spec: ScenarioSpec, xi_dim: int | None = None) -> ParamLayout:
         """The layout of a scenario's ``X``.
 
-        ``xi_dim`` is ``XI_DIM = 404`` when any vehicle is a learned driver
-        (:attr:`ScenarioSpec.has_learned_drivers`), else 0.
+        Parameters
+        ----------
+        spec : ScenarioSpec
+        xi_dim : int or None
+            Length of the learned drivers' parameter block; required when any
+            vehicle is a learned driver (:attr:`ScenarioSpec.has_learned_drivers`),
+            unused otherwise. :func:`avrisk.assembly.param_layout` passes the
+            driver network's.
+
+        Raises
+        ------
+        ValueError
+            If the scenario has learned drivers and ``xi_dim`` is None.
         """
         if not spec.has_learned_drivers:
             return cls(n_vehicles=spec.n_vehicles)
-        # Imported here: the driver network needs torch, which scenarios
-        # without learned drivers do not load.
-        from avrisk.agents.drivers.xi import XI_DIM
-
-        return cls(n_vehicles=spec.n_vehicles, xi_dim=XI_DIM)
+        if xi_dim is None:
+            raise ValueError(
+                f"scenario {spec.name!r} has learned drivers: pass xi_dim, the "
+                "length of their parameter block (avrisk.assembly.param_layout does)"
+            )
+        return cls(n_vehicles=spec.n_vehicles, xi_dim=xi_dim)
 
     @cached_property
     def columns(self) -> tuple[str, ...]:

@@ -259,9 +259,9 @@ class ScenarioSpec(SpecModel):
             :attr:`EgoSpec.idm` for slot 0 (``ego.params`` of an idm_mobil
             ego, else the defaults), else the slot's :class:`DriverSpec`.
         """
-        return self.ego.idm if slot == 0 else self._driver_type(slot)
+        return self.ego.idm if slot == 0 else self.driver_type(slot)
 
-    def _driver_type(self, slot: int) -> DriverSpec:
+    def driver_type(self, slot: int) -> DriverSpec:
         """The driver type of environment slot ``slot >= 1``."""
         name = self.vehicles[slot].driver
         if name is None:
@@ -275,7 +275,7 @@ class ScenarioSpec(SpecModel):
         Slot 0 is always False: the ego is driven by ``ego.policy``.
         """
         return (False,) + tuple(
-            self._driver_type(j).learned for j in range(1, self.n_vehicles)
+            self.driver_type(j).learned for j in range(1, self.n_vehicles)
         )
 
     @property

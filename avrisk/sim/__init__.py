@@ -1,28 +1,32 @@
 """The batched highway simulator. It knows nothing of estimators.
 
-Leaf modules (import them directly): :mod:`~avrisk.sim.road`,
-:mod:`~avrisk.sim.state`, :mod:`~avrisk.sim.geometry`,
+It owns the interfaces that plug into it (:mod:`~avrisk.sim.interfaces`: the
+actors that drive vehicles, the safety measure) and imports no implementation
+of them: :mod:`avrisk.agents` and :mod:`avrisk.safety` build on this package,
+and :mod:`avrisk.assembly` joins them for a scenario. Modules:
+:mod:`~avrisk.sim.road`, :mod:`~avrisk.sim.state`, :mod:`~avrisk.sim.geometry`,
 :mod:`~avrisk.sim.dynamics`, :mod:`~avrisk.sim.lidar`,
 :mod:`~avrisk.sim.collision`, :mod:`~avrisk.sim.observation`,
-:mod:`~avrisk.sim.noise`, :mod:`~avrisk.sim.mathops`. The simulator itself,
-:mod:`~avrisk.sim.simulator`, builds on :mod:`avrisk.agents` and
-:mod:`avrisk.safety`; its names are loaded on first access so that those
-packages can import the leaf modules without a cycle.
+:mod:`~avrisk.sim.interfaces` and :mod:`~avrisk.sim.simulator`.
 """
 
-from typing import Any
-
+from avrisk.sim.collision import Contact
+from avrisk.sim.interfaces import Action, Actor, NoiseRequest, SafetyMeasure
 from avrisk.sim.road import Road
+from avrisk.sim.simulator import RolloutResult, SimConfig, Simulator, Status, Trace
 from avrisk.sim.state import VehicleState
 
-__all__ = ["RolloutResult", "Road", "SimConfig", "Simulator", "Trace", "VehicleState"]
-
-_LAZY = {"RolloutResult", "SimConfig", "Simulator", "Trace"}
-
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        from avrisk.sim import simulator
-
-        return getattr(simulator, name)
-    raise AttributeError(f"module 'avrisk.sim' has no attribute {name!r}")
+__all__ = [
+    "Action",
+    "Actor",
+    "Contact",
+    "NoiseRequest",
+    "RolloutResult",
+    "Road",
+    "SafetyMeasure",
+    "SimConfig",
+    "Simulator",
+    "Status",
+    "Trace",
+    "VehicleState",
+]

@@ -34,8 +34,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from avrisk.sim.mathops import sinc, sincos, sqrt
 from avrisk.sim.state import VehicleState
+from avrisk.tensors.mathops import sinc, sincos, sqrt
 
 __all__ = ["BicycleLimits", "bicycle_step"]
 

@@ -3,7 +3,7 @@
 Every function is written for one pair (one ray and one box, two boxes) and
 broadcasts over any leading dimensions ``(...)``; shapes in the docstrings are
 the broadcast shape. Headings enter as their cosine ``c`` and sine ``s`` so the
-caller computes them once per step (see :func:`avrisk.sim.mathops.sincos`).
+caller computes them once per step (see :func:`avrisk.tensors.mathops.sincos`).
 
 Conventions
 -----------

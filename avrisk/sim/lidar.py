@@ -23,10 +23,10 @@ import torch
 from torch import Tensor
 
 from avrisk.sim.geometry import min_argmin, ray_box_distance, step, to_local
-from avrisk.sim.mathops import sincos
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
-from avrisk.sim.tensors import TensorDataclass
+from avrisk.tensors.mathops import sincos
+from avrisk.tensors.tensors import TensorDataclass
 
 __all__ = [
     "LidarScan",
@@ -76,7 +76,7 @@ def beam_directions(
     -------
     cos, sin : Tensor of shape (R,)
         Beam ``k`` is at angle ``2 pi k / n`` [rad] counter-clockwise from ahead.
-        Computed in float64 with :func:`~avrisk.sim.mathops.sincos`, then
+        Computed in float64 with :func:`~avrisk.tensors.mathops.sincos`, then
         rounded, so the table is identical on every machine.
     """
     angles = torch.arange(n, dtype=torch.float64) * (2.0 * math.pi / n)

@@ -1,4 +1,4 @@
-"""What a policy sees at one step: privileged state, lidar, lane features, flags."""
+"""What an actor sees at one step: privileged state, lidar, lane features, flags."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ import torch
 from torch import Tensor
 
 from avrisk.sim.lidar import LidarScan
-from avrisk.sim.mathops import wrap_angle
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
-from avrisk.sim.tensors import TensorDataclass
+from avrisk.tensors.mathops import wrap_angle
+from avrisk.tensors.tensors import TensorDataclass
 
 __all__ = ["LaneFeatures", "Observation", "lane_features"]
 
@@ -82,10 +82,11 @@ def lane_features(state: VehicleState, road: Road) -> LaneFeatures:
 
 @dataclass(frozen=True)
 class Observation:
-    """Everything a policy may use at one step, for every vehicle.
+    """Everything an actor may use at one step, for every vehicle.
 
     An ego policy reads vehicle 0's rows (``lidar.range[:, 0]``, ...) and may
-    use the rest as privileged information; a driver model acts for all.
+    use the rest as privileged information; a driver reads the rows of the
+    vehicles it controls.
 
     Attributes
     ----------
@@ -93,9 +94,8 @@ class Observation:
         Privileged ground truth, fields of shape (B, A).
     lidar : LidarScan or None
         Each vehicle's lidar, fields of shape (B, A, R); None when the
-        simulator runs without lidar (``n_lidar_beams = 0``) or when neither
-        the drivers nor the ego read it (``reads_lidar = False``, see
-        :mod:`avrisk.agents.policy`).
+        simulator runs without lidar (``n_lidar_beams = 0``) or when no actor
+        reads it (``reads_lidar = False``, see :mod:`avrisk.sim.interfaces`).
     lane : LaneFeatures
         Fields of shape (B, A).
     collided : Tensor of bool, shape (B, A)
@@ -105,7 +105,7 @@ class Observation:
     reversing : Tensor of bool, shape (B, A)
         The vehicle moves against the road direction now.
     seeds : Tensor of int64, shape (B,)
-        Per-rollout seeds, for counter-based noise (:mod:`avrisk.sim.noise`).
+        Per-rollout seeds, for counter-based noise (:mod:`avrisk.tensors.noise`).
     step : int
         Index ``t`` of this step; the action applies from ``t`` to ``t + 1``.
     dt : float

@@ -1,4 +1,4 @@
-"""The batched highway simulator: initial states, driver parameters, seeds in; f out.
+"""The batched highway simulator: initial states, actors, seeds in; f out.
 
 One call simulates ``B`` independent rollouts of ``A`` vehicles each, all as
 tensors with a leading batch dimension. Per step ``t = 1..T`` (``T =
@@ -6,31 +6,35 @@ horizon / dt``):
 
 1. every vehicle observes (lidar, lane features, flags; the full state as
    privileged information);
-2. the driver model acts for every vehicle; an ego policy, if given, replaces
-   the ego's (vehicle 0) action;
+2. the actors act (:mod:`avrisk.sim.interfaces`): each computes actions for
+   the batch and the simulator keeps, per vehicle, the action of the last
+   actor that controls it;
 3. the kinematic bicycle advances every vehicle (:mod:`avrisk.sim.dynamics`);
-4. the safety measure (ray TTC from the ego centre, :mod:`avrisk.safety.ttc`),
+4. the safety measure (:class:`~avrisk.sim.interfaces.SafetyMeasure`),
    collisions, road departure and reversing are evaluated.
 
 The state at ``t = 0`` is measured too. A rollout *stops* at the first step at
 which the ego's rectangle overlaps another vehicle's (a crash): its state
-freezes there and its ``f`` is final, including that step's TTC. Collisions
-between two environment vehicles do not stop a rollout (they show in the
-observations' ``collided`` flag). Road departure and reversing are recorded for
-the ego (the vehicle under test) and do not stop the rollout.
+freezes there and its ``f`` is final, including that step's value. It stops
+as well, before moving, when an actor returns a non-finite action for it (the
+actor failed): it is marked failed (``status``) and its ``f`` is NaN.
+Collisions between two environment vehicles do not stop a rollout (they show
+in the observations' ``collided`` flag). Road departure and reversing are
+recorded for the ego (the vehicle under test) and do not stop the rollout.
 
 Reproducibility
 ---------------
-A rollout's result depends only on its own initial state, parameters and
-seed. Every operation is elementwise along the batch dimension or reduces over
-vehicles and rays within one rollout (``min``/``max``, which are exact), and
-every floating-point operation is one that IEEE 754 rounds correctly (``+ - *
-/``, a correctly rounded square root, and trigonometry built from those in
-:mod:`avrisk.sim.mathops`). So results are bit-identical alone, in any batch,
-in any order, in eager mode and under ``torch.compile``, and should be on any
-device (float32; the tests check all but the device). The loop ends early once
-every rollout of the batch has stopped; eager ray casting goes through large
-batches in slices; neither changes any result.
+A rollout's result depends only on its own initial state, actor parameters
+and seed. Every operation is elementwise along the batch dimension or reduces
+over vehicles and rays within one rollout (``min``/``max``, which are exact),
+and every floating-point operation is one that IEEE 754 rounds correctly (``+
+- * /``, a correctly rounded square root, and trigonometry built from those in
+:mod:`avrisk.tensors.mathops`); the actors' noise is counter-based
+(:mod:`avrisk.tensors.noise`). So results are bit-identical alone, in any
+batch, in any order, in eager mode and under ``torch.compile``, and should be
+on any device (float32; the tests check all but the device). The loop ends
+early once every rollout of the batch has stopped; eager ray casting goes
+through large batches in slices; neither changes any result.
 
 Speed
 -----
@@ -44,28 +48,29 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import IntEnum
 from typing import Any, NamedTuple
 
 import torch
 from torch import Tensor
 
-from avrisk.agents.idm import IDMDriver, IDMParams
-from avrisk.agents.policy import Action, DriverModel, Policy, reads_lidar
-from avrisk.safety.base import SafetyMeasure
-from avrisk.safety.ttc import MinTTC
-from avrisk.sim.collision import offroad, pairwise_overlap, reversing
+from avrisk.sim.collision import Contact, contact, offroad, pairwise_overlap, reversing
 from avrisk.sim.dynamics import BicycleLimits, bicycle_step
+from avrisk.sim.interfaces import Actor, NoiseRequest, SafetyMeasure, reads_lidar
 from avrisk.sim.lidar import LidarScan, beam_directions, lidar_scan
 from avrisk.sim.observation import LaneFeatures, Observation, lane_features
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
+from avrisk.tensors.noise import normal
 
 __all__ = [
     "COMPILE_ENV",
     "RolloutResult",
     "SimConfig",
     "Simulator",
+    "Status",
     "Trace",
     "compile_requested",
 ]
@@ -89,10 +94,6 @@ class SimConfig:
         Beams per vehicle lidar ``R``; 0 disables lidar.
     lidar_range : float, default=50.0
         Lidar range [m].
-    n_ttc_rays : int, default=360
-        Rays cast from the ego centre for the TTC ``N``.
-    ttc_range : float, default=100.0
-        Length of the TTC rays [m].
     accel_min, accel_max : float, default=-9.0, 6.0
         Physical acceleration limits [m/s^2].
     max_steer : float, default=0.6
@@ -107,8 +108,6 @@ class SimConfig:
     horizon: float = 10.0  # [s]
     n_lidar_beams: int = 20
     lidar_range: float = 50.0  # [m]
-    n_ttc_rays: int = 360
-    ttc_range: float = 100.0  # [m]
     accel_min: float = -9.0  # [m/s^2]
     accel_max: float = 6.0  # [m/s^2]
     max_steer: float = 0.6  # [rad]
@@ -125,10 +124,6 @@ class SimConfig:
             raise ValueError(f"n_lidar_beams must be >= 0; got {self.n_lidar_beams}")
         if not self.lidar_range > 0:
             raise ValueError(f"lidar_range must be > 0 [m]; got {self.lidar_range}")
-        if self.n_ttc_rays < 1:
-            raise ValueError(f"n_ttc_rays must be >= 1; got {self.n_ttc_rays}")
-        if not self.ttc_range > 0:
-            raise ValueError(f"ttc_range must be > 0 [m]; got {self.ttc_range}")
         self.limits  # noqa: B018  (validates the physical limits)
 
     @property
@@ -174,6 +169,15 @@ class Trace:
     ttc: Tensor  # [B, T+1] s
 
 
+class Status(IntEnum):
+    """Per-rollout status codes (``RolloutResult.status``, int8)."""
+
+    #: Simulated to its crash or to the horizon.
+    OK = 0
+    #: An actor returned a non-finite action for it: stopped there, ``f`` NaN.
+    ACTOR_FAILED = 1
+
+
 @dataclass(frozen=True)
 class RolloutResult:
     """Outcome of a batch of rollouts.
@@ -181,7 +185,8 @@ class RolloutResult:
     Attributes
     ----------
     f : Tensor of shape (B,)
-        Minimum TTC over rays and time [s]; ``inf`` if nothing ever approached.
+        The safety measure, e.g. minimum TTC over time [s]; ``inf`` if nothing
+        ever approached; NaN where ``status`` is not ``OK``.
     crash : Tensor of bool, shape (B,)
         The ego collided (the rollout stopped there).
     offroad : Tensor of bool, shape (B,)
@@ -189,11 +194,19 @@ class RolloutResult:
     reversing : Tensor of bool, shape (B,)
         The ego moved against the road direction at some simulated step.
     steps : Tensor of int64, shape (B,)
-        Steps simulated: the crash step, or ``T`` (0 if it starts in a crash).
-    trace : Trace or None
-        Trajectories, when requested.
+        Steps simulated: the crash step, the last step before an actor
+        failed, or ``T`` (0 if it starts in a crash).
+    status : Tensor of int8, shape (B,)
+        :class:`Status` code: 0 ok, 1 an actor failed for this rollout.
     collision_with : Tensor of int64, shape (B,)
         Vehicle the ego crashed into (lowest index if several); -1 if none.
+    contact : Tensor of int8, shape (B,)
+        :class:`~avrisk.sim.collision.Contact` mechanism of the crash, from
+        the relative position at the crash step: 0 none, 1 the ego rear-ends
+        the vehicle ahead in its lane-width band, 2 hit from behind, 3 side
+        contact.
+    trace : Trace or None
+        Trajectories, when requested.
     """
 
     f: Tensor  # [B] s
@@ -201,8 +214,10 @@ class RolloutResult:
     offroad: Tensor  # [B] bool
     reversing: Tensor  # [B] bool
     steps: Tensor  # [B] int64
+    status: Tensor  # [B] int8
+    collision_with: Tensor  # [B] int64
+    contact: Tensor  # [B] int8
     trace: Trace | None = None
-    collision_with: Tensor | None = field(default=None)  # [B] int64
 
 
 # Eager ray casting works through the batch in slices of about this many
@@ -270,13 +285,12 @@ class Simulator:
     road : Road
         Straight road (``curvature == 0``).
     config : SimConfig, default=SimConfig()
+    measure : SafetyMeasure
+        Safety measure ``f`` (:mod:`avrisk.safety` implements some).
     device : str or torch.device, default="cpu"
     dtype : torch.dtype, default=torch.float32
         Floating type of the simulation (float32 is the fast default; float64
         for checks).
-    measure : SafetyMeasure or None
-        Safety measure ``f``; default :class:`~avrisk.safety.ttc.MinTTC` with
-        the config's rays.
     compile : bool or None, default=None
         Run each step through ``torch.compile`` (inductor; needs a C++
         compiler): about three times faster at large batches, after a one-off
@@ -290,14 +304,25 @@ class Simulator:
     Examples
     --------
     >>> import torch
-    >>> sim = Simulator(Road(n_lanes=3), SimConfig(horizon=1.0))
+    >>> from avrisk.safety import MinTTC
+    >>> from avrisk.sim.interfaces import Action
+    >>> class Cruise:  # an actor: every vehicle holds its speed
+    ...     controlled = torch.tensor([True, True])
+    ...     reads_lidar, noise = False, None
+    ...     def init(self, obs, params):
+    ...         return None
+    ...     def act(self, obs, state, noise):
+    ...         zero = torch.zeros_like(obs.state.x)
+    ...         return Action(accel=zero, steer=zero), None
+    >>> sim = Simulator(Road(n_lanes=3), SimConfig(horizon=1.0), measure=MinTTC())
     >>> state = VehicleState.from_rows(
     ...     [[0.0, 1.85, 0.0, 20.0, 4.8, 1.9], [30.0, 1.85, 0.0, 15.0, 4.8, 1.9]]
     ... )
-    >>> params = IDMParams.full((1, 2))
-    >>> res = sim.rollout(state, params, torch.tensor([0]))
-    >>> res.f.shape, bool(res.crash[0]), int(res.steps[0])
-    (torch.Size([1]), False, 10)
+    >>> res = sim.run(state, [Cruise()], torch.tensor([0]))
+    >>> round(res.f.item(), 3), bool(res.crash[0]), int(res.steps[0])
+    (4.52, False, 10)
+
+    At 1 s the lead's rear is 22.6 m from the ego's centre, closing at 5 m/s.
     """
 
     def __init__(
@@ -305,9 +330,9 @@ class Simulator:
         road: Road,
         config: SimConfig = SimConfig(),
         *,
+        measure: SafetyMeasure,
         device: str | torch.device = "cpu",
         dtype: torch.dtype = torch.float32,
-        measure: SafetyMeasure | None = None,
         compile: bool | None = None,
     ) -> None:
         if road.curvature != 0.0:
@@ -322,9 +347,7 @@ class Simulator:
         self.device = torch.device(device)
         self.dtype = dtype
         self.limits = config.limits
-        self.measure = measure or MinTTC(
-            config.n_ttc_rays, config.ttc_range, dtype=dtype, device=self.device
-        )
+        self.measure = measure
         self._beams = (
             beam_directions(config.n_lidar_beams, dtype=dtype, device=self.device)
             if config.n_lidar_beams > 0
@@ -333,98 +356,83 @@ class Simulator:
         self.compile = compile_requested(compile)
         self._compiled_acts: dict[type, Any] = {}
         self._move = self._move_impl
-        per_pair, n_beams = self.measure.tests_per_pair, config.n_lidar_beams
-        self._ttc = _in_chunks(self.measure.instant, lambda a: (a - 1) * per_pair)
+        per_pair, n_beams = measure.tests_per_pair, config.n_lidar_beams
+        self._ttc = _in_chunks(measure.instant, lambda a: (a - 1) * per_pair)
         self._scan = _in_chunks(self._scan_impl, lambda a: a * (a - 1) * n_beams)
-        if compile:
-            # Three graphs per step plus the driver's (see _driver_act), each
-            # small enough for inductor to compile in seconds. dynamic=None:
-            # static shapes first, one dynamic-B graph after a batch-size change.
+        if self.compile:
+            # Three graphs per step plus one per actor class (see _actor_act),
+            # each small enough for inductor to compile in seconds.
+            # dynamic=None: static shapes first, one dynamic-B graph after a
+            # batch-size change.
             self._move = torch.compile(self._move_impl)
-            self._ttc = torch.compile(self.measure.instant)
+            self._ttc = torch.compile(measure.instant)
             self._scan = torch.compile(self._scan_impl)
 
     # ------------------------------------------------------------------ public
-    def rollout(
+    def run(
         self,
         initial: VehicleState,
-        driver_params: IDMParams,
+        actors: Sequence[Actor],
         seeds: Tensor,
         *,
+        params: Sequence[Tensor | None] | None = None,
         record_trace: bool = False,
-        ego_policy: Policy | None = None,
     ) -> RolloutResult:
-        """Simulate a batch with IDM+MOBIL drivers.
+        """Simulate a batch driven by ``actors``.
 
         Parameters
         ----------
         initial : VehicleState
             Fields of shape (B, A); vehicle 0 is the ego.
-        driver_params : IDMParams
-            Fields of shape (B, A): every vehicle's driver, the ego's included
-            (the ego drives IDM+MOBIL unless ``ego_policy`` is given).
+        actors : sequence of Actor
+            In order of precedence: a vehicle takes the action of the last
+            actor that controls it; every vehicle must be controlled.
         seeds : Tensor of int64, shape (B,)
-            Per-rollout seeds (counter-based noise of stochastic policies).
+            Per-rollout seeds (the actors' counter-based noise).
+        params : sequence of (Tensor of shape (B, P) or None), optional
+            Each actor's per-rollout parameter block, in the order of
+            ``actors``, passed to its ``init``; default None for every actor.
         record_trace : bool, default=False
             Also return the trajectories (memory ``O(B T A)``).
-        ego_policy : Policy or None
-            Drives the ego instead of its IDM+MOBIL driver.
 
         Returns
         -------
         RolloutResult
-        """
-        initial = self._prepare_state(initial)
-        params = driver_params.to(self.device, self.dtype).validate()
-        if params.shape != initial.shape:
-            raise ValueError(
-                f"driver_params have shape {tuple(params.shape)}, the initial state "
-                f"{tuple(initial.shape)}; both must be (B, A)"
-            )
-        driver = IDMDriver(
-            params, self.road, wheelbase_fraction=self.config.wheelbase_fraction
-        )
-        return self.run(
-            initial, driver, seeds, ego_policy=ego_policy, record_trace=record_trace
-        )
 
-    def run(
-        self,
-        initial: VehicleState,
-        driver: DriverModel,
-        seeds: Tensor,
-        *,
-        ego_policy: Policy | None = None,
-        record_trace: bool = False,
-    ) -> RolloutResult:
-        """Simulate a batch with any driver model (see :meth:`rollout`).
-
-        Parameters
-        ----------
-        initial : VehicleState
-            Fields of shape (B, A).
-        driver : DriverModel
-            Acts for every vehicle (the ego too, unless ``ego_policy``).
-        seeds : Tensor of int64, shape (B,)
-        ego_policy : Policy or None
-        record_trace : bool, default=False
-
-        Returns
-        -------
-        RolloutResult
+        Raises
+        ------
+        ValueError
+            For seeds of the wrong type or shape, a ``controlled`` mask that is
+            not a bool tensor of shape (A,), a vehicle that no actor controls,
+            or ``params`` that do not match the actors and the batch.
         """
         state = self._prepare_state(initial)
+        b, n = state.batch_size, state.n_vehicles
         seeds = torch.as_tensor(seeds, device=self.device)
-        if seeds.shape != (state.batch_size,) or seeds.dtype != torch.int64:
+        if seeds.shape != (b,) or seeds.dtype != torch.int64:
             raise ValueError(
-                f"seeds must be int64 of shape ({state.batch_size},); got "
+                f"seeds must be int64 of shape ({b},); got "
                 f"{seeds.dtype} of shape {tuple(seeds.shape)}"
             )
+        actors = list(actors)
+        masks = self._controlled(actors, n)
+        if params is None:
+            params = [None] * len(actors)
+        if len(params) != len(actors):
+            raise ValueError(
+                f"params must give one entry (a tensor or None) per actor: "
+                f"{len(actors)} actors, {len(params)} params"
+            )
+        for k, p in enumerate(params):
+            if p is not None and (p.dim() != 2 or p.shape[0] != b):
+                raise ValueError(
+                    f"params[{k}] must have shape ({b}, P); got {tuple(p.shape)}"
+                )
         with torch.no_grad():
-            return self._run(state, driver, seeds, ego_policy, record_trace)
+            return self._run(state, actors, masks, list(params), seeds, record_trace)
 
     def observe(self, state: VehicleState, seeds: Tensor, step: int = 0) -> Observation:
-        """The observation of a state, as policies receive it at ``step``.
+        """The observation of a state, as actors receive it at ``step``.
 
         Parameters
         ----------
@@ -445,6 +453,29 @@ class Simulator:
     # ---------------------------------------------------------------- internal
     def _prepare_state(self, state: VehicleState) -> VehicleState:
         return state.to(self.device, self.dtype).validate()
+
+    def _controlled(self, actors: list[Actor], n_vehicles: int) -> list[Tensor]:
+        """Every actor's ``controlled`` mask on the device, checked."""
+        if not actors:
+            raise ValueError("give at least one actor")
+        masks = []
+        for k, actor in enumerate(actors):
+            mask = torch.as_tensor(actor.controlled)
+            if mask.dtype != torch.bool or mask.shape != (n_vehicles,):
+                raise ValueError(
+                    f"actor {k} ({type(actor).__name__}): controlled must be a bool "
+                    f"tensor of shape ({n_vehicles},); got {mask.dtype} of shape "
+                    f"{tuple(mask.shape)}"
+                )
+            masks.append(mask.to(self.device))
+        covered = torch.stack(masks).any(dim=0)
+        if not bool(covered.all()):
+            missing = torch.nonzero(~covered).flatten().tolist()
+            raise ValueError(
+                f"vehicles {missing} are controlled by no actor; every vehicle "
+                "needs one (set its entry of some actor's controlled)"
+            )
+        return masks
 
     def _geometry(self, state: VehicleState) -> _Geometry:
         cos, sin = state.cos_sin
@@ -494,68 +525,82 @@ class Simulator:
             dt=self.config.dt,
         )
 
-    def _driver_act(self, driver: DriverModel) -> Any:
-        """``driver.act``, compiled if the simulator compiles (one graph per class)."""
+    def _actor_act(self, actor: Actor) -> Any:
+        """``actor.act``, compiled if the simulator compiles (one graph per class)."""
         if not self.compile:
-            return driver.act
-        cls = type(driver)
+            return actor.act
+        cls = type(actor)
         if cls not in self._compiled_acts:
             self._compiled_acts[cls] = torch.compile(cls.act)
         compiled = self._compiled_acts[cls]
-        return lambda obs, state: compiled(driver, obs, state)
+        return lambda obs, state, noise: compiled(actor, obs, state, noise)
+
+    def _noise(self, request: NoiseRequest | None, obs: Observation) -> Tensor | None:
+        """The step's standard-normal noise for one actor, (B, *shape), or None."""
+        if request is None:
+            return None
+        dtype = self.dtype if request.dtype is None else request.dtype
+        return normal(obs.seeds, obs.step, request.stream, request.shape, dtype=dtype)
 
     def _act(
         self,
         obs: Observation,
-        act: Any,
-        driver_state: Any,
-        ego_policy: Policy | None,
-        ego_state: Any,
-    ) -> tuple[Action, Any, Any]:
-        action, driver_state = act(obs, driver_state)
-        if ego_policy is not None:
-            ego, ego_state = ego_policy.act(obs, ego_state)
-            accel = ego.accel.reshape(-1, 1).to(action.accel)
-            steer = ego.steer.reshape(-1, 1).to(action.steer)
-            action = Action(
-                accel=torch.cat([accel, action.accel[:, 1:]], dim=1),
-                steer=torch.cat([steer, action.steer[:, 1:]], dim=1),
-            )
-        return action, driver_state, ego_state
+        actors: list[Actor],
+        acts: list[Any],
+        masks: list[Tensor],
+        states: list[Any],
+    ) -> tuple[Tensor, Tensor]:
+        """Every vehicle's (accel, steer), (B, A), from its controlling actor.
+
+        Updates ``states`` in place.
+        """
+        accel = steer = None
+        for k, (actor, act, mask) in enumerate(zip(actors, acts, masks, strict=True)):
+            action, states[k] = act(obs, states[k], self._noise(actor.noise, obs))
+            mine = action.accel.to(self.dtype), action.steer.to(self.dtype)
+            if accel is None or steer is None:
+                accel, steer = mine
+            else:
+                accel = torch.where(mask, mine[0], accel)
+                steer = torch.where(mask, mine[1], steer)
+        assert accel is not None and steer is not None
+        return accel, steer
 
     def _run(
         self,
         state: VehicleState,
-        driver: DriverModel,
+        actors: list[Actor],
+        masks: list[Tensor],
+        params: list[Tensor | None],
         seeds: Tensor,
-        ego_policy: Policy | None,
         record_trace: bool,
     ) -> RolloutResult:
         n_steps = self.config.n_steps
         measure = self.measure
+        lane_width = self.road.lane_width
         geo = self._geometry(state)
         ttc = self._ttc(state, geo.cos, geo.sin)
         ego_overlap = geo.overlap[:, 0, :]
         crash = ego_overlap.any(dim=-1)
         partner = torch.where(crash, ego_overlap.to(torch.int8).argmax(dim=-1), -1)
+        hit_how = contact(state, geo.cos, geo.sin, partner.clamp_min(0), lane_width)
+        how = torch.where(crash, hit_how, int(Contact.NONE))
+        status = torch.full_like(crash, int(Status.OK), dtype=torch.int8)
         carry = measure.init(ttc)
         off = geo.offroad[:, 0]
         rev = geo.reversing[:, 0]
         steps = torch.zeros_like(seeds)
         alive = ~crash
 
-        # Scan lidar only if the drivers or the ego read it (results are the same).
-        lidar_read = reads_lidar(driver) or (
-            ego_policy is not None and reads_lidar(ego_policy)
-        )
+        # Scan lidar only if some actor reads it (results are the same).
+        lidar_read = any(reads_lidar(actor) for actor in actors)
 
         def lidar(state: VehicleState, geo: _Geometry) -> LidarScan | None:
             return self._lidar(state, geo) if lidar_read else None
 
         obs = self._observation(state, geo, lidar(state, geo), seeds, 0)
-        act = self._driver_act(driver)
-        driver_state = driver.init(obs)
-        ego_state = ego_policy.init(obs) if ego_policy is not None else None
+        acts = [self._actor_act(actor) for actor in actors]
+        states = [actor.init(obs, p) for actor, p in zip(actors, params, strict=True)]
         frames: list[tuple[Tensor, ...]] = []
         if record_trace:
             frames.append(self._frame(state, torch.ones_like(alive), ttc))
@@ -563,10 +608,12 @@ class Simulator:
         for k in range(1, n_steps + 1):
             if not bool(alive.any()):
                 break
-            action, driver_state, ego_state = self._act(
-                obs, act, driver_state, ego_policy, ego_state
-            )
-            state, geo = self._move(state, action.accel, action.steer, alive)
+            accel, steer = self._act(obs, actors, acts, masks, states)
+            acted = torch.isfinite(accel).all(dim=-1) & torch.isfinite(steer).all(-1)
+            failed = alive & ~acted
+            status = torch.where(failed, int(Status.ACTOR_FAILED), status)
+            alive = alive & acted
+            state, geo = self._move(state, accel, steer, alive)
             ttc = self._ttc(state, geo.cos, geo.sin)
             carry = measure.update(carry, ttc, alive)
             ego_overlap = geo.overlap[:, 0, :]
@@ -574,6 +621,8 @@ class Simulator:
             partner = torch.where(
                 hit, ego_overlap.to(torch.int8).argmax(dim=-1), partner
             )
+            hit_how = contact(state, geo.cos, geo.sin, partner.clamp_min(0), lane_width)
+            how = torch.where(hit, hit_how, how)
             crash = crash | hit
             off = off | (alive & geo.offroad[:, 0])
             rev = rev | (alive & geo.reversing[:, 0])
@@ -601,14 +650,17 @@ class Simulator:
             trace = Trace(
                 *(torch.stack(parts, dim=1) for parts in zip(*frames, strict=True))
             )
+        f = measure.finalize(carry)
         return RolloutResult(
-            f=measure.finalize(carry),
+            f=torch.where(status == int(Status.OK), f, math.nan),
             crash=crash,
             offroad=off,
             reversing=rev,
             steps=steps,
-            trace=trace,
+            status=status,
             collision_with=partner,
+            contact=how,
+            trace=trace,
         )
 
     @staticmethod

@@ -8,8 +8,8 @@ import torch
 from torch import Tensor
 
 from avrisk.sim.geometry import box_corners
-from avrisk.sim.mathops import sincos
-from avrisk.sim.tensors import TensorDataclass
+from avrisk.tensors.mathops import sincos
+from avrisk.tensors.tensors import TensorDataclass
 
 __all__ = ["VehicleState"]
 

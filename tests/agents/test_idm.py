@@ -3,11 +3,17 @@ import math
 import pytest
 import torch
 
-from avrisk.agents import ConstantPolicy, IDMDriver, IDMParams, IDMState
+from avrisk.agents import ConstantPolicy, IDMDriver, IDMParams, IDMState, ego_only
 from avrisk.agents.idm import LANE_CHANGE_DELAY, idm_acceleration
+from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 
 F64 = torch.float64
+
+
+def simulator(road, config=None):
+    config = SimConfig() if config is None else config
+    return Simulator(road, config, measure=MinTTC(dtype=F64), dtype=F64)
 
 
 def t(x):
@@ -53,12 +59,12 @@ SIZE = [4.0, 2.0]
 
 def drive(rows, road=ROAD, **params):
     """One decision of IDM+MOBIL for every vehicle in the scene."""
-    sim = Simulator(road, SimConfig(), dtype=F64)
+    sim = simulator(road)
     state = VehicleState.from_rows(rows, dtype=F64)
     p = IDMParams.full(state.shape, dtype=F64, **params)
     obs = sim.observe(state, torch.zeros(1, dtype=torch.int64))
     driver = IDMDriver(p, road)
-    return driver.act(obs, driver.init(obs))
+    return driver.act(obs, driver.init(obs, None), None)
 
 
 EGO = [0.0, 2.0, 0.0, 25.0, *SIZE]
@@ -76,18 +82,18 @@ def test_a_vehicle_another_model_drives_occupies_only_the_lane_it_is_in():
     # Vehicle 1, ahead in lane 0, carries a lane-change target into lane 1
     # (the ego's). Driven by IDM it occupies both lanes and the ego brakes;
     # driven by another model it is only in lane 0 and the ego's road is free.
-    sim = Simulator(ROAD, SimConfig(), dtype=F64)
+    sim = simulator(ROAD)
     state = VehicleState.from_rows(
         [[0.0, 6.0, 0.0, 25.0, *SIZE], [15.0, 2.0, 0.0, 10.0, *SIZE]], dtype=F64
     )
     obs = sim.observe(state, torch.zeros(1, dtype=torch.int64))
     params = IDMParams.full(state.shape, dtype=F64, desired_speed=30.0)
 
-    def ego_accel(drives):
-        driver = IDMDriver(params, ROAD, drives=drives)
-        memory = driver.init(obs)
+    def ego_accel(controlled):
+        driver = IDMDriver(params, ROAD, controlled=controlled)
+        memory = driver.init(obs, None)
         merging = IDMState(torch.tensor([[1, 1]]), memory.since_change)
-        return driver.act(obs, merging)[0].accel[0, 0].item()
+        return driver.act(obs, merging, None)[0].accel[0, 0].item()
 
     assert ego_accel(None) < 0 < ego_accel(torch.tensor([True, False]))
 
@@ -126,11 +132,12 @@ def test_a_vehicle_on_the_rightmost_lane_never_targets_a_lane_beyond_the_edge():
 
 
 def simulate(rows, policy=None, horizon=10.0, road=ROAD, **params):
-    sim = Simulator(road, SimConfig(horizon=horizon), dtype=F64)
+    sim = simulator(road, SimConfig(horizon=horizon))
     state = VehicleState.from_rows(rows, dtype=F64)
     p = IDMParams.full(state.shape, dtype=F64, **params)
     seeds = torch.zeros(1, dtype=torch.int64)
-    return sim.rollout(state, p, seeds, record_trace=True, ego_policy=policy)
+    actors = [IDMDriver(p, road)] + ([] if policy is None else [policy])
+    return sim.run(state, actors, seeds, record_trace=True)
 
 
 def test_the_lane_keeping_controller_settles_on_the_lane_centre():
@@ -152,7 +159,7 @@ def test_a_follower_stops_behind_a_standing_vehicle_without_reversing():
     follower = [-60.0, 2.0, 0.0, 20.0, *SIZE]
     res = simulate(
         [standing, follower],
-        policy=ConstantPolicy(accel=0.0),
+        policy=ConstantPolicy(ego_only(2), accel=0.0),
         horizon=15.0,
         lane_change_threshold=1e3,
     )
@@ -164,14 +171,14 @@ def test_a_follower_stops_behind_a_standing_vehicle_without_reversing():
 
 
 def test_lane_changes_are_spaced_by_the_decision_delay():
-    sim = Simulator(Road(n_lanes=4, lane_width=4.0), SimConfig(), dtype=F64)
+    sim = simulator(Road(n_lanes=4, lane_width=4.0))
     rows = [[0.0, 2.0, 0.0, 25.0, *SIZE], [25.0, 2.0, 0.0, 10.0, *SIZE]]
     state = VehicleState.from_rows(rows, dtype=F64)
     driver = IDMDriver(
         IDMParams.full(state.shape, dtype=F64, desired_speed=30.0), sim.road
     )
     obs = sim.observe(state, torch.zeros(1, dtype=torch.int64))
-    _, memory = driver.act(obs, driver.init(obs))
+    _, memory = driver.act(obs, driver.init(obs, None), None)
     assert memory.target_lane[0, 0].item() == 1
     # Pretend the change is done: the centre is in lane 1 and it is slow ahead again.
     moved = VehicleState.from_rows(
@@ -180,9 +187,9 @@ def test_lane_changes_are_spaced_by_the_decision_delay():
     obs = sim.observe(moved, torch.zeros(1, dtype=torch.int64))
     delay = round(LANE_CHANGE_DELAY / 0.1)
     for _ in range(delay - 1):
-        _, memory = driver.act(obs, memory)
+        _, memory = driver.act(obs, memory, None)
         assert memory.target_lane[0, 0].item() == 1
-    _, memory = driver.act(obs, memory)
+    _, memory = driver.act(obs, memory, None)
     assert memory.target_lane[0, 0].item() == 2
 
 

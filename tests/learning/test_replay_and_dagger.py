@@ -2,7 +2,6 @@ import numpy as np
 import torch
 
 from avrisk.agents.idm import IDMDriver, IDMParams
-from avrisk.agents.policy import Action
 from avrisk.learning.dagger import ExpertLabeller
 from avrisk.learning.demonstrations import SOURCE_IDM
 from avrisk.learning.replay import (
@@ -11,7 +10,9 @@ from avrisk.learning.replay import (
     replay_distances,
 )
 from avrisk.learning.simulated_demonstrations import NO_LANE_CHANGE
+from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
+from avrisk.sim.interfaces import Action
 
 
 def windows(n=3, steps=30):
@@ -48,10 +49,12 @@ def test_a_replayed_leader_follows_its_recorded_speed_profile():
 class Constant:
     """A learner that always brakes gently and steers a little."""
 
-    def init(self, obs):
+    noise = None
+
+    def init(self, obs, params):
         return None
 
-    def act(self, obs, state):
+    def act(self, obs, state, noise):
         full = torch.full_like(obs.state.x, -0.5)
         return Action(accel=full, steer=torch.full_like(full, 0.01)), None
 
@@ -63,9 +66,8 @@ def test_students_follow_the_learner_and_only_they_are_labelled_by_the_expert():
     student = torch.tensor([[True, False], [True, False]])
     expert = IDMDriver(IDMParams.full((2, 2)), road)
     rec = ExpertLabeller(Constant(), expert, student, every=1)
-    res = Simulator(road, SimConfig(horizon=0.5, n_ttc_rays=4)).run(
-        state, rec, torch.arange(2), record_trace=True
-    )
+    sim = Simulator(road, SimConfig(horizon=0.5), measure=MinTTC(n_rays=4))
+    res = sim.run(state, [rec], torch.arange(2), record_trace=True)
     speed = res.trace.speed
     assert torch.allclose(speed[:, -1, 0], torch.full((2,), 15.0 - 0.25), atol=1e-4)
     assert not torch.allclose(speed[:, -1, 1], torch.full((2,), 15.0 - 0.25), atol=1e-3)

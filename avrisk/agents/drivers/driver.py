@@ -1,43 +1,46 @@
-"""Learned drivers in the simulator: the environment model and the lidar ego.
+"""Learned drivers in the simulator: the environment actor and the lidar ego.
 
-:class:`LearnedDriver` is a :class:`~avrisk.agents.policy.DriverModel`: every
-vehicle of rollout ``b`` is driven by the network with last layer ``xi[b]``
-(one draw of ``xi ~ N(mu0, Sigma0)`` per rollout, DESIGN.md §2). Actions are
-sampled from the network's Gaussians with counter-based noise
-(:mod:`avrisk.sim.noise`), a pure function of the rollout's seed, the step,
-the vehicle and the action, so a rollout gets the same noise alone or in any
-batch. :class:`LearnedEgoPolicy` drives vehicle 0 with the same network (the
-paper's non-vision ego, DESIGN.md §5), by default with its mean action.
+:class:`LearnedDriver` is an actor of the simulator
+(:class:`avrisk.sim.interfaces.Actor`): every vehicle of rollout ``b`` it
+controls is driven by the network with last layer ``xi[b]``, its per-rollout
+parameter block (one draw of ``xi ~ N(mu0, Sigma0)`` per rollout, DESIGN.md
+§2; columns of ``X``). Actions are sampled from the network's Gaussians with
+noise the simulator draws for it (:class:`~avrisk.sim.interfaces.NoiseRequest`,
+counter-based: a pure function of the rollout's seed, the step, the vehicle
+and the action), so a rollout gets the same noise alone or in any batch.
+:class:`LearnedEgoPolicy` drives vehicle 0 with the same network (the paper's
+non-vision ego, DESIGN.md §5), by default with its mean action.
 
 Sampling: ``action_t = mean_t + c * std_t * eps_t`` with standardised noise
-``eps_t = rho eps_{t-1} + sqrt(1 - rho^2) z_t``, ``z_t ~ N(0, 1)`` counter-based,
-``rho = net.noise_correlation`` and ``c = net.noise_scale`` per action. With
-``rho = 0`` and ``c = 1`` (the paper) every step is an independent draw from
-the network's Gaussian. A fitted ``rho > 0`` keeps a Gaussian marginal at
-every step but makes the noise as persistent as human residuals are
-(independent draws at 10 Hz give a jerk far above human jerk); a calibrated
-``c < 1`` tempers the variance that behaviour cloning inflates on states it
-cannot predict. ``eps`` is the driver's memory (its state in the simulator
-loop).
+``eps_t = rho eps_{t-1} + sqrt(1 - rho^2) z_t``, ``z_t ~ N(0, 1)`` the
+simulator's noise, ``rho = net.noise_correlation`` and ``c = net.noise_scale``
+per action. With ``rho = 0`` and ``c = 1`` (the paper) every step is an
+independent draw from the network's Gaussian. A fitted ``rho > 0`` keeps a
+Gaussian marginal at every step but makes the noise as persistent as human
+residuals are (independent draws at 10 Hz give a jerk far above human jerk); a
+calibrated ``c < 1`` tempers the variance that behaviour cloning inflates on
+states it cannot predict. ``eps`` and ``xi`` are the actor's state
+(:class:`LearnedState`) in the simulator loop.
 
 Examples
 --------
 >>> import torch
 >>> from avrisk.agents.drivers.network import DriverNet
+>>> from avrisk.safety import MinTTC
 >>> from avrisk.sim import Road, SimConfig, Simulator, VehicleState
->>> sim = Simulator(Road(n_lanes=3), SimConfig(horizon=0.5))
+>>> sim = Simulator(Road(n_lanes=3), SimConfig(horizon=0.5), measure=MinTTC())
 >>> state = VehicleState.from_rows(
 ...     [[0.0, 5.55, 0.0, 20.0, 4.8, 1.9], [30.0, 5.55, 0.0, 18.0, 4.8, 1.9]]
 ... )
 >>> net = DriverNet()
->>> driver = LearnedDriver(net, net.default_xi.expand(1, -1))
->>> sim.run(state, driver, torch.tensor([0])).steps.tolist()
+>>> driver = LearnedDriver(net, controlled=torch.tensor([True, True]))
+>>> sim.run(state, [driver], torch.tensor([0])).steps.tolist()
 [5]
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import NamedTuple
 
 import torch
 from torch import Tensor
@@ -45,8 +48,8 @@ from torch import Tensor
 from avrisk.agents.drivers.features import features_from_observation
 from avrisk.agents.drivers.network import ActionDistribution, DriverNet
 from avrisk.agents.drivers.xi import XI_DIM
-from avrisk.agents.policy import Action, register_policy
-from avrisk.sim.noise import normal
+from avrisk.agents.policy import ego_only, register_policy
+from avrisk.sim.interfaces import Action, NoiseRequest
 from avrisk.sim.observation import Observation
 
 __all__ = [
@@ -54,12 +57,13 @@ __all__ = [
     "EGO_NOISE_STREAM",
     "LearnedDriver",
     "LearnedEgoPolicy",
+    "LearnedState",
     "ar1_noise",
     "reproducible_exp",
     "sample_actions",
 ]
 
-#: Counter-based noise stream of the environment drivers (:mod:`avrisk.sim.noise`).
+#: Counter-based noise stream of the environment drivers.
 DRIVER_NOISE_STREAM = 0x4C44  # "LD"
 #: Noise stream of the learned ego (distinct from the drivers').
 EGO_NOISE_STREAM = 0x4C45
@@ -81,7 +85,7 @@ def reproducible_exp(x: Tensor) -> Tensor:
 
     ``torch.exp`` may round an element differently depending on where it sits
     in a tensor (vectorised body or scalar tail); this function, like
-    :mod:`avrisk.sim.mathops`, uses only ``+ - * /``, ``round`` and an exact
+    :mod:`avrisk.tensors.mathops`, uses only ``+ - * /``, ``round`` and an exact
     power of two, so it does not (Cephes ``expf``: a few ulp in float32).
 
     Parameters
@@ -118,43 +122,26 @@ def reproducible_exp(x: Tensor) -> Tensor:
     return y * two_k
 
 
-def ar1_noise(
-    previous: Tensor | None,
-    seeds: Tensor,
-    step: int,
-    stream: int,
-    shape: tuple[int, ...],
-    rho: Tensor,
-    *,
-    dtype: torch.dtype = torch.float32,
-) -> Tensor:
-    """Standardised action noise, autocorrelated over steps, counter-based.
+def ar1_noise(previous: Tensor | None, z: Tensor, rho: Tensor) -> Tensor:
+    """Standardised action noise, autocorrelated over steps.
 
     Parameters
     ----------
-    previous : Tensor of shape (B, *shape, 2) or None
-        Last step's noise; None starts the process (a plain draw).
-    seeds : Tensor of int64, shape (B,)
-        Per-rollout seeds.
-    step : int
-        Time step (the noise counter).
-    stream : int
-        Noise stream.
-    shape : tuple of int
-        Per-rollout shape before the action axis (``(A,)`` or ``()``).
+    previous : Tensor of shape (B, ..., 2) or None
+        Last step's noise; None starts the process (``z`` itself).
+    z : Tensor of shape (B, ..., 2)
+        This step's standard-normal draw (the simulator's, counter-based).
     rho : Tensor of shape (2,)
         Autocorrelation per action in ``[0, 1)``.
-    dtype : torch.dtype, default=torch.float32
 
     Returns
     -------
-    Tensor of shape (B, *shape, 2)
-        Marginally standard normal at every step.
+    Tensor of shape (B, ..., 2)
+        Marginally standard normal at every step, in the dtype of ``z``.
     """
-    z = normal(seeds, step, stream, (*shape, 2), dtype=dtype)
     if previous is None:
         return z
-    rho = rho.to(dtype)
+    rho = rho.to(z.dtype)
     return rho * previous + torch.sqrt(1.0 - rho * rho) * z
 
 
@@ -190,162 +177,212 @@ def sample_actions(
     return accel, steer
 
 
+class LearnedState(NamedTuple):
+    """Memory of a learned actor in the simulator loop.
+
+    Attributes
+    ----------
+    xi : Tensor of shape (B, XI_DIM) or (XI_DIM,)
+        Last layer of each rollout (or one for all), on the network's device
+        and dtype.
+    eps : Tensor of shape (B, ..., 2) or None
+        Last step's standardised noise; None before the first step and
+        without sampling.
+    """
+
+    xi: Tensor
+    eps: Tensor | None
+
+
+def _as_xi(net: DriverNet, xi: Tensor | None) -> Tensor:
+    """``xi`` (default ``net.default_xi``), checked, on the net's device and dtype."""
+    xi = net.default_xi if xi is None else torch.as_tensor(xi)
+    if xi.shape[-1] != XI_DIM or xi.dim() not in (1, 2):
+        raise ValueError(
+            f"xi must have shape (B, {XI_DIM}) or ({XI_DIM},); got {tuple(xi.shape)}"
+        )
+    return xi.to(net.input_mean.device, net.input_mean.dtype)
+
+
+def _initial_state(
+    name: str, net: DriverNet, default_xi: Tensor, params: Tensor | None, batch: int
+) -> LearnedState:
+    """The state at ``t = 0``: per-rollout ``xi`` from ``params``, else the default."""
+    xi = default_xi if params is None else _as_xi(net, params)
+    if xi.dim() == 2 and xi.shape[0] != batch:
+        raise ValueError(
+            f"{name} got xi for {xi.shape[0]} rollouts and a batch of {batch}; "
+            f"pass xi of shape ({batch}, {XI_DIM})"
+        )
+    return LearnedState(xi=xi, eps=None)
+
+
 def _no_reverse(accel: Tensor, speed: Tensor, dt: float) -> Tensor:
     """Brake at most to a stop within the step (as the IDM drivers do)."""
     return torch.maximum(accel, speed * (-1.0 / dt))
 
 
 class LearnedDriver:
-    """Every vehicle driven by the driver network, one ``xi`` per rollout.
+    """Vehicles driven by the driver network, one ``xi`` per rollout (an actor).
 
     Parameters
     ----------
     net : DriverNet
         On the simulator's device.
     xi : Tensor of shape (B, XI_DIM) or (XI_DIM,), optional
-        Last layer per rollout, or one for all; default ``net.default_xi``.
+        Last layer used when the simulator passes no parameter block
+        (``params`` None in :meth:`init`): per rollout, or one for all;
+        default ``net.default_xi``.
+    controlled : Tensor of bool, shape (A,)
+        The vehicles it drives. The network acts for every vehicle of the
+        batch (one batched pass); the others' actions are not used.
     stochastic : bool, default=True
-        Sample the actions (the paper's generative model); False drives with
-        the mean actions.
+        Sample the actions (the paper's generative model), with noise of
+        shape (B, A, 2) drawn by the simulator; False drives with the mean
+        actions (no noise).
     allow_reverse : bool, default=False
         False clips braking so that a vehicle stops rather than reverses
         within a step (speed noise around 0 in congested traffic would
         otherwise back cars up).
-
-    Notes
-    -----
-    The state is the last step's standardised noise (None before the first
-    step, and always None without sampling). The ego's column of the action is
-    replaced by the ego policy when the simulator is given one.
     """
+
+    #: The features include every vehicle's lidar.
+    reads_lidar = True
 
     def __init__(
         self,
         net: DriverNet,
         xi: Tensor | None = None,
         *,
+        controlled: Tensor,
         stochastic: bool = True,
         allow_reverse: bool = False,
     ) -> None:
-        xi = net.default_xi if xi is None else torch.as_tensor(xi)
-        if xi.shape[-1] != XI_DIM or xi.dim() not in (1, 2):
-            raise ValueError(
-                f"xi must have shape (B, {XI_DIM}) or ({XI_DIM},); got "
-                f"{tuple(xi.shape)}"
-            )
         self.net = net
-        self.xi = xi.to(net.input_mean.device, net.input_mean.dtype)
+        self.xi = _as_xi(net, xi)
+        self.controlled = controlled
         self.stochastic = stochastic
         self.allow_reverse = allow_reverse
+        self.noise = (
+            NoiseRequest(
+                DRIVER_NOISE_STREAM,
+                (controlled.shape[0], 2),
+                dtype=net.input_mean.dtype,
+            )
+            if stochastic
+            else None
+        )
 
-    def init(self, obs: Observation) -> None:
-        """Check that ``xi`` matches the batch; the noise starts at the first act.
+    def init(self, obs: Observation, params: Tensor | None) -> LearnedState:
+        """``xi`` of every rollout (``params``, shape (B, XI_DIM), or the default).
 
         Raises
         ------
         ValueError
-            If per-rollout ``xi`` has another batch size than ``obs``.
+            If ``xi`` has the wrong shape or another batch size than ``obs``.
         """
-        b = obs.state.batch_size
-        if self.xi.dim() == 2 and self.xi.shape[0] != b:
-            raise ValueError(
-                f"LearnedDriver got xi for {self.xi.shape[0]} rollouts and a batch "
-                f"of {b}; pass xi of shape ({b}, {XI_DIM})"
-            )
-        return None
+        return _initial_state(
+            "LearnedDriver", self.net, self.xi, params, obs.state.batch_size
+        )
 
-    def distribution(self, obs: Observation) -> ActionDistribution:
+    def distribution(self, obs: Observation, xi: Tensor) -> ActionDistribution:
         """Every vehicle's action distribution, fields of shape (B, A)."""
         with torch.no_grad():
-            return self.net(features_from_observation(obs), self.xi)
+            return self.net(features_from_observation(obs), xi)
 
     def act(
-        self, obs: Observation, state: Tensor | None
-    ) -> tuple[Action, Tensor | None]:
+        self, obs: Observation, state: LearnedState, noise: Tensor | None
+    ) -> tuple[Action, LearnedState]:
         """Sampled (or mean) actions of every vehicle, fields of shape (B, A)."""
-        dist = self.distribution(obs)
+        dist = self.distribution(obs, state.xi)
         eps = None
-        if self.stochastic:
-            eps = ar1_noise(
-                state,
-                obs.seeds,
-                obs.step,
-                DRIVER_NOISE_STREAM,
-                (obs.state.n_vehicles,),
-                self.net.noise_correlation,
-                dtype=dist.accel_mean.dtype,
-            )
+        if noise is not None:
+            eps = ar1_noise(state.eps, noise, self.net.noise_correlation)
         accel, steer = sample_actions(dist, eps, self.net.noise_scale)
         dtype = obs.state.x.dtype
         accel, steer = accel.to(dtype), steer.to(dtype)
         if not self.allow_reverse:
             accel = _no_reverse(accel, obs.state.speed, obs.dt)
-        return Action(accel=accel, steer=steer), eps
+        return Action(accel=accel, steer=steer), LearnedState(state.xi, eps)
 
 
 class LearnedEgoPolicy:
-    """The lidar-based imitation ego: the driver network on vehicle 0.
+    """The lidar-based imitation ego: the driver network on vehicle 0 (an actor).
 
     Parameters
     ----------
     net : DriverNet
+    n_vehicles : int
+        ``A``; it controls vehicle 0.
     xi : Tensor of shape (XI_DIM,) or (B, XI_DIM), optional
-        Default ``net.default_xi``.
+        Used when the simulator passes no parameter block; default
+        ``net.default_xi``.
     stochastic : bool, default=False
-        An ego under test usually acts with its mean action.
+        An ego under test usually acts with its mean action; True samples it
+        with noise of shape (B, 2).
     allow_reverse : bool, default=False
         See :class:`LearnedDriver`.
     """
 
+    #: The features include the ego's lidar.
+    reads_lidar = True
+
     def __init__(
         self,
         net: DriverNet,
+        n_vehicles: int,
         xi: Tensor | None = None,
         *,
         stochastic: bool = False,
         allow_reverse: bool = False,
     ) -> None:
-        self.driver = LearnedDriver(
-            net, xi, stochastic=stochastic, allow_reverse=allow_reverse
+        self.net = net
+        self.xi = _as_xi(net, xi)
+        self.controlled = ego_only(n_vehicles, device=net.input_mean.device)
+        self.stochastic = stochastic
+        self.allow_reverse = allow_reverse
+        self.noise = (
+            NoiseRequest(EGO_NOISE_STREAM, (2,), dtype=net.input_mean.dtype)
+            if stochastic
+            else None
         )
 
-    def init(self, obs: Observation) -> None:
+    def init(self, obs: Observation, params: Tensor | None) -> LearnedState:
         """See :meth:`LearnedDriver.init`."""
-        return self.driver.init(obs)
+        return _initial_state(
+            "LearnedEgoPolicy", self.net, self.xi, params, obs.state.batch_size
+        )
 
     def act(
-        self, obs: Observation, state: Tensor | None
-    ) -> tuple[Action, Tensor | None]:
-        """The ego's action, fields of shape (B,)."""
-        d = self.driver
+        self, obs: Observation, state: LearnedState, noise: Tensor | None
+    ) -> tuple[Action, LearnedState]:
+        """The ego's action in every column, fields of shape (B, A)."""
         feats = features_from_observation(obs)[:, :1]  # (B, 1, F)
         with torch.no_grad():
-            dist = d.net(feats, d.xi)[:, 0]
+            dist = self.net(feats, state.xi)[:, 0]
         eps = None
-        if d.stochastic:
-            eps = ar1_noise(
-                state,
-                obs.seeds,
-                obs.step,
-                EGO_NOISE_STREAM,
-                (),
-                d.net.noise_correlation,
-                dtype=dist.accel_mean.dtype,
-            )
-        accel, steer = sample_actions(dist, eps, d.net.noise_scale)
+        if noise is not None:
+            eps = ar1_noise(state.eps, noise, self.net.noise_correlation)
+        accel, steer = sample_actions(dist, eps, self.net.noise_scale)
         dtype = obs.state.x.dtype
         accel, steer = accel.to(dtype), steer.to(dtype)
-        if not d.allow_reverse:
+        if not self.allow_reverse:
             accel = _no_reverse(accel, obs.state.speed[:, 0], obs.dt)
-        return Action(accel=accel, steer=steer), eps
+        shape = obs.state.shape
+        return Action(
+            accel=accel.unsqueeze(-1).expand(shape),
+            steer=steer.unsqueeze(-1).expand(shape),
+        ), LearnedState(state.xi, eps)
 
 
-def _lidar_ego_factory(**kwargs: Any) -> LearnedEgoPolicy:
-    if "net" not in kwargs:
+def _lidar_ego_factory(
+    *, n_vehicles: int, net: DriverNet | None = None
+) -> LearnedEgoPolicy:
+    if net is None:
         from avrisk.agents.drivers.store import load_driver_net
 
-        kwargs["net"] = load_driver_net()
-    return LearnedEgoPolicy(**kwargs)
+        net = load_driver_net()
+    return LearnedEgoPolicy(net, n_vehicles)
 
 
 register_policy("lidar_imitation", _lidar_ego_factory)

@@ -20,7 +20,7 @@ batched product (``torch.bmm``), with no Python loop over rollouts.
 Batch independence
 ------------------
 A rollout's outputs must not depend on the batch it shares (see
-:mod:`avrisk.agents.policy`). Elementwise operations and ReLU are exact; a
+:mod:`avrisk.sim.interfaces`). Elementwise operations and ReLU are exact; a
 matrix product is not automatically: BLAS picks different kernels for very
 few rows (on MKL, fewer than 12 rows that are not a multiple of 4 give
 results that differ in the last bit). :func:`row_linear` therefore pads the
@@ -53,8 +53,8 @@ from avrisk.agents.drivers.xi import (
     pack_xi,
     unpack_xi,
 )
-from avrisk.sim.mathops import log
-from avrisk.sim.tensors import TensorDataclass
+from avrisk.tensors.mathops import log
+from avrisk.tensors.tensors import TensorDataclass
 
 __all__ = [
     "FORMAT_VERSION",

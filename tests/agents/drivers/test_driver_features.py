@@ -10,11 +10,14 @@ from avrisk.agents.drivers.features import (
     assemble_features,
     features_from_observation,
 )
+from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 
 
 def observe(rows, road, **config):
-    sim = Simulator(road, SimConfig(n_ttc_rays=1, **config), dtype=torch.float64)
+    sim = Simulator(
+        road, SimConfig(**config), measure=MinTTC(n_rays=1), dtype=torch.float64
+    )
     state = VehicleState.from_rows(rows, dtype=torch.float64)
     return sim.observe(state, torch.zeros(state.batch_size, dtype=torch.int64))
 
@@ -72,7 +75,7 @@ def test_indicators_are_one_for_a_crashed_reversing_vehicle_off_the_road():
 
 def test_driver_features_have_the_papers_layout():
 
-    sim = Simulator(Road(n_lanes=3), SimConfig(n_lidar_beams=20))
+    sim = Simulator(Road(n_lanes=3), SimConfig(n_lidar_beams=20), measure=MinTTC())
     s = VehicleState.from_rows(
         [[0.0, 5.0, 0.0, 10.0, 4.0, 2.0], [20.0, 5.0, 0.0, 10.0, 4.0, 2.0]]
     )

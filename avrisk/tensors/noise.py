@@ -34,7 +34,7 @@ import math
 import torch
 from torch import Tensor
 
-from avrisk.sim.mathops import log, sincos, sqrt
+from avrisk.tensors.mathops import log, sincos, sqrt
 
 __all__ = ["normal", "random_bits", "uniform"]
 

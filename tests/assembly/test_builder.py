@@ -4,15 +4,17 @@ import numpy as np
 import pytest
 import torch
 
-from avrisk.safety import MinBoxTTC, MinTTC
-from avrisk.scenario import ParamLayout, ScenarioParams, load_spec, spec_from_dict
-from avrisk.scenario.builder import (
+from avrisk.assembly.builder import (
     ScenarioSimulator,
+    base_distribution,
     driver_params,
     initial_state,
+    param_layout,
     road_from_spec,
     sim_config_from_spec,
 )
+from avrisk.safety import MinBoxTTC, MinTTC
+from avrisk.scenario import ScenarioParams, load_spec, spec_from_dict
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +42,7 @@ def spec():
 
 
 def test_initial_state_places_each_vehicle_relative_to_its_slot(spec):
-    layout = ParamLayout.from_spec(spec)
+    layout = param_layout(spec)
     x = np.zeros((1, layout.dim))
     x[0, layout.index("veh0.s")] = 90.0
     x[0, layout.index("veh1.s")] = 100.0
@@ -72,12 +74,7 @@ def test_the_static_pieces_follow_the_spec(spec):
     road = road_from_spec(spec)
     assert (road.n_lanes, road.lane_width, road.length) == (3, 4.0, 500.0)
     cfg = sim_config_from_spec(spec)
-    assert (cfg.dt, cfg.horizon, cfg.n_ttc_rays, cfg.n_lidar_beams) == (
-        0.1,
-        1.0,
-        24,
-        20,
-    )
+    assert (cfg.dt, cfg.horizon, cfg.n_lidar_beams) == (0.1, 1.0, 20)
 
 
 @pytest.mark.parametrize(
@@ -100,7 +97,7 @@ def test_a_parallel_pass_is_a_near_collision_only_for_the_ray_measure(spec):
     # passes it 15 m/s faster with both headings straight: the rectangles never
     # meet, but rays slanted across the truck's side see it approach.
     raw = spec.model_dump(mode="json")
-    layout = ParamLayout.from_spec(spec)
+    layout = param_layout(spec)
     x = np.zeros((1, layout.dim))
     values = {"veh0.s": 100.0, "veh1.s": 70.0, "veh0.speed": 20.0, "veh1.speed": 5.0}
     for name, value in values.items():
@@ -122,14 +119,14 @@ def test_a_rollout_of_the_bundled_default_is_batch_independent():
         }
     )
     from avrisk.rare.problem import chunk_rng, sample_seeds
-    from avrisk.scenario import build_base_distribution
 
     sim = ScenarioSimulator(spec)
-    x = build_base_distribution(spec).sample(5, chunk_rng(0, 0, 0))
+    x = base_distribution(spec).sample(5, chunk_rng(0, 0, 0))
     seeds = sample_seeds(0, 0, np.arange(5))
     together = sim.rollout(x, seeds)
     alone = sim.rollout(x[3:4], seeds[3:4])
     assert together.f.shape == (5,) and together.steps.dtype == torch.int64
+    assert (together.status == 0).all() and together.contact.dtype == torch.int8
     assert together.f[3].item() == alone.f[0].item()
     assert sim.min_ttc(x, seeds).dtype == np.float64
 

@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from avrisk.agents.drivers import XI_DIM, LearnedEgoPolicy, load_xi_prior
+from avrisk.assembly.builder import ScenarioSimulator, base_distribution, param_layout
 from avrisk.rare import FixedCovNormal, ScaledBeta
 from avrisk.rare.problem import chunk_rng, sample_seeds
 from avrisk.scenario import (
@@ -13,7 +14,6 @@ from avrisk.scenario import (
     load_spec,
     spec_from_dict,
 )
-from avrisk.scenario.builder import ScenarioSimulator
 
 
 def shortened(name, horizon):
@@ -50,7 +50,7 @@ def traffic(models, ego="idm_mobil", horizon=1.0):
 
 
 def sample(spec, n, seed=0):
-    x = build_base_distribution(spec).sample(n, chunk_rng(seed, 0, 0))
+    x = base_distribution(spec).sample(n, chunk_rng(seed, 0, 0))
     return x, sample_seeds(seed, 0, np.arange(n))
 
 
@@ -62,19 +62,28 @@ def frames(spec, x, seeds):
 
 
 def test_the_learned_scenario_appends_one_xi_block_to_x():
-    layout = ParamLayout.from_spec(load_spec("highway_default"))
+    layout = param_layout(load_spec("highway_default"))
     assert layout.xi_dim == XI_DIM == 404
     assert layout.dim == 24 + 404 and len(layout.columns) == layout.dim
     assert layout.columns[23:26] == ("veh5.speed", "xi.0", "xi.1")
     assert layout.columns[-1] == "xi.403" and layout.unit("xi.403") == "-"
     assert layout.xi_slice == slice(24, 428)
-    default = ParamLayout.from_spec(load_spec("highway_idm"))
+    default = param_layout(load_spec("highway_idm"))
     assert (default.dim, default.xi_dim) == (24, 0)
+
+
+def test_the_scenario_layer_asks_for_the_xi_block_it_does_not_know():
+    spec = load_spec("highway_default")
+    with pytest.raises(ValueError, match="pass xi_dim"):
+        ParamLayout.from_spec(spec)
+    with pytest.raises(ValueError, match="pass xi_prior"):
+        build_base_distribution(spec)
+    assert ParamLayout.from_spec(spec, XI_DIM) == param_layout(spec)
 
 
 def test_p0_of_the_learned_scenario_ends_with_the_shipped_xi_prior():
     spec = load_spec("highway_default")
-    p0 = build_base_distribution(spec)
+    p0 = base_distribution(spec)
     assert p0.dim == 428 and len(p0.blocks) == 25
     assert all(isinstance(b, ScaledBeta) for b in p0.blocks[:24])
     xi = p0.blocks[-1]
@@ -86,7 +95,7 @@ def test_p0_of_the_learned_scenario_ends_with_the_shipped_xi_prior():
     assert log_p0.shape == (6,) and np.isfinite(log_p0).all()
     np.testing.assert_allclose(
         log_p0 - xi.log_prob(x[:, 24:]),
-        build_base_distribution(load_spec("highway_idm")).log_prob(x[:, :24]),
+        base_distribution(load_spec("highway_idm")).log_prob(x[:, :24]),
     )
 
 
@@ -136,7 +145,7 @@ def test_with_mean_actions_a_rollout_is_a_function_of_x_alone():
 
 def test_the_xi_search_box_of_p0_follows_the_spec():
     spec = load_spec("highway_default")
-    xi = build_base_distribution(spec).blocks[-1]
+    xi = base_distribution(spec).blocks[-1]
     assert np.all(xi.max_shift == 0.0)  # xi_search: 0 -> CE leaves xi at P0
     moved = xi.project(xi.mean + 1.0)
     np.testing.assert_array_equal(moved.mean, xi.mean)
@@ -144,7 +153,7 @@ def test_the_xi_search_box_of_p0_follows_the_spec():
     wide = spec.model_copy(
         update={"learned_drivers": spec.learned_drivers.model_copy(update=search)}
     )
-    xi = build_base_distribution(wide).blocks[-1]
+    xi = base_distribution(wide).blocks[-1]
     np.testing.assert_allclose(xi.max_shift, 0.5 * xi.std)
     paper = spec.model_copy(
         update={
@@ -153,7 +162,7 @@ def test_the_xi_search_box_of_p0_follows_the_spec():
             )
         }
     )
-    assert np.all(build_base_distribution(paper).blocks[-1].max_shift == 0.01)
+    assert np.all(base_distribution(paper).blocks[-1].max_shift == 0.01)
 
 
 def test_mixed_traffic_gives_each_vehicle_the_action_of_its_own_model():

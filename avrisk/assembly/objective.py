@@ -1,24 +1,30 @@
 """The simulator seen as the estimation engine's batched black box.
 
 :class:`SimulationObjective` maps ``X`` (n, D) and one seed per rollout to the
-minimum time-to-collision ``f`` [s] plus the event flags, which the engine
-passes on to the samples table without using them.
+minimum time-to-collision ``f`` [s] plus per-rollout outcomes (event flags,
+status, crash facts), which the engine passes on to the samples table without
+using them.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from pathlib import Path
-from typing import Any
-
 import numpy as np
 import torch
 
+from avrisk.assembly.builder import ScenarioSimulator
 from avrisk.scenario import ParamLayout, ScenarioSpec
-from avrisk.scenario.builder import ScenarioSimulator
 
-#: Per-rollout outputs recorded besides ``f``.
+__all__ = ["EVENT_COLUMNS", "FACT_COLUMNS", "SimulationObjective"]
+
+#: Per-rollout event flags and step counts recorded besides ``f``.
 EVENT_COLUMNS = ("crash", "offroad", "reversing", "steps")
+#: Per-rollout status and crash facts recorded besides ``f``, with their
+#: integer types (see :class:`avrisk.sim.simulator.RolloutResult`).
+FACT_COLUMNS: dict[str, type[np.integer]] = {
+    "status": np.int8,
+    "collision_with": np.int16,
+    "contact": np.int8,
+}
 
 
 class SimulationObjective:
@@ -54,27 +60,22 @@ class SimulationObjective:
         Returns
         -------
         dict
-            ``f`` (n,) float64 minimum TTC [s]; ``crash``, ``offroad``,
-            ``reversing`` (n,) bool; ``steps`` (n,) int64.
+            ``f`` (n,) float64 minimum TTC [s] (NaN where an actor failed);
+            ``crash``, ``offroad``, ``reversing`` (n,) bool; ``steps`` (n,)
+            int64; ``status`` (n,) int8 (0 ok, 1 an actor failed);
+            ``collision_with`` (n,) int16 (vehicle hit, -1 none); ``contact``
+            (n,) int8 (0 none, 1 rear-end, 2 hit from behind, 3 side).
         """
         result = self.simulator.rollout(x, seeds)
         out = {"f": _numpy(result.f).astype(np.float64)}
         out.update({name: _numpy(getattr(result, name)) for name in EVENT_COLUMNS})
+        out.update(
+            {
+                name: _numpy(getattr(result, name)).astype(kind)
+                for name, kind in FACT_COLUMNS.items()
+            }
+        )
         return out
-
-    def animate(self, rows: Sequence[dict[str, Any]], path: Path) -> Path:
-        """Re-simulate samples-table rows with traces and write a top-down GIF."""
-        from avrisk.report.animate import animate_rollouts, traces_from_rollout
-
-        x = np.array([[row[c] for c in self.layout.columns] for row in rows])
-        seeds = np.array([row["seed"] for row in rows], dtype=np.int64)
-        result = self.simulator.rollout(x, seeds, record_trace=True)
-        labels = [f"min TTC {row['f']:.2f} s" for row in rows]
-        traces = traces_from_rollout(self.simulator, x, result, labels=labels)
-        spec = self.simulator.spec
-        path.parent.mkdir(parents=True, exist_ok=True)
-        animate_rollouts(traces, spec.road, spec.simulation.dt, path)
-        return path
 
 
 def _numpy(t: torch.Tensor) -> np.ndarray:

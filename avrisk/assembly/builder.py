@@ -1,8 +1,13 @@
-"""From a scenario spec and named parameters to simulator inputs, and rollouts.
+"""From a scenario spec and flat ``X`` to the simulator, its actors and its measure.
 
-This is the thin adapter between :mod:`avrisk.scenario` and :mod:`avrisk.sim`:
+The one place that joins :mod:`avrisk.scenario` (data) with :mod:`avrisk.sim`,
+:mod:`avrisk.agents` and :mod:`avrisk.safety`:
 
-* :func:`road_from_spec`, :func:`sim_config_from_spec` -- the static pieces;
+* :func:`road_from_spec`, :func:`sim_config_from_spec`,
+  :func:`safety_measure_from_spec` -- the static pieces;
+* :func:`param_layout`, :func:`base_distribution` -- the scenario's named
+  ``X`` and ``P0``, with the learned drivers' ``xi`` block (its dimension and
+  the shipped prior ``N(mu0, Sigma0)``);
 * :func:`initial_state` -- ``ScenarioParams`` (B, A) to the simulator's
   ``VehicleState`` in road coordinates;
 * :func:`driver_params` -- per-slot IDM+MOBIL parameters as (B, A) tensors
@@ -10,38 +15,38 @@ This is the thin adapter between :mod:`avrisk.scenario` and :mod:`avrisk.sim`:
 * :class:`ScenarioSimulator` -- all of the above bound together: flat ``X``
   (B, D) and seeds (B,) in, ``RolloutResult`` out.
 
-Drivers: every vehicle of a rollout is driven in one batched pass by IDM+MOBIL
-(:class:`~avrisk.agents.idm.IDMDriver`), by the learned driver network with
-the rollout's own ``xi`` (:class:`~avrisk.agents.drivers.LearnedDriver`, one
-``xi`` row of ``X`` shared by all learned drivers of the rollout), or, when a
-scenario has both, by a per-vehicle mix of the two
-(:class:`~avrisk.agents.mixed.MixedDriver`). An ego with an IDM+MOBIL policy
-is one more IDM+MOBIL vehicle (slot 0); the ``lidar_imitation`` ego is the
-registered ego policy of that name, which replaces slot 0's action.
+Actors, in order of precedence (:meth:`ScenarioSimulator.actors`): the
+IDM+MOBIL drivers (:class:`~avrisk.agents.idm.IDMDriver`, one batched pass for
+all their slots; an ``idm_mobil`` ego is one more of them, slot 0), the
+learned drivers (:class:`~avrisk.agents.drivers.LearnedDriver`, one batched
+pass, parameter block the rollout's ``xi`` columns of ``X``, shared by all
+learned drivers of the rollout), and any other ego policy (registered by name,
+e.g. ``lidar_imitation``), which controls slot 0.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import torch
 from numpy.typing import ArrayLike, NDArray
 
 from avrisk.agents import (
-    DriverModel,
     IDMDriver,
     IDMParams,
     LearnedDriver,
-    MixedDriver,
-    Policy,
+    get_driver_model,
     get_policy,
 )
-from avrisk.agents.drivers import DriverNet, load_driver_net
-from avrisk.safety import SafetyMeasure, get_safety_measure
-from avrisk.scenario.components import IDM_MOBIL
-from avrisk.scenario.params import ParamLayout, ScenarioParams
+from avrisk.agents.drivers import XI_DIM, DriverNet, load_driver_net, load_xi_prior
+from avrisk.rare import Product
+from avrisk.safety import get_safety_measure
+from avrisk.scenario import ParamLayout, ScenarioParams, build_base_distribution
+from avrisk.scenario.components import IDM_MOBIL, LEARNED, DriverSpec
 from avrisk.scenario.spec import ScenarioSpec
+from avrisk.sim.interfaces import Actor, SafetyMeasure
 from avrisk.sim.road import Road
 from avrisk.sim.simulator import RolloutResult, SimConfig, Simulator
 from avrisk.sim.state import VehicleState
@@ -69,14 +74,13 @@ def road_from_spec(spec: ScenarioSpec) -> Road:
 
 
 def sim_config_from_spec(spec: ScenarioSpec) -> SimConfig:
-    """The simulator's settings (time step, horizon, lidar, TTC rays)."""
+    """The simulator's settings (time step, horizon, lidar)."""
     sim = spec.simulation
     return SimConfig(
         dt=sim.dt,
         horizon=sim.horizon,
         n_lidar_beams=sim.n_lidar_beams,
         lidar_range=sim.lidar_range,
-        n_ttc_rays=spec.safety.n_rays,
     )
 
 
@@ -85,17 +89,63 @@ def safety_measure_from_spec(
     *,
     device: str | torch.device = "cpu",
     dtype: torch.dtype = torch.float32,
+    allow_import: bool = False,
 ) -> SafetyMeasure:
-    """The scenario's safety measure ``f`` (ray TTC takes its ray count)."""
+    """The scenario's safety measure ``f`` with its params.
+
+    A measure is offered ``n_rays`` (ray TTC's ray count), ``device`` and
+    ``dtype`` and takes those its signature names.
+    """
     safety = spec.safety
-    if safety.measure == "min_ttc":
-        return get_safety_measure(
-            "min_ttc",
-            n_rays=safety.n_rays,
-            device=device,
-            dtype=dtype,
-        )
-    return get_safety_measure(safety.measure)
+    return get_safety_measure(
+        safety.measure,
+        safety.params,
+        allow_import=allow_import,
+        n_rays=safety.n_rays,
+        device=device,
+        dtype=dtype,
+    )
+
+
+def _other_driver_models(
+    drivers: list[DriverSpec],
+) -> list[tuple[str, dict[str, Any]]]:
+    """The driver models besides IDM+MOBIL and learned, each once, with params.
+
+    Raises
+    ------
+    ValueError
+        If one model name comes with two different ``params`` (one actor
+        drives all vehicles of a model).
+    """
+    found: dict[str, dict[str, Any]] = {}
+    for d in drivers:
+        if d.model in (IDM_MOBIL, LEARNED):
+            continue
+        if found.setdefault(d.model, d.params) != d.params:
+            raise ValueError(
+                f"driver model {d.model!r} is given twice with different params; "
+                "one model drives all its vehicles with one set of params"
+            )
+    return list(found.items())
+
+
+def param_layout(spec: ScenarioSpec) -> ParamLayout:
+    """The column layout of a scenario's ``X`` (``xi`` block: ``XI_DIM`` columns)."""
+    return ParamLayout.from_spec(spec, XI_DIM)
+
+
+def base_distribution(spec: ScenarioSpec) -> Product:
+    """``P0`` of a scenario, with the shipped ``xi`` prior for learned drivers.
+
+    Returns
+    -------
+    avrisk.rare.Product
+        See :func:`avrisk.scenario.build_base_distribution`; ``dim`` equals
+        ``param_layout(spec).dim``.
+    """
+    prior = load_xi_prior() if spec.has_learned_drivers else None
+    return build_base_distribution(spec, prior)
 
 
 def initial_state(
@@ -208,8 +258,9 @@ class ScenarioSimulator:
     net : DriverNet or None
         The shipped driver network (on ``device``) when a learned driver or
         the ``lidar_imitation`` ego needs it.
-    ego_policy : Policy or None
-        The ego policy when it is not IDM+MOBIL (slot 0 of the drivers).
+    ego_policy : Actor or None
+        The ego policy when it is not IDM+MOBIL (then slot 0 of the IDM+MOBIL
+        drivers); it controls slot 0.
     """
 
     def __init__(
@@ -218,9 +269,10 @@ class ScenarioSimulator:
         *,
         device: str | torch.device = "cpu",
         dtype: torch.dtype = torch.float32,
+        allow_import: bool = False,
     ) -> None:
         self.spec = spec
-        self.layout = ParamLayout.from_spec(spec)
+        self.layout = param_layout(spec)
         self.road = road_from_spec(spec)
         self.config = sim_config_from_spec(spec)
         self.device = torch.device(device)
@@ -228,21 +280,57 @@ class ScenarioSimulator:
         self.simulator = Simulator(
             self.road,
             self.config,
+            measure=safety_measure_from_spec(
+                spec, device=device, dtype=dtype, allow_import=allow_import
+            ),
             device=device,
             dtype=dtype,
-            measure=safety_measure_from_spec(spec, device=device, dtype=dtype),
         )
         idm_ego = spec.ego.policy == IDM_MOBIL
+        types = [spec.driver_type(j) for j in range(1, spec.n_vehicles)]
         # Per slot (A,): driven by the driver network / by IDM+MOBIL.
         self._learned = torch.tensor(spec.learned_slots, device=self.device)
-        self._idm = ~self._learned
-        self._idm[0] = idm_ego
+        self._idm = torch.tensor(
+            [idm_ego] + [t.model == IDM_MOBIL for t in types], device=self.device
+        )
+        context = dict(
+            n_vehicles=spec.n_vehicles, road=self.road, device=self.device, dtype=dtype
+        )
+        self._other_drivers = [
+            get_driver_model(
+                name,
+                params,
+                allow_import=allow_import,
+                controlled=torch.tensor(
+                    [False] + [t.model == name for t in types], device=self.device
+                ),
+                **context,
+            )
+            for name, params in _other_driver_models(types)
+        ]
         needs_net = bool(self._learned.any()) or not idm_ego
         self.net: DriverNet | None = (
             load_driver_net().to(self.device) if needs_net else None
         )
-        self.ego_policy: Policy | None = (
-            None if idm_ego else get_policy(spec.ego.policy, net=self.net)
+        self._learned_driver = (
+            LearnedDriver(
+                self.net,
+                controlled=self._learned,
+                stochastic=spec.learned_drivers.stochastic,
+            )
+            if self.net is not None and bool(self._learned.any())
+            else None
+        )
+        self.ego_policy: Actor | None = (
+            None
+            if idm_ego
+            else get_policy(
+                spec.ego.policy,
+                spec.ego.params,
+                allow_import=allow_import,
+                net=self.net,
+                **context,
+            )
         )
 
     @property
@@ -268,7 +356,8 @@ class ScenarioSimulator:
         -------
         RolloutResult
             ``f`` (B,) minimum TTC [s], ``crash``/``offroad``/``reversing`` (B,)
-            bool, ``steps`` (B,) int64, ``trace`` or None.
+            bool, ``steps`` (B,) int64, ``status``/``contact`` (B,) int8,
+            ``collision_with`` (B,) int64, ``trace`` or None.
         """
         params = ScenarioParams.from_flat(np.asarray(x, dtype=np.float64), self.layout)
         seeds_t = torch.as_tensor(np.array(seeds, dtype=np.int64), device=self.device)
@@ -278,17 +367,15 @@ class ScenarioSimulator:
                 f"got {tuple(seeds_t.shape)}"
             )
         state = initial_state(params, self.spec, device=self.device, dtype=self.dtype)
-        with torch.no_grad():
-            return self.simulator.run(
-                state,
-                self.drivers(params),
-                seeds_t,
-                ego_policy=self.ego_policy,
-                record_trace=record_trace,
-            )
+        actors, blocks = self.actors(params)
+        return self.simulator.run(
+            state, actors, seeds_t, params=blocks, record_trace=record_trace
+        )
 
-    def drivers(self, params: ScenarioParams) -> DriverModel:
-        """The driver model of a batch: IDM+MOBIL, learned, or a per-vehicle mix.
+    def actors(
+        self, params: ScenarioParams
+    ) -> tuple[list[Actor], list[torch.Tensor | None]]:
+        """The actors of a batch, in order of precedence, and their parameters.
 
         Parameters
         ----------
@@ -297,56 +384,39 @@ class ScenarioSimulator:
 
         Returns
         -------
-        DriverModel
-            Acts for every vehicle, fields of shape (B, A).
+        actors : list of Actor
+            IDM+MOBIL drivers, learned drivers, other driver models (one per
+            model name), the ego policy: those the scenario has. Together they
+            control every slot.
+        blocks : list of (Tensor of shape (B, P) or None)
+            Each actor's parameter block: ``xi`` (B, XI_DIM) for the learned
+            drivers, None for the others.
         """
-        learned = None
-        if bool(self._learned.any()):
-            assert self.net is not None
-            xi = torch.from_numpy(np.ascontiguousarray(params.xi))
-            learned = LearnedDriver(
-                self.net, xi, stochastic=self.spec.learned_drivers.stochastic
-            )
-            if not bool(self._idm.any()):
-                return learned
-        idm = IDMDriver(
-            driver_params(
+        actors: list[Actor] = []
+        blocks: list[torch.Tensor | None] = []
+        if bool(self._idm.any()):
+            p = driver_params(
                 self.spec, params.batch_size, device=self.device, dtype=self.dtype
-            ).validate(),
-            self.road,
-            wheelbase_fraction=self.config.wheelbase_fraction,
-            drives=None if bool(self._idm.all()) else self._idm,
-        )
-        return idm if learned is None else MixedDriver(idm, learned, self._learned)
+            )
+            actors.append(
+                IDMDriver(
+                    p.validate(),
+                    self.road,
+                    wheelbase_fraction=self.config.wheelbase_fraction,
+                    controlled=self._idm,
+                )
+            )
+            blocks.append(None)
+        if self._learned_driver is not None:
+            actors.append(self._learned_driver)
+            blocks.append(torch.from_numpy(np.ascontiguousarray(params.xi)))
+        actors += self._other_drivers
+        blocks += [None] * len(self._other_drivers)
+        if self.ego_policy is not None:
+            actors.append(self.ego_policy)
+            blocks.append(None)
+        return actors, blocks
 
     def min_ttc(self, x: ArrayLike, seeds: ArrayLike) -> NDArray[np.float64]:
         """Minimum time-to-collision of each rollout [s], shape (B,), float64."""
         return self.rollout(x, seeds).f.detach().cpu().numpy().astype(np.float64)
-
-
-def ttc_series(sim: ScenarioSimulator, result: RolloutResult) -> NDArray[np.float64]:
-    """Minimum time-to-collision so far at every recorded step [s].
-
-    Parameters
-    ----------
-    sim : ScenarioSimulator
-        The simulator that produced ``result``.
-    result : RolloutResult
-        Recorded with ``record_trace=True``.
-
-    Returns
-    -------
-    ndarray of shape (B, T+1)
-        Running minimum over steps ``0..k`` of the ray TTC from the ego centre;
-        constant after a rollout ends; ``inf`` while nothing approaches.
-    """
-    trace = result.trace
-    if trace is None:
-        raise ValueError("the rollout was run without record_trace=True")
-    ttc = getattr(trace, "ttc", None)
-    if ttc is None:  # pragma: no cover - depends on the simulator's trace
-        raise NotImplementedError("the simulator's trace does not record TTC")
-    series = ttc.detach().cpu().numpy().astype(np.float64)
-    alive = trace.alive.detach().cpu().numpy().astype(bool)
-    series = np.where(alive, series, np.inf)
-    return np.minimum.accumulate(series, axis=1)

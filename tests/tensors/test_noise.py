@@ -1,6 +1,6 @@
 import torch
 
-from avrisk.sim.noise import normal, random_bits, uniform
+from avrisk.tensors.noise import normal, random_bits, uniform
 
 
 def test_the_same_seed_step_and_stream_give_the_same_numbers_in_any_batch():

@@ -3,7 +3,7 @@ import math
 import pytest
 import torch
 
-from avrisk.sim.mathops import asin, atan, log, sinc, sincos, wrap_angle
+from avrisk.tensors.mathops import asin, atan, log, sinc, sincos, wrap_angle
 
 
 def grid(lo, hi, n=20001, dtype=torch.float64):

@@ -1,0 +1,33 @@
+"""Assembly: a scenario spec built into a simulator, its actors and its measure.
+
+The one layer that joins the scenario data (:mod:`avrisk.scenario`) with the
+simulator (:mod:`avrisk.sim`), the drivers and ego policies
+(:mod:`avrisk.agents`) and the safety measures (:mod:`avrisk.safety`):
+
+* :mod:`~avrisk.assembly.builder` -- :class:`ScenarioSimulator` (flat ``X``
+  and seeds in, rollouts out), the scenario's ``X`` layout and ``P0``;
+* :mod:`~avrisk.assembly.objective` -- :class:`SimulationObjective`, the
+  simulator as the estimation engine's black box.
+"""
+
+from avrisk.assembly.builder import (
+    ScenarioSimulator,
+    base_distribution,
+    initial_state,
+    param_layout,
+)
+from avrisk.assembly.objective import (
+    EVENT_COLUMNS,
+    FACT_COLUMNS,
+    SimulationObjective,
+)
+
+__all__ = [
+    "EVENT_COLUMNS",
+    "FACT_COLUMNS",
+    "ScenarioSimulator",
+    "SimulationObjective",
+    "base_distribution",
+    "initial_state",
+    "param_layout",
+]
