@@ -3,7 +3,7 @@
 import pytest
 from pydantic import BaseModel, Field
 
-from avrisk.agents.policy import ConstantPolicy, Policy, get_policy
+from avrisk.agents.policy import ConstantPolicy, EgoPolicy, get_policy
 from avrisk.registry import (
     ComponentError,
     Registry,
@@ -29,7 +29,7 @@ def _registry() -> Registry:
 
 
 def test_params_are_validated_by_the_component_and_errors_name_the_field():
-    ego = get_policy("constant", {"accel": "-2"})
+    ego = get_policy("constant", {"accel": "-2"}, n_vehicles=2)
     assert isinstance(ego, ConstantPolicy) and (ego.accel, ego.steer) == (-2.0, 0.0)
     with pytest.raises(ComponentError) as info:
         get_policy("constant", {"accel": "fast"})
@@ -97,7 +97,7 @@ def test_an_import_path_is_refused_unless_importing_is_allowed():
 
 def test_an_import_path_loads_the_users_class_and_validates_its_params():
     ego = get_policy(USER_EGO, {"speed": 25}, allow_import=True)
-    assert isinstance(ego, Policy) and (ego.speed, ego.gain) == (25.0, 0.5)
+    assert isinstance(ego, EgoPolicy) and (ego.speed, ego.gain) == (25.0, 0.5)
     assert type(ego) is load_component(USER_EGO, allow_import=True)
     with pytest.raises(ComponentError) as info:
         get_policy(USER_EGO, {"speed": -1}, allow_import=True)

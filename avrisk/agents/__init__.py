@@ -10,16 +10,27 @@ path through :func:`get_driver_model`.
 from avrisk.agents.driver_models import get_driver_model, register_driver_model
 from avrisk.agents.drivers import LearnedDriver, LearnedEgoPolicy
 from avrisk.agents.idm import IDMDriver, IDMParams, IDMPolicy, IDMState
-from avrisk.agents.policy import ConstantPolicy, ego_only, get_policy, register_policy
+from avrisk.agents.policy import (
+    ConstantPolicy,
+    EgoActor,
+    EgoPolicy,
+    as_ego_actor,
+    ego_only,
+    get_policy,
+    register_policy,
+)
 
 __all__ = [
     "ConstantPolicy",
+    "EgoActor",
+    "EgoPolicy",
     "IDMDriver",
     "IDMParams",
     "IDMPolicy",
     "IDMState",
     "LearnedDriver",
     "LearnedEgoPolicy",
+    "as_ego_actor",
     "ego_only",
     "get_driver_model",
     "get_policy",

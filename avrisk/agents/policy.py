@@ -10,23 +10,47 @@ client of an external process all fit.
 
 Ego policies are registered by name (``"constant"``, ``"idm_mobil"``,
 ``"lidar_imitation"``) for scenario files and the command line
-(:func:`get_policy`).
+(:func:`get_policy`). A user's own ego may be simpler than an actor: any
+object with ``init(obs) -> state`` and ``act(obs, state) -> (Action of shape
+(B,), state)`` (an :class:`EgoPolicy`) drives vehicle 0 through
+:class:`EgoActor`::
+
+    class HoldSpeed:
+        reads_lidar = False
+
+        def __init__(self, speed: float = 25.0) -> None:
+            self.speed = speed
+
+        def init(self, obs):
+            return None
+
+        def act(self, obs, state):  # fields of shape (B,)
+            v = obs.state.speed[:, 0]
+            return Action(0.5 * (self.speed - v), torch.zeros_like(v)), None
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, Protocol, runtime_checkable
 
 import torch
 from pydantic import BaseModel, ConfigDict
 from torch import Tensor
 
 from avrisk.registry import Registry
-from avrisk.sim.interfaces import Action, Actor
+from avrisk.sim.interfaces import Action, Actor, reads_lidar
 from avrisk.sim.observation import Observation
 
-__all__ = ["ConstantPolicy", "ego_only", "get_policy", "register_policy"]
+__all__ = [
+    "ConstantPolicy",
+    "EgoActor",
+    "EgoPolicy",
+    "as_ego_actor",
+    "ego_only",
+    "get_policy",
+    "register_policy",
+]
 
 
 def ego_only(n_vehicles: int, *, device: str | torch.device = "cpu") -> Tensor:
@@ -38,6 +62,78 @@ def ego_only(n_vehicles: int, *, device: str | torch.device = "cpu") -> Tensor:
     [True, False, False]
     """
     return torch.arange(n_vehicles, device=device) == 0
+
+
+@runtime_checkable
+class EgoPolicy(Protocol):
+    """The simplest ego under test: the ego's action only, no noise input."""
+
+    def init(self, obs: Observation) -> Any:
+        """The policy's state for the batch, from the observation at ``t = 0``."""
+        ...
+
+    def act(self, obs: Observation, state: Any) -> tuple[Action, Any]:
+        """The ego's action, fields of shape (B,), and the next state."""
+        ...
+
+
+class EgoActor:
+    """An :class:`EgoPolicy` as the simulator's actor of vehicle 0.
+
+    Parameters
+    ----------
+    policy : EgoPolicy
+    n_vehicles : int
+        ``A``.
+    device : str or torch.device, default="cpu"
+
+    Examples
+    --------
+    >>> ego = EgoActor(ConstantPolicy(ego_only(1), accel=1.0), 3)
+    >>> ego.controlled.tolist(), ego.noise
+    ([True, False, False], None)
+    """
+
+    noise = None
+
+    def __init__(
+        self, policy: Any, n_vehicles: int, *, device: str | torch.device = "cpu"
+    ) -> None:
+        self.policy = policy
+        self.controlled = ego_only(n_vehicles, device=device)
+        self.reads_lidar = reads_lidar(policy)
+
+    def init(self, obs: Observation, params: Tensor | None) -> Any:
+        """The policy's initial state (an ego policy takes no part of ``X``)."""
+        return self.policy.init(obs)
+
+    def act(self, obs: Observation, state: Any, noise: None) -> tuple[Action, Any]:
+        """The policy's action in every column (only vehicle 0's is used)."""
+        action, state = self.policy.act(obs, state)
+        shape = obs.state.x.shape
+        accel = action.accel.reshape(-1, 1).to(obs.state.x).expand(shape)
+        steer = action.steer.reshape(-1, 1).to(obs.state.x).expand(shape)
+        return Action(accel=accel, steer=steer), state
+
+
+def as_ego_actor(
+    ego: Any, n_vehicles: int, *, device: str | torch.device = "cpu"
+) -> Actor:
+    """``ego`` itself if it is an actor, else wrapped in :class:`EgoActor`.
+
+    Raises
+    ------
+    TypeError
+        If ``ego`` is neither an actor nor an :class:`EgoPolicy`.
+    """
+    if isinstance(ego, Actor) and hasattr(ego, "controlled"):
+        return ego
+    if isinstance(ego, EgoPolicy):
+        return EgoActor(ego, n_vehicles, device=device)
+    raise TypeError(
+        f"an ego policy must have init(obs) and act(obs, state) (or be an actor "
+        f"of the simulator); got {type(ego).__name__}"
+    )
 
 
 class ConstantPolicy:

@@ -37,6 +37,7 @@ from avrisk.agents import (
     IDMDriver,
     IDMParams,
     LearnedDriver,
+    as_ego_actor,
     get_driver_model,
     get_policy,
 )
@@ -324,12 +325,16 @@ class ScenarioSimulator:
         self.ego_policy: Actor | None = (
             None
             if idm_ego
-            else get_policy(
-                spec.ego.policy,
-                spec.ego.params,
-                allow_import=allow_import,
-                net=self.net,
-                **context,
+            else as_ego_actor(
+                get_policy(
+                    spec.ego.policy,
+                    spec.ego.params,
+                    allow_import=allow_import,
+                    net=self.net,
+                    **context,
+                ),
+                spec.n_vehicles,
+                device=self.device,
             )
         )
 
