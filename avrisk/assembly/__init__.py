@@ -7,7 +7,9 @@ simulator (:mod:`avrisk.sim`), the drivers and ego policies
 * :mod:`~avrisk.assembly.builder` -- :class:`ScenarioSimulator` (flat ``X``
   and seeds in, rollouts out), the scenario's ``X`` layout and ``P0``;
 * :mod:`~avrisk.assembly.objective` -- :class:`SimulationObjective`, the
-  simulator as the estimation engine's black box.
+  simulator as the estimation engine's black box;
+* :mod:`~avrisk.assembly.traces` -- rollouts as plain arrays, and the traces
+  of a run's most likely failures, recorded while it runs.
 """
 
 from avrisk.assembly.builder import (
@@ -21,13 +23,25 @@ from avrisk.assembly.objective import (
     FACT_COLUMNS,
     SimulationObjective,
 )
+from avrisk.assembly.traces import (
+    FAILURES_FILE,
+    FailureRecorder,
+    RolloutTrace,
+    read_failure_traces,
+    traces_from_rollout,
+)
 
 __all__ = [
     "EVENT_COLUMNS",
     "FACT_COLUMNS",
+    "FAILURES_FILE",
+    "FailureRecorder",
+    "RolloutTrace",
     "ScenarioSimulator",
     "SimulationObjective",
     "base_distribution",
     "initial_state",
     "param_layout",
+    "read_failure_traces",
+    "traces_from_rollout",
 ]

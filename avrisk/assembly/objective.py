@@ -8,10 +8,13 @@ using them.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import torch
 
 from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.traces import FailureRecorder
 from avrisk.scenario import ParamLayout, ScenarioSpec
 
 __all__ = ["EVENT_COLUMNS", "FACT_COLUMNS", "SimulationObjective"]
@@ -36,18 +39,34 @@ class SimulationObjective:
         The scenario.
     device : str, default="cpu"
         Torch device of the simulator.
+    allow_import : bool, default=False
+        Whether components the spec names by import path may be imported
+        (only for a spec given on the command line).
 
     Attributes
     ----------
     needs_seeds : bool
         Always ``True``: a rollout's seed drives its stochastic parts.
     simulator : ScenarioSimulator
+    failures : FailureRecorder or None
+        Keeps the traces of the most likely dangerous rollouts, when set.
     """
 
     needs_seeds = True
 
-    def __init__(self, spec: ScenarioSpec, *, device: str = "cpu") -> None:
-        self.simulator = ScenarioSimulator(spec, device=device)
+    def __init__(
+        self, spec: ScenarioSpec, *, device: str = "cpu", allow_import: bool = False
+    ) -> None:
+        self.simulator = ScenarioSimulator(
+            spec, device=device, allow_import=allow_import
+        )
+        self.failures: FailureRecorder | None = None
+
+    def recording(self, failures: FailureRecorder) -> SimulationObjective:
+        """The same objective (same simulator) recording into ``failures``."""
+        other = copy.copy(self)
+        other.failures = failures
+        return other
 
     @property
     def layout(self) -> ParamLayout:
@@ -66,7 +85,12 @@ class SimulationObjective:
             ``collision_with`` (n,) int16 (vehicle hit, -1 none); ``contact``
             (n,) int8 (0 none, 1 rear-end, 2 hit from behind, 3 side).
         """
-        result = self.simulator.rollout(x, seeds)
+        record = self.failures is not None
+        result = self.simulator.rollout(x, seeds, record_trace=record)
+        if self.failures is not None:
+            self.failures.offer(
+                self.simulator, np.asarray(x), np.asarray(seeds), result
+            )
         out = {"f": _numpy(result.f).astype(np.float64)}
         out.update({name: _numpy(getattr(result, name)) for name in EVENT_COLUMNS})
         out.update(

@@ -21,7 +21,7 @@ from typing import Annotated, Any
 import typer
 import yaml
 
-from avrisk.assembly import SimulationObjective
+from avrisk.assembly import ScenarioSimulator, SimulationObjective, param_layout
 from avrisk.cli.common import CliError, user_errors
 from avrisk.cli.workflow import (
     EXPECTED,
@@ -180,13 +180,15 @@ def run(
             batch_size=batch_size,
             **estimator_options(method, flags, set_),
         )
-        objective = SimulationObjective(spec, device=device)
+        objective = SimulationObjective(spec, device=device, allow_import=True)
         label = method_label(method)
         run_dir = execute(
-            label, out, objective, spec.model_dump(mode="json"), run_settings
+            label, out, objective, spec.model_dump(mode="json"), run_settings, failures
         )
         print_summary([(label, run_dir)])
-        write_run_report(out, [(label, run_dir)], objective, failures)
+        write_run_report(
+            out, [(label, run_dir)], spec, failures, simulator=objective.simulator
+        )
 
 
 def compare(
@@ -244,9 +246,22 @@ def report(
         Path, typer.Argument(help="A directory made by run or compare.")
     ],
     failures: Failures = 6,
+    scenario: Annotated[
+        str | None,
+        typer.Option(
+            "--scenario",
+            help="The run's scenario file, given again: needed only to animate "
+            "failures without recorded traces of a scenario that names user code "
+            "by import path.",
+        ),
+    ] = None,
     device: Device = "cpu",
 ) -> None:
-    """Rebuild the report of a finished run or comparison."""
+    """Rebuild the report of a finished run or comparison.
+
+    Failures are animated from the traces recorded during the run; the run
+    directory alone suffices (it never makes avrisk import code).
+    """
     with user_errors(*EXPECTED):
         single = (run_dir / "config.json").is_file()
         parts = [] if single else comparison_parts(run_dir)
@@ -255,10 +270,21 @@ def report(
         dirs = [("run", run_dir)] if single else parts
         config = json.loads((dirs[0][1] / "config.json").read_text())
         spec = spec_from_dict(config["scenario"], source=f"{dirs[0][1]}/config.json")
-        objective = SimulationObjective(spec, device=device)
+        simulator = None
+        if scenario is not None:
+            given = load_spec(scenario)
+            if given.model_dump(mode="json") != config["scenario"]:
+                raise CliError(
+                    f"{scenario} is not the scenario of {run_dir} (they differ); "
+                    "give the file the run was made with"
+                )
+            simulator = ScenarioSimulator(given, device=device, allow_import=True)
+        elif not spec.import_paths():
+            simulator = ScenarioSimulator(spec, device=device)
+        columns = param_layout(spec).columns
         runs = []
         for name, path in dirs:
-            directory = RunDirectory(path, objective.layout.columns)
+            directory = RunDirectory(path, columns)
             if not directory.is_complete:
                 raise CliError(
                     f"{path} is not finished; rerun its command to resume it"
@@ -266,8 +292,6 @@ def report(
             label = method_label(directory.config()["settings"]["method"])
             runs.append((label if single else f"{label} ({name})", directory))
         reference = dict(parts).get("reference")
-        ref_dir = (
-            RunDirectory(reference, objective.layout.columns) if reference else None
-        )
+        ref_dir = RunDirectory(reference, columns) if reference else None
         print_summary(runs)
-        write_run_report(run_dir, runs, objective, failures, ref_dir)
+        write_run_report(run_dir, runs, spec, failures, ref_dir, simulator=simulator)

@@ -325,11 +325,8 @@ def replay(
     ] = None,
 ) -> None:
     """Re-simulate chosen rows of a simulate output and write a top-down GIF."""
-    from avrisk.report.animate import (
-        animate_rollouts,
-        save_frame_png,
-        traces_from_rollout,
-    )
+    from avrisk.assembly import traces_from_rollout
+    from avrisk.report.animate import animate_rollouts, save_frame_png
 
     with user_errors(ScenarioSpecError):
         if not file.is_file():

@@ -7,22 +7,31 @@ sections come from the estimator itself.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from rich.markup import escape
 from rich.table import Table
 
-from avrisk.assembly import SimulationObjective, base_distribution
+from avrisk.assembly import (
+    FAILURES_FILE,
+    FailureRecorder,
+    ScenarioSimulator,
+    SimulationObjective,
+    base_distribution,
+    param_layout,
+    read_failure_traces,
+)
 from avrisk.cli.common import CliError, err_console, out_console
 from avrisk.cli.progress import RichRunMonitor
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
-from avrisk.report.animate import animate_samples
+from avrisk.report.animate import animate_rollouts, animate_samples
 from avrisk.report.html import write_report
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
-from avrisk.scenario import ScenarioSpecError, load_spec
+from avrisk.scenario import ScenarioSpec, ScenarioSpecError, load_spec
 
 #: Failures reported as one red line (no traceback).
 EXPECTED = (
@@ -54,15 +63,23 @@ def execute(
     objective: SimulationObjective,
     spec_json: dict[str, Any],
     run_settings: RunSettings,
+    failures: int,
 ) -> RunDirectory:
-    """Run (or resume, or read back) one estimation into ``out`` with progress."""
+    """Run (or resume, or read back) one estimation into ``out`` with progress.
+
+    The traces of the ``failures`` most likely dangerous rollouts are recorded
+    as the run goes (``out/failures.parquet``), for its report.
+    """
     run_dir = RunDirectory(out, objective.layout.columns)
     base = base_distribution(objective.simulator.spec)
+    recorder = FailureRecorder(
+        out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
+    )
     with RichRunMonitor(err_console, label) as monitor:
         run_estimation(
             run_dir,
             base,
-            objective,
+            objective.recording(recorder),
             run_settings,
             context={"scenario": spec_json},
             monitor=monitor,
@@ -109,22 +126,41 @@ def _by_gamma(run_dir: RunDirectory) -> list[dict[str, Any]]:
 def write_run_report(
     out: Path,
     runs: list[tuple[str, RunDirectory]],
-    objective: SimulationObjective,
+    spec: ScenarioSpec,
     failures: int,
     reference: RunDirectory | None = None,
+    simulator: ScenarioSimulator | None = None,
 ) -> Path:
-    """The HTML report of ``runs``; failures come from the first run."""
-    spec = objective.simulator.spec
+    """The HTML report of ``runs``; failures come from the first run.
+
+    A failure is animated from the trace recorded during the run; one without
+    (a run older than recorded traces) is simulated again when ``simulator``
+    is given, else shown without animation.
+    """
+    failures_from = runs[0][1]
+    recorded = failures_from.path / FAILURES_FILE
+    traces = read_failure_traces(recorded) if recorded.is_file() else {}
+
+    def animate(row: dict[str, Any], path: Path) -> Path | None:
+        found = traces.get(int(row["seed"]))
+        if found is not None:
+            trace = replace(found[1], label=f"min TTC {row['f']:.2f} s")
+            path.parent.mkdir(parents=True, exist_ok=True)
+            return animate_rollouts([trace], spec.road, spec.simulation.dt, path)
+        if simulator is not None:
+            return animate_samples(simulator, [row], path)
+        return None
+
     path = write_report(
         out,
         runs,
         title=f"avrisk: {spec.name}",
         subtitle=spec.description or "",
         reference=reference,
-        failures_from=runs[0][1],
+        failures_from=failures_from,
         n_failures=failures,
-        param_names=objective.layout.columns,
-        animate=lambda row, p: animate_samples(objective.simulator, [row], p),
+        param_names=param_layout(spec).columns,
+        animate=animate,
     )
     err_console.print(f"report: {path}")
     return path
@@ -145,7 +181,7 @@ def compare_runs(
     ``reference_n``) to ``out/reference``.
     """
     spec = load_spec(scenario)
-    objective = SimulationObjective(spec, device=device)
+    objective = SimulationObjective(spec, device=device, allow_import=True)
     spec_json = spec.model_dump(mode="json")
     shared = dict(
         gamma=tested.gamma, gamma_test=tested.gamma_test, batch_size=tested.batch_size
@@ -171,13 +207,15 @@ def compare_runs(
             )
         )
     runs = [
-        (label, execute(label, path, objective, spec_json, s))
+        (label, execute(label, path, objective, spec_json, s, failures))
         for label, path, s in plan
     ]
     print_summary(runs)
     reference = runs[2][1] if reference_n else None
     print_ratios(runs[0], runs[1][1], reference)
-    return write_run_report(out, runs, objective, failures, reference)
+    return write_run_report(
+        out, runs, spec, failures, reference, simulator=objective.simulator
+    )
 
 
 def comparison_parts(out: Path) -> list[tuple[str, Path]]:

@@ -10,12 +10,13 @@ ended early (crash) holds its last frame, marked in red.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+
+from avrisk.assembly.traces import RolloutTrace, traces_from_rollout
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -37,48 +38,6 @@ class RoadLike(Protocol):
     n_lanes: int
     lane_width: float
     length: float
-
-
-@dataclass(frozen=True)
-class RolloutTrace:
-    """One recorded rollout, as plain arrays.
-
-    Attributes
-    ----------
-    x, y : ndarray of shape (T+1, A)
-        Centre position along the road and from the right road edge [m].
-    heading : ndarray of shape (T+1, A)
-        Heading, ccw from the road direction [rad].
-    speed : ndarray of shape (T+1, A)
-        Speed [m/s].
-    length, width : ndarray of shape (A,)
-        Vehicle size [m]; vehicle 0 is the ego.
-    ttc_so_far : ndarray of shape (T+1,)
-        Minimum time-to-collision up to and including each step [s] (inf when
-        nothing has approached the ego yet).
-    n_frames : int
-        Steps actually simulated plus one (the rollout may stop at a crash).
-    crashed : bool
-        Whether the rollout ended in a crash.
-    label : str
-        Shown in the panel title, e.g. ``"row 12"``.
-    """
-
-    x: FloatArray
-    y: FloatArray
-    heading: FloatArray
-    speed: FloatArray
-    length: FloatArray
-    width: FloatArray
-    ttc_so_far: FloatArray
-    n_frames: int
-    crashed: bool
-    label: str = ""
-
-    @property
-    def min_ttc(self) -> float:
-        """Minimum time-to-collision of the whole rollout [s]."""
-        return float(self.ttc_so_far[self.n_frames - 1])
 
 
 def box_corners(
@@ -338,91 +297,6 @@ def save_frame_png(
         fig.savefig(out, dpi=100)
     finally:
         plt.close(fig)
-    return out
-
-
-def ttc_series(result: Any) -> FloatArray:
-    """Minimum time-to-collision so far at every recorded step [s].
-
-    Parameters
-    ----------
-    result : avrisk.sim.simulator.RolloutResult
-        Recorded with ``record_trace=True``.
-
-    Returns
-    -------
-    ndarray of shape (B, T+1)
-        Running minimum over steps ``0..k`` of the instantaneous safety value
-        (TTC); constant after a rollout ends; ``inf`` while nothing approaches.
-    """
-    trace = result.trace
-    if trace is None:
-        raise ValueError("the rollout was run without record_trace=True")
-    series = trace.ttc.detach().cpu().numpy().astype(np.float64)
-    alive = trace.alive.detach().cpu().numpy().astype(bool)
-    series = np.where(alive, series, np.inf)
-    return np.minimum.accumulate(series, axis=1)
-
-
-def traces_from_rollout(
-    sim: ScenarioSimulator,
-    x: FloatArray,
-    result: Any,
-    *,
-    labels: Sequence[str] | None = None,
-) -> list[RolloutTrace]:
-    """Turn a recorded batch rollout into per-rollout traces.
-
-    Parameters
-    ----------
-    sim : avrisk.assembly.ScenarioSimulator
-        The simulator that produced ``result`` (for vehicle sizes).
-    x : ndarray of shape (B, D)
-        The flat scenario samples that were simulated.
-    result : avrisk.sim.simulator.RolloutResult
-        With ``trace`` recorded (``record_trace=True``).
-    labels : sequence of str or None
-        One label per rollout.
-
-    Returns
-    -------
-    list of RolloutTrace
-        Length ``B``.
-    """
-    trace = result.trace
-    if trace is None:
-        raise ValueError("the rollout was run without record_trace=True")
-
-    def np_(t: Any) -> np.ndarray:
-        return t.detach().cpu().numpy()
-
-    xs, ys, hs, vs = (
-        np_(getattr(trace, k)).astype(np.float64)
-        for k in ("x", "y", "heading", "speed")
-    )
-    alive = np_(trace.alive).astype(bool)
-    ttc = ttc_series(result)  # (B, T+1), running minimum
-    spec = sim.spec
-    length = np.array([v.length for v in spec.vehicles], dtype=np.float64)
-    width = np.array([v.width for v in spec.vehicles], dtype=np.float64)
-    crash = np_(result.crash).astype(bool)
-    out = []
-    for b in range(xs.shape[0]):
-        n_frames = int(alive[b].sum()) if alive[b].any() else 1
-        out.append(
-            RolloutTrace(
-                x=xs[b],
-                y=ys[b],
-                heading=hs[b],
-                speed=vs[b],
-                length=length,
-                width=width,
-                ttc_so_far=ttc[b],
-                n_frames=n_frames,
-                crashed=bool(crash[b]),
-                label=labels[b] if labels is not None else "",
-            )
-        )
     return out
 
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from avrisk.assembly import RolloutTrace
 from avrisk.report.animate import (
-    RolloutTrace,
     animate_rollouts,
     box_corners,
     save_frame_png,
