@@ -28,6 +28,7 @@ from avrisk.assembly.traces import (
     FailureRecorder,
     RolloutTrace,
     read_failure_traces,
+    resimulate,
     traces_from_rollout,
 )
 
@@ -43,5 +44,6 @@ __all__ = [
     "initial_state",
     "param_layout",
     "read_failure_traces",
+    "resimulate",
     "traces_from_rollout",
 ]

@@ -31,6 +31,7 @@ __all__ = [
     "FailureRecorder",
     "RolloutTrace",
     "read_failure_traces",
+    "resimulate",
     "traces_from_rollout",
     "ttc_series",
 ]
@@ -173,6 +174,32 @@ def traces_from_rollout(
             )
         )
     return out
+
+
+def resimulate(
+    sim: ScenarioSimulator,
+    x: FloatArray,
+    seeds: np.ndarray,
+    labels: Sequence[str] | None = None,
+) -> tuple[Any, list[RolloutTrace]]:
+    """Simulate given rollouts again, with their traces.
+
+    Parameters
+    ----------
+    sim : ScenarioSimulator
+    x : ndarray of shape (B, D)
+        Rows of ``X`` in ``sim.layout``.
+    seeds : ndarray of int64, shape (B,)
+    labels : sequence of str, optional
+        One per rollout, for animations.
+
+    Returns
+    -------
+    result : avrisk.sim.simulator.RolloutResult
+    traces : list of RolloutTrace
+    """
+    result = sim.rollout(x, seeds, record_trace=True)
+    return result, traces_from_rollout(sim, x, result, labels=labels)
 
 
 class FailureRecorder:

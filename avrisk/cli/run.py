@@ -30,10 +30,10 @@ from avrisk.cli.workflow import (
     execute,
     method_label,
     print_summary,
+    samples_directory,
     settings,
     write_run_report,
 )
-from avrisk.pipeline import RunDirectory
 from avrisk.rare import estimator_names
 from avrisk.rare.estimator import estimator_class
 from avrisk.scenario import load_spec, spec_from_dict
@@ -281,10 +281,10 @@ def report(
             simulator = ScenarioSimulator(given, device=device, allow_import=True)
         elif not spec.import_paths():
             simulator = ScenarioSimulator(spec, device=device)
-        columns = param_layout(spec).columns
+        layout = param_layout(spec)
         runs = []
         for name, path in dirs:
-            directory = RunDirectory(path, columns)
+            directory = samples_directory(path, layout)
             if not directory.is_complete:
                 raise CliError(
                     f"{path} is not finished; rerun its command to resume it"
@@ -292,6 +292,6 @@ def report(
             label = method_label(directory.config()["settings"]["method"])
             runs.append((label if single else f"{label} ({name})", directory))
         reference = dict(parts).get("reference")
-        ref_dir = RunDirectory(reference, columns) if reference else None
+        ref_dir = samples_directory(reference, layout) if reference else None
         print_summary(runs)
         write_run_report(run_dir, runs, spec, failures, ref_dir, simulator=simulator)

@@ -1,13 +1,18 @@
 """``avrisk simulate`` and ``avrisk replay``: naive rollouts from P0, and animations.
 
 ``simulate`` draws ``X ~ P0`` (seeded, batch-size independent), simulates every
-rollout and writes one Parquet row per rollout::
+rollout and writes one Parquet row per rollout, in the samples-table format of
+a run (:func:`avrisk.pipeline.store.samples_table`)::
 
-    sample_id, seed, veh0.s, ..., veh5.speed, log_p0, f, crash, offroad,
-    reversing, steps
+    phase, stage, iteration, chunk, sample_id, seed, veh0.s, ..., veh5.speed,
+    log_p0, log_p_proposal, log_weight, weight, f, crash, offroad, reversing,
+    steps, status, collision_with, contact
 
 The resolved scenario spec travels in the file's schema metadata, so
-``replay`` can re-simulate any row from the file alone.
+``replay`` can re-simulate any row from the file alone; ``replay`` takes a
+run directory (or its ``samples.parquet``) too, whose spec is its
+``config.json``. A spec read back from a file never makes avrisk import code:
+one that names user code by import path must be given again (``--scenario``).
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import numpy as np
 import pyarrow as pa
@@ -35,18 +40,22 @@ from rich.table import Table
 
 import avrisk
 from avrisk.assembly import (
-    EVENT_COLUMNS,
     ScenarioSimulator,
     SimulationObjective,
     base_distribution,
     param_layout,
 )
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
-from avrisk.pipeline.store import write_parquet_atomic
+from avrisk.pipeline.store import (
+    CONFIG_FILE,
+    SAMPLES_FILE,
+    samples_table,
+    write_parquet_atomic,
+)
 from avrisk.rare import RareEventProblem, StageBatch, run_stage
 from avrisk.rare.problem import FINAL_STAGE
+from avrisk.registry import ComponentError
 from avrisk.scenario import (
-    ParamLayout,
     ScenarioSpec,
     ScenarioSpecError,
     load_spec,
@@ -128,18 +137,6 @@ def simulate_rollouts(
     run_stage(problem, p0, n, seed=seed, stage=FINAL_STAGE, on_batch=record)
     wall_s = time.perf_counter() - start_time
 
-    def joined(get: Callable[[StageBatch], np.ndarray]) -> np.ndarray:
-        return np.concatenate([get(b) for b in batches])
-
-    x_all = joined(lambda b: b.x)
-    columns: dict[str, Any] = {
-        "sample_id": joined(lambda b: b.ids),
-        "seed": joined(lambda b: b.seeds),
-    }
-    columns.update({c: x_all[:, i] for i, c in enumerate(objective.layout.columns)})
-    columns["log_p0"] = joined(lambda b: b.log_p0)
-    columns["f"] = joined(lambda b: b.values)
-    columns.update({k: joined(lambda b, k=k: b.extras[k]) for k in EVENT_COLUMNS})
     run_meta = {
         "avrisk_version": avrisk.__version__,
         "command": "simulate",
@@ -149,52 +146,40 @@ def simulate_rollouts(
         "scenario": spec.name,
     }
     layout = objective.layout
-    table = pa.table(columns, schema=_schema(layout, spec, run_meta))
+    units = {**layout.units(), "f": "s", "log_p0": "log density"}
+    table = pa.concat_tables(
+        samples_table(b, layout.columns, units)
+        for b in sorted(batches, key=lambda b: b.chunk)
+    )
+    table = table.replace_schema_metadata(
+        {
+            META_SCENARIO: json.dumps(spec.model_dump(mode="json")).encode(),
+            META_RUN: json.dumps(run_meta).encode(),
+        }
+    )
     return SimulationRun(table=table, wall_s=wall_s)
 
 
-def _schema(layout: ParamLayout, spec: ScenarioSpec, run_meta: dict) -> pa.Schema:
-    """Arrow schema with units in field metadata and the spec in schema metadata."""
-
-    def unit(u: str) -> dict[bytes, bytes]:
-        return {b"unit": u.encode()}
-
-    fields = [
-        pa.field("sample_id", pa.int64()),
-        pa.field("seed", pa.int64()),
-        *(
-            pa.field(c, pa.float64(), metadata=unit(layout.unit(c)))
-            for c in layout.columns
-        ),
-        pa.field("log_p0", pa.float64(), metadata=unit("log density")),
-        pa.field("f", pa.float64(), metadata=unit("s")),
-        pa.field("crash", pa.bool_()),
-        pa.field("offroad", pa.bool_()),
-        pa.field("reversing", pa.bool_()),
-        pa.field("steps", pa.int64()),
-    ]
-    meta = {
-        META_SCENARIO: json.dumps(spec.model_dump(mode="json")).encode(),
-        META_RUN: json.dumps(run_meta).encode(),
-    }
-    return pa.schema(fields, metadata=meta)
-
-
 def spec_from_parquet(path: Path) -> ScenarioSpec:
-    """The scenario spec stored in a ``simulate`` output file.
+    """The scenario of a samples table: stored in it, or in its run's config.json.
 
     Raises
     ------
     CliError
-        If the file has no (valid) stored scenario.
+        If neither holds a (valid) scenario.
     """
     meta = pq.read_schema(path).metadata or {}
-    if META_SCENARIO not in meta:
-        raise CliError(
-            f"{path} carries no scenario (not written by 'avrisk simulate'); "
-            "pass --scenario to name it"
-        )
-    return spec_from_dict(json.loads(meta[META_SCENARIO]), source=f"{path} (stored)")
+    if META_SCENARIO in meta:
+        stored = json.loads(meta[META_SCENARIO])
+        return spec_from_dict(stored, source=f"{path} (stored)")
+    config = path.parent / CONFIG_FILE
+    if config.is_file():
+        stored = json.loads(config.read_text()).get("scenario")
+        return spec_from_dict(stored, source=str(config))
+    raise CliError(
+        f"{path} carries no scenario (neither written by 'avrisk simulate' nor in "
+        "a run directory); pass --scenario to name it"
+    )
 
 
 # ------------------------------------------------------------------------ CLI
@@ -301,7 +286,11 @@ def _parse_rows(rows: str, n_rows: int) -> list[int]:
 
 def replay(
     file: Annotated[
-        Path, typer.Argument(help="Parquet file written by 'avrisk simulate'.")
+        Path,
+        typer.Argument(
+            help="Parquet file written by 'avrisk simulate', or a run directory "
+            "(its samples.parquet)."
+        ),
     ],
     rows: Annotated[
         str | None, typer.Option(help="Comma-separated row numbers, e.g. 0,5,12.")
@@ -324,11 +313,13 @@ def replay(
         Path | None, typer.Option(help="Also save the frame of lowest TTC as a PNG.")
     ] = None,
 ) -> None:
-    """Re-simulate chosen rows of a simulate output and write a top-down GIF."""
-    from avrisk.assembly import traces_from_rollout
+    """Re-simulate chosen rows of a samples table and write a top-down GIF."""
+    from avrisk.assembly import resimulate
     from avrisk.report.animate import animate_rollouts, save_frame_png
 
-    with user_errors(ScenarioSpecError):
+    with user_errors(ScenarioSpecError, ComponentError):
+        if file.is_dir():
+            file = file / SAMPLES_FILE
         if not file.is_file():
             raise CliError(f"{file}: no such file")
         _check_out_path(out, (".gif",))
@@ -354,10 +345,8 @@ def replay(
         sub = table.take(picked)
         x = np.stack([sub.column(c).to_numpy() for c in layout.columns], axis=1)
         seeds = sub.column("seed").to_numpy()
-        sim = ScenarioSimulator(spec)
-        result = sim.rollout(x, seeds, record_trace=True)
-        labels = [f"row {r}" for r in picked]
-        traces = traces_from_rollout(sim, x, result, labels=labels)
+        sim = ScenarioSimulator(spec, allow_import=scenario is not None)
+        result, traces = resimulate(sim, x, seeds, [f"row {r}" for r in picked])
         if "f" in sub.column_names:
             stored = sub.column("f").to_numpy()
             again = result.f.cpu().numpy().astype(np.float64)

@@ -31,7 +31,7 @@ from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.report.animate import animate_rollouts, animate_samples
 from avrisk.report.html import write_report
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
-from avrisk.scenario import ScenarioSpec, ScenarioSpecError, load_spec
+from avrisk.scenario import ParamLayout, ScenarioSpec, ScenarioSpecError, load_spec
 
 #: Failures reported as one red line (no traceback).
 EXPECTED = (
@@ -70,7 +70,7 @@ def execute(
     The traces of the ``failures`` most likely dangerous rollouts are recorded
     as the run goes (``out/failures.parquet``), for its report.
     """
-    run_dir = RunDirectory(out, objective.layout.columns)
+    run_dir = samples_directory(out, objective.layout)
     base = base_distribution(objective.simulator.spec)
     recorder = FailureRecorder(
         out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
@@ -85,6 +85,12 @@ def execute(
             monitor=monitor,
         )
     return run_dir
+
+
+def samples_directory(out: Path, layout: ParamLayout) -> RunDirectory:
+    """A run directory whose samples table records the scenario's units."""
+    units = {**layout.units(), "f": "s", "log_p0": "log density"}
+    return RunDirectory(out, layout.columns, units)
 
 
 def print_summary(runs: list[tuple[str, RunDirectory]]) -> None:

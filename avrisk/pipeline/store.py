@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -84,12 +84,18 @@ class RunDirectory:
         The directory (created by :meth:`claim`).
     param_names : sequence of str
         Names of the ``D`` coordinates of ``X`` (Parquet column names).
+    units : mapping of str to str, optional
+        Unit of each parameter (and of ``f``), recorded as field metadata.
     """
 
     def __init__(
-        self, path: str | os.PathLike[str], param_names: Sequence[str]
+        self,
+        path: str | os.PathLike[str],
+        param_names: Sequence[str],
+        units: Mapping[str, str] | None = None,
     ) -> None:
         self.path = Path(path)
+        self.units = dict(units or {})
         self.param_names = list(param_names)
         if len(set(self.param_names)) != len(self.param_names):
             raise ValueError("parameter names must be unique")
@@ -172,7 +178,7 @@ class RunDirectory:
     def record(self, batch: StageBatch) -> None:
         """Store one evaluated chunk (atomically)."""
         path = self._chunk_path(batch.stage, batch.chunk)
-        write_parquet_atomic(self._batch_table(batch), path)
+        write_parquet_atomic(samples_table(batch, self.param_names, self.units), path)
 
     def cached(self, stage: int, chunk: int) -> StageBatch | None:
         """The recorded chunk ``(stage, chunk)``, or ``None``."""
@@ -195,34 +201,6 @@ class RunDirectory:
             log_q=cols["log_p_proposal"],
             seeds=cols["seed"],
         )
-
-    def _batch_table(self, batch: StageBatch) -> pa.Table:
-        n = len(batch.values)
-        log_w = batch.log_p0 - batch.log_q
-        final = batch.stage == FINAL_STAGE
-        columns: dict[str, Any] = {
-            "phase": pa.array(["final" if final else "search"] * n),
-            "stage": np.full(n, batch.stage, dtype=np.int32),
-            "iteration": np.full(n, -1 if final else batch.stage - 1, dtype=np.int32),
-            "chunk": np.full(n, batch.chunk, dtype=np.int32),
-            "sample_id": batch.ids,
-            "seed": batch.seeds,
-        }
-        columns.update(
-            (name, _narrowest(col))
-            for name, col in zip(self.param_names, batch.x.T, strict=True)
-        )
-        with np.errstate(over="ignore"):
-            weight = np.exp(log_w)
-        columns.update(
-            log_p0=batch.log_p0,
-            log_p_proposal=batch.log_q,
-            log_weight=log_w,
-            weight=weight,
-            f=batch.values,
-        )
-        columns.update(batch.extras)
-        return pa.table(columns)
 
     # -- checkpoints and the end of a run ---------------------------------------
 
@@ -272,6 +250,68 @@ class RunDirectory:
     def samples(self, columns: Sequence[str] | None = None) -> pa.Table:
         """The samples table of a complete run."""
         return pq.read_table(self.path / SAMPLES_FILE, columns=columns)
+
+
+def samples_table(
+    batch: StageBatch,
+    param_names: Sequence[str],
+    units: Mapping[str, str] | None = None,
+) -> pa.Table:
+    """The rows of one evaluated chunk, in the samples-table format.
+
+    One format for every table of rollouts avrisk writes (a run's
+    ``samples.parquet``, ``avrisk simulate``'s output)::
+
+        phase, stage, iteration, chunk, sample_id, seed, <parameters of X>,
+        log_p0, log_p_proposal, log_weight, weight, f, <other outputs of f>
+
+    Parameters
+    ----------
+    batch : StageBatch
+    param_names : sequence of str
+        Names of the columns of ``batch.x``.
+    units : mapping of str to str, optional
+        Units recorded as the ``unit`` metadata of the named fields.
+
+    Returns
+    -------
+    pyarrow.Table
+        ``len(batch.values)`` rows; a parameter is stored as float32 when that
+        loses nothing (e.g. float32-rounded ``xi``).
+    """
+    n = len(batch.values)
+    log_w = batch.log_p0 - batch.log_q
+    final = batch.stage == FINAL_STAGE
+    columns: dict[str, Any] = {
+        "phase": pa.array(["final" if final else "search"] * n),
+        "stage": np.full(n, batch.stage, dtype=np.int32),
+        "iteration": np.full(n, -1 if final else batch.stage - 1, dtype=np.int32),
+        "chunk": np.full(n, batch.chunk, dtype=np.int32),
+        "sample_id": batch.ids,
+        "seed": batch.seeds,
+    }
+    columns.update(
+        (name, _narrowest(col))
+        for name, col in zip(param_names, batch.x.T, strict=True)
+    )
+    with np.errstate(over="ignore"):
+        weight = np.exp(log_w)
+    columns.update(
+        log_p0=batch.log_p0,
+        log_p_proposal=batch.log_q,
+        log_weight=log_w,
+        weight=weight,
+        f=batch.values,
+    )
+    columns.update(batch.extras)
+    table = pa.table(columns)
+    if not units:
+        return table
+    fields = [
+        f.with_metadata({b"unit": units[f.name].encode()}) if f.name in units else f
+        for f in table.schema
+    ]
+    return table.cast(pa.schema(fields))
 
 
 def _narrowest(column: np.ndarray) -> np.ndarray:

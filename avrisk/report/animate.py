@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from avrisk.assembly.traces import RolloutTrace, traces_from_rollout
+from avrisk.assembly.traces import RolloutTrace, resimulate
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -321,9 +321,8 @@ def animate_samples(
     """
     x = np.array([[row[c] for c in sim.layout.columns] for row in rows])
     seeds = np.array([row["seed"] for row in rows], dtype=np.int64)
-    result = sim.rollout(x, seeds, record_trace=True)
     labels = [f"min TTC {row['f']:.2f} s" for row in rows]
-    traces = traces_from_rollout(sim, x, result, labels=labels)
+    _, traces = resimulate(sim, x, seeds, labels)
     spec = sim.spec
     path.parent.mkdir(parents=True, exist_ok=True)
     animate_rollouts(traces, spec.road, spec.simulation.dt, path)

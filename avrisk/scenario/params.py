@@ -136,6 +136,10 @@ class ParamLayout:
             return "-"
         return FIELD_UNITS[column.split(".", 1)[1]]
 
+    def units(self) -> dict[str, str]:
+        """Unit of every column, by name (see :meth:`unit`)."""
+        return {c: self.unit(c) for c in self.columns}
+
     def index(self, column: str) -> int:
         """Position of a named column in ``X``.
 

@@ -42,15 +42,25 @@ def test_simulate_writes_one_row_per_rollout_with_named_columns(
     table = pq.read_table(out)
     layout = ParamLayout(n_vehicles=6)
     expected = [
+        "phase",
+        "stage",
+        "iteration",
+        "chunk",
         "sample_id",
         "seed",
         *layout.columns,
         "log_p0",
+        "log_p_proposal",
+        "log_weight",
+        "weight",
         "f",
         "crash",
         "offroad",
         "reversing",
         "steps",
+        "status",
+        "collision_with",
+        "contact",
     ]
     assert table.column_names == expected
     assert table.num_rows == 12
@@ -156,3 +166,29 @@ def test_replay_rejects_rows_out_of_range(short_scenario, tmp_path):
         ["replay", str(table_path), "--rows", "5", "--out", str(tmp_path / "a.gif")],
     )
     assert result.exit_code == 2 and "out of range" in result.output
+
+
+def test_simulate_and_a_naive_run_write_the_same_rows(short_scenario, tmp_path):
+    out = tmp_path / "rollouts.parquet"
+    assert _simulate(str(short_scenario), "--n", "40", "--out", str(out)).exit_code == 0
+    run_dir = tmp_path / "run"
+    args = ["run", str(short_scenario), "--out", str(run_dir), "--method", "naive"]
+    args += ["--n-final", "40", "--seed", "0", "--failures", "0"]
+    assert runner.invoke(app, args).exit_code == 0
+    simulated = pq.read_table(out)
+    run = pq.read_table(run_dir / "samples.parquet")
+    assert simulated.column_names == run.column_names
+    assert simulated.to_pylist() == run.to_pylist()
+
+
+def test_replay_takes_a_run_directory(short_scenario, tmp_path):
+    run_dir = tmp_path / "run"
+    args = ["run", str(short_scenario), "--out", str(run_dir), "--method", "naive"]
+    args += ["--n-final", "30", "--failures", "0"]
+    assert runner.invoke(app, args).exit_code == 0
+    gif = tmp_path / "worst.gif"
+    result = runner.invoke(
+        app, ["replay", str(run_dir), "--worst", "1", "--out", str(gif)]
+    )
+    assert result.exit_code == 0, result.output
+    assert gif.is_file() and "warning" not in result.output
