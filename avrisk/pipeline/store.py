@@ -229,7 +229,7 @@ class RunDirectory:
                 table = pq.read_table(path)
                 if writer is None:
                     writer = pq.ParquetWriter(tmp, schema)
-                writer.write_table(table.cast(schema))
+                writer.write_table(_conformed(table, schema))
         finally:
             if writer is not None:
                 writer.close()
@@ -321,15 +321,30 @@ def _narrowest(column: np.ndarray) -> np.ndarray:
 
 
 def _widest_schema(schemas: Sequence[pa.Schema]) -> pa.Schema | None:
-    """The first chunk's schema, float64 where any chunk stored float64."""
+    """Every chunk's columns in order of appearance, float64 where any stored it.
+
+    Chunks recorded by an earlier avrisk may lack columns that later chunks
+    have (a run resumed across versions): those are null in the older rows.
+    """
     if not schemas:
         return None
     wide = {f.name for s in schemas for f in s if f.type == pa.float64()}
-    first = schemas[0]
-    return pa.schema(
-        [f.with_type(pa.float64()) if f.name in wide else f for f in first],
-        metadata=first.metadata,
-    )
+    fields: dict[str, pa.Field] = {}
+    for schema in schemas:
+        for f in schema:
+            fields.setdefault(
+                f.name, f.with_type(pa.float64()) if f.name in wide else f
+            )
+    return pa.schema(list(fields.values()), metadata=schemas[0].metadata)
+
+
+def _conformed(table: pa.Table, schema: pa.Schema) -> pa.Table:
+    """``table`` cast to ``schema``, missing columns filled with nulls."""
+    columns = [
+        table[f.name] if f.name in table.column_names else pa.nulls(len(table), f.type)
+        for f in schema
+    ]
+    return pa.Table.from_arrays(columns, schema=schema.remove_metadata()).cast(schema)
 
 
 def _diff_keys(a: Any, b: Any, prefix: str = "") -> set[str]:

@@ -313,3 +313,24 @@ def test_too_many_failures_stop_the_run_with_a_clear_message(tmp_path):
     with pytest.raises(TooManyFailuresError, match=r"failed to evaluate .*rerun"):
         run(tmp_path / "run", f=flaky(lambda x: x[:, 1] > 1.5))
     assert (tmp_path / "run" / "chunks").is_dir()  # kept for the rerun
+
+
+def test_chunks_recorded_by_an_older_version_resume_with_nulls_for_new_columns(
+    tmp_path,
+):
+    naive = RunSettings("naive", gamma=0.0, n_final=20_000, seed=1)
+    reference = run(tmp_path / "reference", settings=naive)
+    calls = []
+
+    def first_chunk_only(x):
+        if calls:
+            raise KeyboardInterrupt
+        calls.append(len(x))
+        return PROBLEM.f(x)  # an older avrisk: no "crash" column
+
+    with pytest.raises(KeyboardInterrupt):
+        run(tmp_path / "run", settings=naive, f=first_chunk_only)
+    resumed = run(tmp_path / "run", settings=naive)
+    assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
+    crash = pq.read_table(tmp_path / "run" / "samples.parquet")["crash"]
+    assert crash.null_count == calls[0] and len(crash) == 20_000
