@@ -33,7 +33,20 @@ ALLOWED = {
     "agents": {"sim", "tensors", "registry"},
     "safety": {"sim", "tensors", "registry"},
     "scenario": {"rare", "registry"},
-    "assembly": {"sim", "agents", "safety", "scenario", "tensors", "rare", "registry"},
+    "assembly": {
+        "sim",
+        "agents",
+        "safety",
+        "scenario",
+        "tensors",
+        "rare",
+        "registry",
+        "fingerprint",
+    },
+    # the run driver serves any black box: it knows nothing of the simulator
+    "pipeline": {"rare", "registry", "fingerprint"},
+    "report": {"pipeline", "rare", "assembly", "scenario"},
+    "testing": {"rare"},
 }
 
 

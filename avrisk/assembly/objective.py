@@ -9,12 +9,19 @@ using them.
 from __future__ import annotations
 
 import copy
+from typing import Any
 
 import numpy as np
 import torch
 
+from avrisk.agents.drivers.store import (
+    DRIVER_NET_FILE,
+    XI_PRIOR_FILE,
+    default_drivers_dir,
+)
 from avrisk.assembly.builder import ScenarioSimulator
 from avrisk.assembly.traces import FailureRecorder
+from avrisk.fingerprint import sha256_file, sha256_json
 from avrisk.scenario import ParamLayout, ScenarioSpec
 
 __all__ = ["EVENT_COLUMNS", "FACT_COLUMNS", "SimulationObjective"]
@@ -61,6 +68,37 @@ class SimulationObjective:
             spec, device=device, allow_import=allow_import
         )
         self.failures: FailureRecorder | None = None
+
+    def definition(self) -> dict[str, Any]:
+        """What defines ``p`` for this objective, as hashes (a provenance stamp's).
+
+        Returns
+        -------
+        dict
+            ``scenario_sha256``: the resolved spec's canonical JSON (its
+            component names and params included); ``weights_sha256``: each
+            learned-weights file the simulation uses.
+        """
+        spec = self.simulator.spec
+        drivers = default_drivers_dir()
+        files = []
+        if self.simulator.net is not None:
+            files.append(DRIVER_NET_FILE)
+        if spec.has_learned_drivers:
+            files.append(XI_PRIOR_FILE)
+        return {
+            "scenario_sha256": sha256_json(spec.model_dump(mode="json")),
+            "weights_sha256": {name: sha256_file(drivers / name) for name in files},
+        }
+
+    def computed_with(self) -> dict[str, Any]:
+        """How this objective computes (device and floating-point precision)."""
+        sim = self.simulator
+        return {
+            "device": str(sim.device),
+            "precision": str(sim.dtype).removeprefix("torch."),
+            "torch": torch.__version__,
+        }
 
     def recording(self, failures: FailureRecorder) -> SimulationObjective:
         """The same objective (same simulator) recording into ``failures``."""

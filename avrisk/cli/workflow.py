@@ -26,6 +26,11 @@ from avrisk.assembly import (
 from avrisk.cli.common import CliError, err_console, out_console
 from avrisk.cli.progress import RichRunMonitor
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
+from avrisk.pipeline.provenance import (
+    ProvenanceMismatchError,
+    check_same_definition,
+    stamp,
+)
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.report.animate import animate_rollouts, animate_samples
@@ -39,6 +44,7 @@ EXPECTED = (
     RunDirectoryError,
     InvalidOutputError,
     TooManyFailuresError,
+    ProvenanceMismatchError,
 )
 #: Sub-directories of a comparison besides the tested method's own.
 NAIVE_PART, REFERENCE_PART = "naive", "reference"
@@ -72,6 +78,7 @@ def execute(
     """
     run_dir = samples_directory(out, objective.layout)
     base = base_distribution(objective.simulator.spec)
+    definition = objective.definition()
     recorder = FailureRecorder(
         out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
     )
@@ -81,8 +88,9 @@ def execute(
             base,
             objective.recording(recorder),
             run_settings,
-            context={"scenario": spec_json},
+            context={"scenario": spec_json, "defines_p": definition},
             monitor=monitor,
+            provenance=stamp(definition, objective.computed_with()),
         )
     return run_dir
 
@@ -218,6 +226,14 @@ def compare_runs(
     ]
     print_summary(runs)
     reference = runs[2][1] if reference_n else None
+    if reference is not None:
+        notes = check_same_definition(
+            runs[0][1].summary().get("provenance"),
+            reference.summary().get("provenance"),
+            "the reference run",
+        )
+        for note in notes:
+            err_console.print(f"note: {escape(note)}", highlight=False)
     print_ratios(runs[0], runs[1][1], reference)
     return write_run_report(
         out, runs, spec, failures, reference, simulator=objective.simulator

@@ -14,13 +14,12 @@ such a stamp::
 
 from __future__ import annotations
 
-import hashlib
-import json
 import subprocess
 from pathlib import Path
 from typing import Any
 
 import avrisk
+from avrisk.fingerprint import sha256_file, sha256_json
 
 __all__ = [
     "ProvenanceMismatchError",
@@ -34,21 +33,6 @@ __all__ = [
 
 class ProvenanceMismatchError(ValueError):
     """Two results estimate different probabilities (scenario or weights differ)."""
-
-
-def sha256_json(value: Any) -> str:
-    """SHA-256 of a JSON value in canonical form (sorted keys, no spaces)."""
-    text = json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def sha256_file(path: Path) -> str:
-    """SHA-256 of a file's bytes."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def code_version() -> dict[str, Any]:

@@ -110,6 +110,10 @@ class RunDirectory:
     def claim(self, config: dict[str, Any]) -> None:
         """Create the directory for ``config``, or check that it holds the same run.
 
+        A top-level key of ``config`` that the recorded configuration lacks
+        (a run recorded by an older avrisk, before that key existed) is not a
+        difference: such a run resumes, unchecked on that key.
+
         Raises
         ------
         RunDirectoryError
@@ -119,6 +123,7 @@ class RunDirectory:
         config_path = self.path / CONFIG_FILE
         if config_path.is_file():
             previous = json.loads(config_path.read_text())
+            config = {k: v for k, v in config.items() if k in previous}
             if previous != config:
                 changed = sorted(_diff_keys(previous, config))
                 raise RunDirectoryError(

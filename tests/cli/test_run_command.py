@@ -216,3 +216,22 @@ def test_compare_runs_ce_naive_and_reference_then_reports_them(
     assert "Cross-entropy vs naive Monte Carlo" in html and "Summary" in html
     assert (out / "plots" / "comparison.png").is_file()
     assert invoke("report", out, "--failures", 0).exit_code == 0
+
+
+def test_a_run_is_stamped_and_refuses_to_resume_with_other_weights(
+    short_scenario, tmp_path
+):
+    out = tmp_path / "run"
+    args = ("--method", "naive", "--n-final", 50, "--gamma", 1.0, "--failures", 0)
+    assert invoke("run", short_scenario, "--out", out, *args).exit_code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    defines = summary["provenance"]["defines_p"]
+    assert len(defines["scenario_sha256"]) == 64
+    assert defines["weights_sha256"] == {}  # IDM traffic: no learned weights
+    assert summary["provenance"]["computed_with"]["precision"] == "float32"
+    config = json.loads((out / "config.json").read_text())
+    config["defines_p"]["weights_sha256"] = {"driver_net.npz": "0" * 64}
+    (out / "config.json").write_text(json.dumps(config))
+    again = invoke("run", short_scenario, "--out", out, *args)
+    assert again.exit_code == 2
+    assert "differs in: defines_p.weights_sha256" in again.output
