@@ -151,7 +151,7 @@ def run_stage(
     def tasks() -> Iterator[EvalTask]:
         for chunk, size in enumerate(sizes):
             if chunk not in batches:
-                yield _chunk_task(proposal, seed, stage, chunk, size)
+                yield chunk_task(proposal, seed, stage, chunk, size)
 
     for result in (evaluator or LocalEvaluator()).evaluate(problem, tasks()):
         batch = _stage_batch(problem, proposal, result)
@@ -176,13 +176,14 @@ def run_stage(
     )
 
 
-def _chunk_task(
+def chunk_task(
     proposal: ExponentialFamily | DefensiveMixture,
     seed: int,
     stage: int,
     chunk: int,
     size: int,
 ) -> EvalTask:
+    """Chunk ``chunk`` (``size`` rows) of ``stage``: its samples, ids and seeds."""
     start = chunk * SAMPLE_CHUNK
     ids = np.arange(start, start + size, dtype=np.int64)
     x = proposal.sample(size, chunk_rng(seed, stage, chunk))
