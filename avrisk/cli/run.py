@@ -34,6 +34,7 @@ from avrisk.cli.workflow import (
     settings,
     write_run_report,
 )
+from avrisk.pipeline import RunSettings
 from avrisk.rare import estimator_names
 from avrisk.rare.estimator import estimator_class
 from avrisk.scenario import load_spec, spec_from_dict
@@ -137,6 +138,38 @@ def estimator_options(
     return {**defaults, **given}
 
 
+#: The options of ``run`` and ``compare`` that are estimator settings by name.
+ESTIMATOR_FLAGS = (
+    "rho",
+    "alpha",
+    "n_per_iter",
+    "n_iter",
+    "n_final",
+    "select",
+    "defensive",
+)
+
+
+def _run_settings(
+    method: str,
+    gamma: float,
+    gamma_test: str,
+    seed: int,
+    batch_size: int,
+    assignments: list[str] | None,
+    flags: dict[str, Any],
+) -> RunSettings:
+    """Run settings from a command's options; ``flags``: the estimator flags."""
+    return settings(
+        method,
+        gamma=gamma,
+        gamma_test=_thresholds(gamma_test),
+        seed=seed,
+        batch_size=batch_size,
+        **estimator_options(method, flags, assignments),
+    )
+
+
 def run(
     scenario: Scenario = DEFAULT_SCENARIO,
     out: Out = Path("runs/latest"),
@@ -163,22 +196,22 @@ def run(
     """
     with user_errors(*EXPECTED):
         spec = load_spec(scenario)
-        flags = dict(
-            rho=rho,
-            alpha=alpha,
-            n_per_iter=n_per_iter,
-            n_iter=n_iter,
-            n_final=n_final,
-            select=select,
-            defensive=defensive,
-        )
-        run_settings = settings(
+        run_settings = _run_settings(
             method,
-            gamma=gamma,
-            gamma_test=_thresholds(gamma_test),
-            seed=seed,
-            batch_size=batch_size,
-            **estimator_options(method, flags, set_),
+            gamma,
+            gamma_test,
+            seed,
+            batch_size,
+            set_,
+            dict(
+                rho=rho,
+                alpha=alpha,
+                n_per_iter=n_per_iter,
+                n_iter=n_iter,
+                n_final=n_final,
+                select=select,
+                defensive=defensive,
+            ),
         )
         objective = SimulationObjective(spec, device=device, allow_import=True)
         label = method_label(method)
@@ -221,22 +254,22 @@ def compare(
     variance ratios per threshold.
     """
     with user_errors(*EXPECTED):
-        flags = dict(
-            rho=rho,
-            alpha=alpha,
-            n_per_iter=n_per_iter,
-            n_iter=n_iter,
-            n_final=n_final,
-            select=select,
-            defensive=defensive,
-        )
-        tested = settings(
+        tested = _run_settings(
             method,
-            gamma=gamma,
-            gamma_test=_thresholds(gamma_test),
-            seed=seed,
-            batch_size=batch_size,
-            **estimator_options(method, flags, set_),
+            gamma,
+            gamma_test,
+            seed,
+            batch_size,
+            set_,
+            dict(
+                rho=rho,
+                alpha=alpha,
+                n_per_iter=n_per_iter,
+                n_iter=n_iter,
+                n_final=n_final,
+                select=select,
+                defensive=defensive,
+            ),
         )
         compare_runs(scenario, out, tested, reference_n, failures, device)
 
