@@ -21,6 +21,7 @@ from avrisk.assembly.builder import (
 from avrisk.assembly.objective import (
     EVENT_COLUMNS,
     FACT_COLUMNS,
+    MECHANISMS,
     SimulationObjective,
 )
 from avrisk.assembly.traces import (
@@ -36,6 +37,7 @@ __all__ = [
     "EVENT_COLUMNS",
     "FACT_COLUMNS",
     "FAILURES_FILE",
+    "MECHANISMS",
     "FailureRecorder",
     "RolloutTrace",
     "ScenarioSimulator",

@@ -23,8 +23,9 @@ from avrisk.assembly.builder import ScenarioSimulator
 from avrisk.assembly.traces import FailureRecorder
 from avrisk.fingerprint import sha256_file, sha256_json
 from avrisk.scenario import ParamLayout, ScenarioSpec
+from avrisk.sim.collision import Contact
 
-__all__ = ["EVENT_COLUMNS", "FACT_COLUMNS", "SimulationObjective"]
+__all__ = ["EVENT_COLUMNS", "FACT_COLUMNS", "MECHANISMS", "SimulationObjective"]
 
 #: Per-rollout event flags and step counts recorded besides ``f``.
 EVENT_COLUMNS = ("crash", "offroad", "reversing", "steps")
@@ -35,6 +36,20 @@ FACT_COLUMNS: dict[str, type[np.integer]] = {
     "collision_with": np.int16,
     "contact": np.int8,
 }
+
+
+#: The per-rollout column by which ``p`` is decomposed, and its codes' names
+#: (:class:`avrisk.sim.collision.Contact`; ``-1``: not recorded).
+MECHANISMS: tuple[str, dict[int, str]] = (
+    "contact",
+    {
+        int(Contact.NONE): "near miss (no contact)",
+        int(Contact.REAR_END): "rear-end: the ego hits the vehicle ahead",
+        int(Contact.FROM_BEHIND): "hit from behind",
+        int(Contact.SIDE): "side contact",
+        -1: "not recorded (older run)",
+    },
+)
 
 
 class SimulationObjective:

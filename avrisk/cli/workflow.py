@@ -16,6 +16,7 @@ from rich.table import Table
 
 from avrisk.assembly import (
     FAILURES_FILE,
+    MECHANISMS,
     FailureRecorder,
     ScenarioSimulator,
     SimulationObjective,
@@ -91,6 +92,7 @@ def execute(
             context={"scenario": spec_json, "defines_p": definition},
             monitor=monitor,
             provenance=stamp(definition, objective.computed_with()),
+            mechanisms=MECHANISMS,
         )
     return run_dir
 
@@ -123,6 +125,8 @@ def print_summary(runs: list[tuple[str, RunDirectory]]) -> None:
             )
     out_console.print(table)
     for label, run_dir in runs:
+        print_mechanisms(label, run_dir.summary())
+    for label, run_dir in runs:
         failed = max((g.get("n_failed", 0) for g in _by_gamma(run_dir)), default=0)
         if failed:
             err_console.print(
@@ -131,6 +135,30 @@ def print_summary(runs: list[tuple[str, RunDirectory]]) -> None:
                 "them dangerous (rerun the command to evaluate them again)",
                 highlight=False,
             )
+
+
+def print_mechanisms(label: str, summary: dict[str, Any]) -> None:
+    """What the dangerous rollouts were, at the run's main threshold: p by mechanism."""
+    mechanisms = summary.get("mechanisms")
+    if not mechanisms:
+        return
+    gamma = summary["estimate"]["gamma"]
+    main = next(m for m in mechanisms["by_gamma"] if m["gamma"] == gamma)
+    if not main["by_label"]:
+        return
+    table = Table(title=f"{label}: P(min TTC <= {gamma:g} s) by what happened")
+    for col in ("mechanism", "p", "95% CI", "share of p", "hits"):
+        table.add_column(col, justify="left" if col == "mechanism" else "right")
+    for part in main["by_label"]:
+        share = part["share"]
+        table.add_row(
+            part["label"],
+            f"{part['p']:.3g}",
+            f"{part['ci'][0]:.2g}..{part['ci'][1]:.2g}",
+            "-" if share is None else f"{share:.0%}",
+            str(part["n_hits"]),
+        )
+    out_console.print(table)
 
 
 def _by_gamma(run_dir: RunDirectory) -> list[dict[str, Any]]:

@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import platform
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 
 import avrisk
+from avrisk.pipeline.mechanisms import decompose
 from avrisk.pipeline.store import RunDirectory
 from avrisk.rare import (
     Estimate,
@@ -153,6 +154,7 @@ def run_estimation(
     monitor: RunMonitor | None = None,
     evaluator: Evaluator | None = None,
     provenance: dict[str, Any] | None = None,
+    mechanisms: tuple[str, Mapping[int, str]] | None = None,
 ) -> dict[str, Any]:
     """Run (or resume, or just read back) one estimation into ``run_dir``.
 
@@ -177,6 +179,10 @@ def run_estimation(
     provenance : dict, optional
         The run's provenance stamp (:mod:`avrisk.pipeline.provenance`),
         recorded in the summary.
+    mechanisms : (str, mapping of int to str), optional
+        An integer output column of ``f`` and the names of its codes: ``p`` is
+        decomposed by it (:mod:`avrisk.pipeline.mechanisms`) in the summary's
+        ``mechanisms``, for estimators whose estimate is a final-stage mean.
 
     Returns
     -------
@@ -206,6 +212,8 @@ def run_estimation(
     summary = _summary(estimate, settings, clock, wall)
     if provenance is not None:
         summary["provenance"] = provenance
+    if mechanisms is not None and getattr(settings.estimator, "decomposable", False):
+        summary["mechanisms"] = _mechanisms(run_dir, settings, *mechanisms)
     run_dir.finish(summary)
     return run_dir.summary()
 
@@ -239,6 +247,33 @@ def _estimate(
     problem = RareEventProblem(base, f, s.gamma, s.gamma_test, s.batch_size)
     context = EstimationContext(s.seed, evaluator, on_batch, cache)
     return run_estimator(estimator, problem, context, callback=on_step)
+
+
+def _mechanisms(
+    run_dir: RunDirectory,
+    settings: RunSettings,
+    column: str,
+    names: Mapping[int, str],
+) -> dict[str, Any]:
+    """``p`` by the codes of ``column``, from the final stage's chunks."""
+    table = run_dir.final_stage(["f", "weight", "status", column])
+
+    def floats(name: str) -> np.ndarray:  # nulls (older chunks) become NaN
+        return np.asarray(table[name].to_numpy(zero_copy_only=False), dtype=float)
+
+    labels = np.nan_to_num(floats(column), nan=-1).astype(np.int64)
+    return {
+        "column": column,
+        "by_gamma": decompose(
+            table["f"].to_numpy(),
+            table["weight"].to_numpy(),
+            labels,
+            names,
+            (settings.gamma, *settings.gamma_test),
+            weighted=settings.estimator.weighted,
+            failed=np.nan_to_num(floats("status")) != 0,
+        ),
+    }
 
 
 def _timed(f: Callable[..., Any], clock: _Clock) -> Callable[..., Any]:

@@ -177,6 +177,25 @@ class RunDirectory:
 
     # -- chunks: record and replay ---------------------------------------------
 
+    def final_stage(self, columns: Sequence[str]) -> pa.Table:
+        """Columns of the final stage's recorded chunks (before :meth:`finish`).
+
+        Columns a chunk lacks (recorded by an older avrisk) are null there.
+        """
+        files = sorted((self.path / CHUNKS_DIR).glob(f"stage{FINAL_STAGE:04d}-*"))
+        tables = []
+        for path in files:
+            table = pq.read_table(path)
+            tables.append(
+                pa.table(
+                    {
+                        c: table[c] if c in table.column_names else pa.nulls(len(table))
+                        for c in columns
+                    }
+                )
+            )
+        return pa.concat_tables(tables, promote_options="default")
+
     def _chunk_path(self, stage: int, chunk: int) -> Path:
         return self.path / CHUNKS_DIR / f"stage{stage:04d}-chunk{chunk:06d}.parquet"
 

@@ -158,6 +158,7 @@ class CrossEntropy:
     label = "cross-entropy"
     Settings: type[CESettings] = CESettings
     weighted = True
+    decomposable = True
 
     def __init__(self, settings: CESettings) -> None:
         self.settings = settings

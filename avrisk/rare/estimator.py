@@ -271,12 +271,17 @@ class Estimator(Protocol, Generic[State, Info]):
     weighted : bool
         Whether its hits carry importance weights (their ESS and Pareto k
         then say how far its standard error can be trusted).
+    decomposable : bool
+        Whether its estimate is the mean of ``w 1{f <= gamma}`` over its final
+        stage (``w = 1`` for naive sampling): then ``p`` splits exactly by any
+        per-sample label (:mod:`avrisk.pipeline.mechanisms`).
     """
 
     name: ClassVar[str]
     label: ClassVar[str]
     Settings: ClassVar[type[EstimatorSettings]]
     weighted: ClassVar[bool]
+    decomposable: ClassVar[bool]
     settings: EstimatorSettings
 
     def budget(self) -> int:

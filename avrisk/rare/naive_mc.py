@@ -58,6 +58,7 @@ class NaiveMC:
     label = "naive Monte Carlo"
     Settings = NaiveSettings
     weighted = False
+    decomposable = True
 
     def __init__(self, settings: NaiveSettings) -> None:
         self.settings = settings

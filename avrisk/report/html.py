@@ -129,6 +129,14 @@ def _run_view(
             )
         ),
         "diagnostics": diagnostics,
+        "mechanisms": next(
+            (
+                m["by_label"]
+                for m in (summary.get("mechanisms") or {}).get("by_gamma", [])
+                if m["gamma"] == est["gamma"]
+            ),
+            [],
+        ),
     }
 
 

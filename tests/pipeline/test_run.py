@@ -334,3 +334,23 @@ def test_chunks_recorded_by_an_older_version_resume_with_nulls_for_new_columns(
     assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
     crash = pq.read_table(tmp_path / "run" / "samples.parquet")["crash"]
     assert crash.null_count == calls[0] and len(crash) == 20_000
+
+
+def test_p_is_decomposed_exactly_by_a_label_column(tmp_path):
+    def labelled(x):
+        return {"f": PROBLEM.f(x), "side": (x[:, 0] > x[:, 1]).astype(np.int8)}
+
+    for settings in (CE, RunSettings("naive", gamma=0.0, n_final=30_000, seed=2)):
+        summary = run_estimation(
+            RunDirectory(tmp_path / settings.method, NAMES),
+            PROBLEM.base,
+            labelled,
+            settings,
+            mechanisms=("side", {0: "left", 1: "right"}),
+        )
+        main = summary["mechanisms"]["by_gamma"][0]
+        parts = main["by_label"]
+        assert {p["label"] for p in parts} <= {"left", "right"}
+        assert sum(p["p"] for p in parts) == pytest.approx(summary["estimate"]["p"])
+        assert sum(p["n_hits"] for p in parts) == summary["estimate"]["n_hits"]
+        assert sum(p["share"] for p in parts) == pytest.approx(1.0)
