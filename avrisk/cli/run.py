@@ -94,6 +94,26 @@ Set = Annotated[
         "--set interval=wilson.",
     ),
 ]
+TargetPrecision = Annotated[
+    float | None,
+    typer.Option(
+        "--target-rel-half-width",
+        help="Stop the final stage once the 95% CI half-width at gamma is at most "
+        "this fraction of p (e.g. 0.1).",
+    ),
+]
+MaxRollouts = Annotated[
+    int | None,
+    typer.Option(min=1, help="Stop before the run's rollouts exceed this."),
+]
+MaxTime = Annotated[
+    float | None,
+    typer.Option(
+        "--max-time",
+        help="Stop the final stage after this many seconds of the run (the "
+        "result then depends on the machine's speed).",
+    ),
+]
 Failures = Annotated[int, typer.Option(min=0, help="Most likely failures to animate.")]
 Device = Annotated[str, typer.Option(help="Torch device of the simulator.")]
 
@@ -158,6 +178,7 @@ def _run_settings(
     batch_size: int,
     assignments: list[str] | None,
     flags: dict[str, Any],
+    **stopping: Any,
 ) -> RunSettings:
     """Run settings from a command's options; ``flags``: the estimator flags."""
     return settings(
@@ -166,6 +187,7 @@ def _run_settings(
         gamma_test=_thresholds(gamma_test),
         seed=seed,
         batch_size=batch_size,
+        **stopping,
         **estimator_options(method, flags, assignments),
     )
 
@@ -186,13 +208,17 @@ def run(
     select: Select = None,
     defensive: Defensive = None,
     set_: Set = None,
+    target_rel_half_width: TargetPrecision = None,
+    max_rollouts: MaxRollouts = None,
+    max_time: MaxTime = None,
     failures: Failures = 6,
     device: Device = "cpu",
 ) -> None:
     """Estimate how likely the ego gets within gamma seconds of a collision.
 
     Rerunning the same command after an interruption resumes the run; a
-    finished run is read back and its report rebuilt.
+    finished run is read back and its report rebuilt. The run ends at its
+    planned size or at the first stopping rule given, and says which.
     """
     with user_errors(*EXPECTED):
         spec = load_spec(scenario)
@@ -212,6 +238,9 @@ def run(
                 select=select,
                 defensive=defensive,
             ),
+            rel_half_width=target_rel_half_width,
+            max_rollouts=max_rollouts,
+            max_seconds=max_time,
         )
         objective = SimulationObjective(spec, device=device, allow_import=True)
         label = method_label(method)

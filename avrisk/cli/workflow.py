@@ -125,6 +125,13 @@ def print_summary(runs: list[tuple[str, RunDirectory]]) -> None:
             )
     out_console.print(table)
     for label, run_dir in runs:
+        est = run_dir.summary()["estimate"]
+        if est.get("stopped_by", "budget") != "budget":
+            out_console.print(
+                f"{label}: stopped by its {est['stopped_by'].replace('_', ' ')} rule "
+                f"after {est['n_evals']:,} rollouts",
+                highlight=False,
+            )
         print_mechanisms(label, run_dir.summary())
     for label, run_dir in runs:
         failed = max((g.get("n_failed", 0) for g in _by_gamma(run_dir)), default=0)

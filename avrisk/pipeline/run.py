@@ -32,6 +32,7 @@ from avrisk.rare import (
 )
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.problem import threshold_list
+from avrisk.rare.stopping import StoppingRule
 
 
 class RunSettings:
@@ -50,6 +51,10 @@ class RunSettings:
         Run seed.
     batch_size : int or None, default=None
         Largest number of rollouts per call of ``f``.
+    rel_half_width, max_rollouts, max_seconds : float, int, float or None
+        Stopping rules for the final stage (:mod:`avrisk.rare.stopping`);
+        the first two define the result and are recorded, a wall-time limit
+        is not.
     **options
         The estimator's settings by name (e.g. ``rho``, ``n_iter``,
         ``n_final`` for CE), validated by its settings model.
@@ -74,6 +79,9 @@ class RunSettings:
         gamma_test: Any = (),
         seed: int = 0,
         batch_size: int | None = None,
+        rel_half_width: float | None = None,
+        max_rollouts: int | None = None,
+        max_seconds: float | None = None,
         **options: Any,
     ) -> None:
         if method not in estimator_names():
@@ -86,6 +94,15 @@ class RunSettings:
         self.seed = seed
         self.batch_size = batch_size
         self.estimator: Estimator[Any, Any] = get_estimator(method, **options)
+        self.stops = {"rel_half_width": rel_half_width, "max_rollouts": max_rollouts}
+        self.max_seconds = max_seconds
+        self.stopping_rule()  # validates
+
+    def stopping_rule(self) -> StoppingRule | None:
+        """The run's stopping rule (its clock starts now), or None."""
+        if not any(v is not None for v in (*self.stops.values(), self.max_seconds)):
+            return None
+        return StoppingRule(**self.stops, max_seconds=self.max_seconds)
 
     @property
     def total_rollouts(self) -> int:
@@ -101,6 +118,7 @@ class RunSettings:
             **self.estimator.settings.recorded(),
             "seed": self.seed,
             "batch_size": self.batch_size,
+            **{k: v for k, v in self.stops.items() if v is not None},
         }
 
     def __eq__(self, other: object) -> bool:
@@ -245,7 +263,9 @@ def _estimate(
         monitor.status(estimator.progress(info))
 
     problem = RareEventProblem(base, f, s.gamma, s.gamma_test, s.batch_size)
-    context = EstimationContext(s.seed, evaluator, on_batch, cache)
+    context = EstimationContext(
+        s.seed, evaluator, on_batch, cache, stopping=s.stopping_rule()
+    )
     return run_estimator(estimator, problem, context, callback=on_step)
 
 

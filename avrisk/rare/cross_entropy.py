@@ -56,6 +56,7 @@ from avrisk.rare.problem import (
 )
 from avrisk.rare.results import CEInfo, Estimate
 from avrisk.rare.stages import BatchCache, BatchRecorder
+from avrisk.rare.stopping import StoppingRule
 from avrisk.rare.weights import (
     kish_ess,
     normalized_weights,
@@ -245,7 +246,9 @@ class CrossEntropy:
             if s.defensive
             else proposal
         )
-        stage = context.stage(problem, sampled, s.n_final, FINAL_STAGE)
+        stage = context.stage(
+            problem, sampled, s.n_final, FINAL_STAGE, final_after=state.n_evals
+        )
         by_gamma = bracket_failures(
             lambda v: importance_estimates(v, stage.log_w, problem.thresholds),
             stage.values,
@@ -255,9 +258,10 @@ class CrossEntropy:
             method="cross_entropy",
             gamma=problem.gamma,
             by_gamma=by_gamma,
-            n_evals=state.n_evals + s.n_final,
+            n_evals=state.n_evals + stage.values.size,
             proposal=proposal,
             best_iteration=None if state.best_iteration < 0 else state.best_iteration,
+            stopped_by=stage.stopped_by or "budget",
         )
 
     def progress(self, info: CEInfo) -> str:
@@ -334,6 +338,7 @@ def cross_entropy(
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
+    stopping: StoppingRule | None = None,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by cross-entropy importance sampling.
 
@@ -382,6 +387,9 @@ def cross_entropy(
         with the same settings, or ``None``: resuming replays the record.
     evaluator : Evaluator, optional
         Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
+    stopping : StoppingRule, optional
+        Ends the final stage early (:mod:`avrisk.rare.stopping`); the result's
+        ``stopped_by`` says what ended it.
 
     Returns
     -------
@@ -410,5 +418,5 @@ def cross_entropy(
         defensive=defensive,
     )
     problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    context = EstimationContext(seed, evaluator, on_batch, cache)
+    context = EstimationContext(seed, evaluator, on_batch, cache, stopping=stopping)
     return run_estimator(CrossEntropy(settings), problem, context, callback=callback)

@@ -43,8 +43,10 @@ from avrisk.rare.stages import (
     BatchRecorder,
     StageBatch,
     StageResult,
+    StageStop,
     run_stage,
 )
+from avrisk.rare.stopping import StoppingRule
 from avrisk.registry import Registry
 
 __all__ = [
@@ -162,6 +164,8 @@ class EstimationContext(NamedTuple):
         Recorded chunks of an interrupted run (resume).
     max_failed_share : float
         Largest share of a stage's samples that may fail to evaluate.
+    stopping : StoppingRule or None
+        When to end a final stage early (:mod:`avrisk.rare.stopping`).
     """
 
     seed: int = 0
@@ -169,6 +173,7 @@ class EstimationContext(NamedTuple):
     on_batch: BatchRecorder | None = None
     cache: BatchCache | None = None
     max_failed_share: float = DEFAULT_MAX_FAILED_SHARE
+    stopping: StoppingRule | None = None
 
     def stage(
         self,
@@ -178,8 +183,12 @@ class EstimationContext(NamedTuple):
         stage: int,
         *,
         keep_stats: bool = False,
+        final_after: int | None = None,
     ) -> StageResult:
         """``n`` fresh samples of ``proposal`` as stage ``stage``, evaluated.
+
+        ``final_after``: this is the estimator's final stage, after that many
+        calls of ``f``: the stopping rule may end it early (``stopped_by``).
 
         Raises
         ------
@@ -197,9 +206,22 @@ class EstimationContext(NamedTuple):
             on_batch=self.on_batch,
             cache=self.cache,
             evaluator=self.evaluator,
+            stop=None if final_after is None else self._stop(problem, final_after),
         )
         self._check_failures(result.failed, stage)
         return result
+
+    def _stop(self, problem: RareEventProblem, calls_before: int) -> StageStop | None:
+        rule = self.stopping
+        if rule is None:
+            return None
+
+        def stop(done: list[StageBatch], next_size: int) -> str | None:
+            values = np.concatenate([b.values for b in done])
+            log_w = np.concatenate([b.log_p0 - b.log_q for b in done])
+            return rule.reason(values, log_w, problem.gamma, calls_before, next_size)
+
+        return stop
 
     def evaluate(
         self, problem: RareEventProblem, x: FloatArray, stage: int, chunk: int

@@ -33,6 +33,7 @@ from avrisk.rare.problem import (
 )
 from avrisk.rare.results import Estimate
 from avrisk.rare.stages import BatchCache, BatchRecorder
+from avrisk.rare.stopping import StoppingRule
 
 
 class NaiveSettings(EstimatorSettings):
@@ -88,14 +89,18 @@ class NaiveMC:
     ) -> Estimate:
         """Sample ``P0``, count the hits of every threshold."""
         n, interval = self.settings.n_final, self.settings.interval
-        stage = context.stage(problem, problem.base, n, FINAL_STAGE)
+        stage = context.stage(problem, problem.base, n, FINAL_STAGE, final_after=0)
         by_gamma = bracket_failures(
             lambda v: binomial_estimates(v, problem.thresholds, interval),
             stage.values,
             stage.failed,
         )
         return Estimate(
-            method="naive_mc", gamma=problem.gamma, by_gamma=by_gamma, n_evals=n
+            method="naive_mc",
+            gamma=problem.gamma,
+            by_gamma=by_gamma,
+            n_evals=stage.values.size,
+            stopped_by=stage.stopped_by or "budget",
         )
 
     def progress(self, info: Any) -> str:
@@ -125,6 +130,7 @@ def naive_mc(
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
+    stopping: StoppingRule | None = None,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by plain sampling from ``base``.
 
@@ -154,6 +160,9 @@ def naive_mc(
         with the same settings, or ``None`` (see :mod:`avrisk.rare.stages`).
     evaluator : Evaluator, optional
         Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
+    stopping : StoppingRule, optional
+        Ends the final stage early (:mod:`avrisk.rare.stopping`); the result's
+        ``stopped_by`` says what ended it.
 
     Returns
     -------
@@ -171,5 +180,5 @@ def naive_mc(
     settings = NaiveSettings.validated(n_final=n, interval=interval)
     estimator = NaiveMC(settings)
     problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    context = EstimationContext(seed, evaluator, on_batch, cache)
+    context = EstimationContext(seed, evaluator, on_batch, cache, stopping=stopping)
     return run_estimator(estimator, problem, context)

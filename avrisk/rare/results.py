@@ -172,6 +172,10 @@ class Estimate:
         Wall-clock time of the whole estimate [s].
     details : dict
         Further JSON-ready results of the estimator (e.g. a level sequence).
+    stopped_by : str
+        What ended the run: ``"budget"`` (its planned size) or a stopping
+        rule (``"precision"``, ``"max_rollouts"``, ``"wall_time"``; see
+        :mod:`avrisk.rare.stopping`).
     """
 
     method: str
@@ -183,6 +187,7 @@ class Estimate:
     best_iteration: int | None = None
     wall_time_s: float = 0.0
     details: dict[str, Any] = field(default_factory=dict)
+    stopped_by: str = "budget"
 
     @property
     def main(self) -> GammaEstimate:
@@ -233,6 +238,7 @@ class Estimate:
                 "n_samples": self.n_samples,
                 "n_evals": self.n_evals,
                 "wall_time_s": self.wall_time_s,
+                "stopped_by": self.stopped_by,
                 "by_gamma": [g.to_dict() for g in self.by_gamma.values()],
                 "proposal": None if self.proposal is None else self.proposal.to_dict(),
                 "best_iteration": self.best_iteration,

@@ -94,12 +94,21 @@ class StageResult(NamedTuple):
         Sufficient statistics under the sampled family, when asked for.
     failed : ndarray of bool, shape (n,)
         Samples whose evaluation failed (see :mod:`avrisk.rare.evaluation`).
+    stopped_by : str or None
+        The stopping rule that ended the stage early (then ``n`` is the
+        prefix of chunks done), or None.
     """
 
     values: FloatArray
     log_w: FloatArray
     stats: FloatArray | None
     failed: np.ndarray
+    stopped_by: str | None = None
+
+
+#: ``stop(batches)``: why to end a stage after this contiguous prefix of its
+#: chunks, or None (see :mod:`avrisk.rare.stopping`).
+StageStop = Callable[[list[StageBatch], int], str | None]
 
 
 def run_stage(
@@ -113,6 +122,7 @@ def run_stage(
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
+    stop: StageStop | None = None,
 ) -> StageResult:
     """Draw ``n`` samples of ``proposal`` for ``stage`` and evaluate ``f``.
 
@@ -135,6 +145,9 @@ def run_stage(
         ``cache(stage, chunk)``: a recorded chunk of an interrupted run, or None.
     evaluator : Evaluator, optional
         Where ``f`` runs; default :class:`~avrisk.rare.evaluation.LocalEvaluator`.
+    stop : callable, optional
+        ``stop(prefix, next_size)``: checked on the contiguous prefix of
+        chunks done after each chunk; a reason ends the stage there.
 
     Returns
     -------
@@ -153,12 +166,33 @@ def run_stage(
             if chunk not in batches:
                 yield chunk_task(proposal, seed, stage, chunk, size)
 
-    for result in (evaluator or LocalEvaluator()).evaluate(problem, tasks()):
-        batch = _stage_batch(problem, proposal, result)
-        batches[batch.chunk] = batch
-        if on_batch is not None:
-            on_batch(batch)
-    if len(batches) != len(sizes):
+    def prefix() -> list[StageBatch]:
+        done = []
+        while len(done) in batches:
+            done.append(batches[len(done)])
+        return done
+
+    def why_stop() -> str | None:
+        if stop is None:
+            return None
+        done = prefix()
+        if not done or len(done) == len(sizes):
+            return None
+        return stop(done, sizes[len(done)])
+
+    stopped_by = why_stop()
+    if stopped_by is None:
+        for result in (evaluator or LocalEvaluator()).evaluate(problem, tasks()):
+            batch = _stage_batch(problem, proposal, result)
+            batches[batch.chunk] = batch
+            if on_batch is not None:
+                on_batch(batch)
+            stopped_by = why_stop()
+            if stopped_by is not None:
+                break
+    if stopped_by is not None:
+        sizes = sizes[: len(prefix())]
+    if len(batches) < len(sizes):
         missing = sorted(set(range(len(sizes))) - set(batches))
         raise RuntimeError(
             f"the evaluator returned no result for chunks {missing} of stage {stage}"
@@ -173,6 +207,7 @@ def run_stage(
             else None
         ),
         np.concatenate([b.failed for b in ordered]),
+        stopped_by,
     )
 
 

@@ -235,3 +235,14 @@ def test_a_run_is_stamped_and_refuses_to_resume_with_other_weights(
     again = invoke("run", short_scenario, "--out", out, *args)
     assert again.exit_code == 2
     assert "differs in: defines_p.weights_sha256" in again.output
+
+
+def test_a_stopping_rule_is_recorded_and_reported(short_scenario, tmp_path):
+    out = tmp_path / "run"
+    args = ("--method", "naive", "--n-final", 20_000, "--gamma", 2.0, "--failures", 0)
+    result = invoke("run", short_scenario, "--out", out, *args, "--max-rollouts", 9000)
+    assert result.exit_code == 0, result.output
+    assert "stopped by its max rollouts rule after 8,192 rollouts" in result.output
+    settings = json.loads((out / "config.json").read_text())["settings"]
+    assert settings["max_rollouts"] == 9000
+    assert json.loads((out / "summary.json").read_text())["estimate"]["n_evals"] == 8192
