@@ -1,6 +1,10 @@
 """Problems with exact answers and conformance checks for avrisk components."""
 
-from avrisk.testing.checks import check_estimator, check_family
+from avrisk.testing.checks import (
+    check_estimator,
+    check_family,
+    check_standard_normal_map,
+)
 from avrisk.testing.problems import (
     AnalyticProblem,
     beta_sum_cdf,
@@ -15,6 +19,7 @@ __all__ = [
     "beta_sum_problem",
     "check_estimator",
     "check_family",
+    "check_standard_normal_map",
     "gaussian_linear_problem",
     "mixed_problem",
 ]
