@@ -9,6 +9,7 @@ from avrisk.testing.problems import (
     AnalyticProblem,
     beta_sum_cdf,
     beta_sum_problem,
+    four_branch_problem,
     gaussian_linear_problem,
     mixed_problem,
 )
@@ -20,6 +21,7 @@ __all__ = [
     "check_estimator",
     "check_family",
     "check_standard_normal_map",
+    "four_branch_problem",
     "gaussian_linear_problem",
     "mixed_problem",
 ]
