@@ -183,12 +183,12 @@ class ParticleSet(NamedTuple):
     values : ndarray of shape (n_chains, max_length)
         ``f`` of chain ``j``'s state ``i`` (``+inf`` where its evaluation
         failed, NaN past the chain's end). Set 0 has ``N`` chains of length 1.
-    threshold : float
+    level : float
         The next level chosen from these particles (``gamma`` on the last set).
     """
 
     values: FloatArray
-    threshold: float
+    level: float
 
     @property
     def flat(self) -> FloatArray:
@@ -209,7 +209,7 @@ class SplittingState(NamedTuple):
     beta : float
         pCN step for the next moves.
     reached : bool
-        Whether the last set's threshold is ``gamma`` (the steps are over).
+        Whether the last set's level is ``gamma`` (the steps are over).
     n_stages : int
         Stages (evaluated batches) used so far.
     n_evals : int
@@ -235,12 +235,12 @@ class SplittingInfo(NamedTuple):
 
     Attributes
     ----------
-    level : int
+    index : int
         Index of the set (0: draws of ``P0``).
-    threshold : float
+    level : float
         Level chosen from this set's ``f`` (``gamma`` on the last set).
     n_survivors : int
-        Particles of the set with ``f <= threshold``.
+        Particles of the set with ``f <= level``.
     n_chains : int
         Chains that made the set (``N`` independent draws for set 0).
     acceptance : float
@@ -256,8 +256,8 @@ class SplittingInfo(NamedTuple):
         Calls of ``f`` so far, this set included.
     """
 
-    level: int
-    threshold: float
+    index: int
+    level: float
     n_survivors: int
     n_chains: int
     acceptance: float
@@ -329,44 +329,42 @@ class SubsetSimulation:
             moved = _move_chains(state, problem, context, s.n_moves)
         else:
             moved = _draw_p0(state, problem, context, s.n_particles)
-        z, values, accepted, proposed, beta, n_stages, n_failed, stuck = moved
-        current = state.sets[-1].threshold if state.sets else math.inf
-        flat = values[~np.isnan(values)]
-        threshold = next_level(
+        current = state.sets[-1].level if state.sets else math.inf
+        flat = moved.values[~np.isnan(moved.values)]
+        level = next_level(
             flat, current, problem.gamma, s.p0, s.p0_max, len(state.sets)
         )
-        level_set = ParticleSet(values, threshold)
-        sets = (*state.sets, level_set)
-        reached = threshold == problem.gamma
+        sets = (*state.sets, ParticleSet(moved.values, level))
+        reached = level == problem.gamma
         if not reached and len(sets) == s.max_levels:
             p_so_far = math.prod(_survivors(sets)) / s.n_particles ** len(sets)
             raise SplittingError(
                 f"after max_levels={s.max_levels} levels the level is f <= "
-                f"{threshold:g}, still above gamma = {problem.gamma:g} "
-                f"(P0(f <= {threshold:g}) is about {p_so_far:.2g}): the event may "
+                f"{level:g}, still above gamma = {problem.gamma:g} "
+                f"(P0(f <= {level:g}) is about {p_so_far:.2g}): the event may "
                 "be impossible, or rarer than that many levels reach; raise "
                 "max_levels (or p0)"
             )
-        n_evals = state.n_evals + proposed + (0 if state.sets else s.n_particles)
+        n_evals = state.n_evals + moved.n_calls
         new_state = SplittingState(
-            z,
+            moved.z,
             sets,
-            beta,
+            moved.beta,
             reached,
-            n_stages,
+            moved.n_stages,
             n_evals,
-            state.n_failed + n_failed,
-            stuck,
+            state.n_failed + moved.n_failed,
+            moved.rounds_without_move,
         )
         info = SplittingInfo(
-            level=len(state.sets),
-            threshold=threshold,
-            n_survivors=int(np.count_nonzero(flat <= threshold)),
-            n_chains=values.shape[0],
-            acceptance=accepted / proposed if proposed else math.nan,
-            beta=beta,
-            cov=math.sqrt(level_cov_squared(values, threshold)),
-            n_failed=n_failed,
+            index=len(state.sets),
+            level=level,
+            n_survivors=int(np.count_nonzero(flat <= level)),
+            n_chains=moved.values.shape[0],
+            acceptance=moved.acceptance,
+            beta=moved.beta,
+            cov=math.sqrt(level_cov_squared(moved.values, level)),
+            n_failed=moved.n_failed,
             n_evals=n_evals,
         )
         return new_state, info
@@ -396,10 +394,10 @@ class SubsetSimulation:
             by_gamma=by_gamma,
             n_evals=state.n_evals,
             details={
-                "levels": [ps.threshold for ps in state.sets],
+                "levels": [ps.level for ps in state.sets],
                 "survivors": _survivors(state.sets),
                 "level_cov": [
-                    math.sqrt(level_cov_squared(ps.values, ps.threshold))
+                    math.sqrt(level_cov_squared(ps.values, ps.level))
                     for ps in state.sets
                 ],
                 "n_particles": n,
@@ -410,14 +408,14 @@ class SubsetSimulation:
         )
 
     def progress(self, info: SplittingInfo) -> str:
-        """``"level 3: f <= 1.23, 212 survivors, accepted 31%, beta 0.42"``."""
+        """``"set 3: f <= 1.23, 212 survivors, accepted 31%, beta 0.42"``."""
         moves = (
             "independent draws"
             if math.isnan(info.acceptance)
             else f"accepted {info.acceptance:.0%}, beta {info.beta:.2g}"
         )
         return (
-            f"level {info.level}: f <= {info.threshold:.3g}, "
+            f"set {info.index}: f <= {info.level:.3g}, "
             f"{info.n_survivors} survivors, {moves}"
         )
 
@@ -440,7 +438,7 @@ class SubsetSimulation:
             return []
         columns = ("set", "level", "survivors", "acceptance", "beta")
         rows = [
-            (h["level"], h["threshold"], h["n_survivors"], h["acceptance"], h["beta"])
+            (h["index"], h["level"], h["n_survivors"], h["acceptance"], h["beta"])
             for h in history
         ]
         return [
@@ -515,7 +513,7 @@ def next_level(
 
 
 def level_cov_squared(values: FloatArray, threshold: float) -> float:
-    """Au & Beck's squared c.o.v. of a set's share of particles with ``f <= threshold``.
+    """Au & Beck's squared c.o.v. of a set's share of ``f <= threshold``.
 
     Parameters
     ----------
@@ -545,8 +543,8 @@ def level_cov_squared(values: FloatArray, threshold: float) -> float:
 
 
 def _survivors(sets: Sequence[ParticleSet]) -> list[int]:
-    """Each set's number of particles at or below its threshold."""
-    return [int(np.count_nonzero(ps.flat <= ps.threshold)) for ps in sets]
+    """Each set's number of particles at or below its level."""
+    return [int(np.count_nonzero(ps.flat <= ps.level)) for ps in sets]
 
 
 def _estimate_at(
@@ -557,13 +555,13 @@ def _estimate_at(
     ``bound`` is the upper end of the interval when no particle of that set
     has ``f <= g`` (the interval of ``gamma``, for ``g`` below it).
     """
-    deepest = max(i for i in range(len(sets)) if i == 0 or sets[i - 1].threshold >= g)
+    deepest = max(i for i in range(len(sets)) if i == 0 or sets[i - 1].level >= g)
     above = sets[:deepest]
     last = sets[deepest]
     n_hits = int(np.count_nonzero(last.flat <= g))
     p = math.prod(c / n for c in _survivors(above)) * n_hits / n
     cov_squared = sum(
-        level_cov_squared(ps.values, ps.threshold) for ps in above
+        level_cov_squared(ps.values, ps.level) for ps in above
     ) + level_cov_squared(last.values, g)
     if n_hits:
         half = stats.norm.ppf(0.5 + CONFIDENCE / 2) * math.sqrt(math.log1p(cov_squared))
@@ -583,12 +581,12 @@ def _estimate_at(
 
 
 class _Moved(NamedTuple):
-    """A new particle set and what making it cost."""
+    """A new particle set and what making it cost (see :class:`SplittingState`)."""
 
     z: FloatArray
     values: FloatArray
-    accepted: int
-    proposed: int
+    acceptance: float
+    n_calls: int
     beta: float
     n_stages: int
     n_failed: int
@@ -598,14 +596,21 @@ class _Moved(NamedTuple):
 def _draw_p0(
     state: SplittingState, problem: RareEventProblem, context: EstimationContext, n: int
 ) -> _Moved:
-    """Set 0: ``n`` draws of ``P0`` (as standard normals mapped by the base)."""
+    """Set 0: ``n`` draws of ``P0`` (standard normals mapped by the base)."""
     stage = state.n_stages + 1
     z = np.random.default_rng([context.seed, stage]).standard_normal(
         (n, problem.base.dim)
     )
     values, n_failed, n_stages = _evaluate(problem, context, z, stage)
     return _Moved(
-        z, values[:, None], 0, 0, state.beta, state.n_stages + n_stages, n_failed, 0
+        z,
+        values[:, None],
+        math.nan,
+        n,
+        state.beta,
+        state.n_stages + n_stages,
+        n_failed,
+        state.rounds_without_move,
     )
 
 
@@ -618,7 +623,7 @@ def _move_chains(
     """The next set: chains from the last set's survivors, moved by pCN."""
     last = state.sets[-1]
     flat = last.flat
-    seeds = np.flatnonzero(flat <= last.threshold)
+    seeds = np.flatnonzero(flat <= last.level)
     n_chains, n = seeds.size, flat.size
     lengths = np.full(n_chains, n // n_chains)
     lengths[: n % n_chains] += 1  # the longer chains first: who moves is a prefix
@@ -635,27 +640,16 @@ def _move_chains(
             eps = np.random.default_rng([context.seed, stage]).standard_normal(z.shape)
             proposal = math.sqrt(1 - beta * beta) * z + beta * eps
             f_new, failed, used = _evaluate(problem, context, proposal, stage)
-            accept = f_new <= last.threshold
+            accept = f_new <= last.level
             z = np.where(accept[:, None], proposal, z)
             f = np.where(accept, f_new, f)
             n_accepted = int(np.count_nonzero(accept))
-            beta = float(
-                np.clip(
-                    beta
-                    * math.exp(
-                        ADAPT_GAIN
-                        * (n_accepted - TARGET_ACCEPTANCE * moving)
-                        / n_chains
-                    ),
-                    MIN_BETA,
-                    1.0,
-                )
-            )
+            beta = _adapted(beta, n_accepted, moving, n_chains)
             stuck = 0 if n_accepted else stuck + 1
             if stuck >= MAX_ROUNDS_WITHOUT_MOVE:
                 raise SplittingError(
                     f"no chain accepted a pCN proposal in {stuck} rounds in a row at "
-                    f"level f <= {last.threshold:g} (beta shrank to {beta:.2g}): "
+                    f"level f <= {last.level:g} (beta shrank to {beta:.2g}): "
                     "the set below the level may have no volume, or f may jump "
                     "there (a stochastic f whose outcome hardly depends on x?)"
                 )
@@ -666,8 +660,26 @@ def _move_chains(
         z_chain[:moving, position], values[:moving, position] = z, f
     present = ~np.isnan(values)
     return _Moved(
-        z_chain[present], values, accepted, proposed, beta, n_stages, n_failed, stuck
+        z_chain[present],
+        values,
+        accepted / proposed,
+        proposed,
+        beta,
+        n_stages,
+        n_failed,
+        stuck,
     )
+
+
+def _adapted(beta: float, n_accepted: int, n_proposed: int, n_chains: int) -> float:
+    """``beta`` after a round of ``n_proposed`` proposals from ``n_chains`` chains.
+
+    ``log beta`` moves by ``ADAPT_GAIN`` times the acceptance rate's error,
+    weighted by the share of the chains that proposed (a round of a few chains
+    at a level's end moves it little).
+    """
+    error = (n_accepted - TARGET_ACCEPTANCE * n_proposed) / n_chains
+    return float(np.clip(beta * math.exp(ADAPT_GAIN * error), MIN_BETA, 1.0))
 
 
 def _evaluate(

@@ -190,7 +190,7 @@ def test_a_mostly_infinite_f_starts_below_the_ties_at_infinity():
 
     est = subset_simulation(f, NORMAL_1D, 0.0, n_particles=2000, seed=2)
     first = est.history[0]
-    assert np.isfinite(first.threshold) and first.n_survivors < 0.1 * 2000
+    assert np.isfinite(first.level) and first.n_survivors < 0.1 * 2000
     assert abs(est.p - stats.norm.cdf(-4.0)) < 5 * est.stderr
 
 
