@@ -61,7 +61,12 @@ sum_l delta_l^2``. The levels are taken as uncorrelated (Au & Beck's
 approximation; their positive correlation makes it somewhat optimistic).
 ``stderr = p_hat delta``; the interval is normal on ``log p`` with ``Var(log
 p_hat) = log(1 + delta^2)``: ``log p_hat`` is a sum over levels, so closer to
-normal than the skewed product, and the interval stays above 0.
+normal than the skewed product, and the interval stays above 0. Measured on
+the 2-d linear problem at ``p = 1e-6`` (400 seeds): at ``N = 2000`` the spread
+of ``log p_hat`` is 8% above the reported one and the 95% interval covers
+``p`` in 92% of runs; at ``N = 500``, 20% and 90%. The estimator also has Au &
+Beck's ``O(1/N)`` bias, upwards there: +2% (+-1.5%) at ``N = 2000``, +16%
+(+-3%) at ``N = 500``; use ``N >= 1000``.
 
 Failed samples
 --------------
