@@ -83,8 +83,3 @@ def write_fake_ngsim(folder, rng):
     pq.write_table(
         pa.Table.from_pylist(rows), folder / "i80_0400_0415_emd_cf_pairs.parquet"
     )
-
-
-# Helper modules that tests import by package path; collecting them for
-# doctests as well would import (and register) them a second time.
-collect_ignore = ["rare/toy_splitting.py"]

@@ -19,6 +19,7 @@ from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
 from avrisk.rare.naive_mc import NaiveMC, naive_mc
 from avrisk.rare.problem import InvalidOutputError, RareEventProblem
 from avrisk.rare.results import CEInfo, Estimate, GammaEstimate
+from avrisk.rare.splitting import SplittingError, SubsetSimulation, subset_simulation
 from avrisk.rare.stages import StageBatch, run_stage
 
 __all__ = [
@@ -40,7 +41,9 @@ __all__ = [
     "Product",
     "RareEventProblem",
     "ScaledBeta",
+    "SplittingError",
     "StageBatch",
+    "SubsetSimulation",
     "UnreliableEstimateWarning",
     "ZeroHitsWarning",
     "cross_entropy",
@@ -49,4 +52,5 @@ __all__ = [
     "naive_mc",
     "run_estimator",
     "run_stage",
+    "subset_simulation",
 ]

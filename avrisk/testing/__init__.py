@@ -1,10 +1,15 @@
 """Problems with exact answers and conformance checks for avrisk components."""
 
-from avrisk.testing.checks import check_estimator, check_family
+from avrisk.testing.checks import (
+    check_estimator,
+    check_family,
+    check_standard_normal_map,
+)
 from avrisk.testing.problems import (
     AnalyticProblem,
     beta_sum_cdf,
     beta_sum_problem,
+    four_branch_problem,
     gaussian_linear_problem,
     mixed_problem,
 )
@@ -15,6 +20,8 @@ __all__ = [
     "beta_sum_problem",
     "check_estimator",
     "check_family",
+    "check_standard_normal_map",
+    "four_branch_problem",
     "gaussian_linear_problem",
     "mixed_problem",
 ]

@@ -244,12 +244,11 @@ def test_a_column_float32_exact_in_one_chunk_only_is_gathered_as_float64(tmp_pat
 
 
 def test_any_registered_estimator_runs_and_resumes_through_the_pipeline(tmp_path):
-    from tests.rare import toy_splitting  # noqa: F401  (registers toy_splitting)
-
-    toy = RunSettings("toy_splitting", gamma=0.0, seed=2, n_particles=1500)
-    reference = run(tmp_path / "reference", settings=toy)
-    assert reference["method"] == "toy_splitting"
-    levels = reference["estimate"]["details"]["levels"]
+    # subset simulation: no importance weights, MCMC moves through evaluate()
+    splitting = RunSettings("splitting", gamma=0.0, seed=2, n_particles=1500)
+    reference = run(tmp_path / "reference", settings=splitting)
+    assert reference["method"] == "splitting"
+    levels = len(reference["estimate"]["details"]["levels"])
     assert levels in (4, 5)  # 1e-4 = 0.1^4, give or take a level
     calls = []
 
@@ -260,10 +259,10 @@ def test_any_registered_estimator_runs_and_resumes_through_the_pipeline(tmp_path
         return with_crash_flag(x)
 
     with pytest.raises(KeyboardInterrupt):
-        run(tmp_path / "run", settings=toy, f=interrupted)
-    resumed = run(tmp_path / "run", settings=toy)
+        run(tmp_path / "run", settings=splitting, f=interrupted)
+    resumed = run(tmp_path / "run", settings=splitting)
     assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
-    assert resumed["timing"]["rollouts_replayed"] == 2 * 1500
+    assert resumed["timing"]["rollouts_replayed"] == sum(calls)  # P0, 1 round
     checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
     assert len(checkpoint["levels"]) == levels
 

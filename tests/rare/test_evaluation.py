@@ -6,8 +6,9 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 import numpy as np
 import pytest
 
-from avrisk.rare import cross_entropy, naive_mc
+from avrisk.rare import cross_entropy, naive_mc, subset_simulation
 from avrisk.rare.evaluation import EvalTask, evaluate_task
+from avrisk.rare.problem import SAMPLE_CHUNK
 from avrisk.testing import gaussian_linear_problem
 
 PROBLEM = gaussian_linear_problem(3, p=1e-4)
@@ -101,20 +102,17 @@ def test_a_task_carries_sample_ids_and_seeds_of_its_chunk():
     assert seen[1].seeds.shape == (10_000 - 8192,) and seen[1].stage == 0
 
 
-def test_a_splitting_like_estimator_plugs_into_the_protocol_and_finds_p():
-    from avrisk.rare import EstimationContext, get_estimator, run_estimator
-    from avrisk.rare.problem import RareEventProblem
-    from tests.rare import toy_splitting  # noqa: F401  (registers it)
+@pytest.mark.parametrize("evaluator", [ThreadPoolEvaluator(), ShuffledEvaluator(2)])
+def test_splitting_moves_through_any_evaluator_to_the_local_result(evaluator):
+    def run(evaluator=None):
+        return subset_simulation(
+            PROBLEM.f,
+            PROBLEM.base,
+            PROBLEM.gamma,
+            n_particles=SAMPLE_CHUNK + 500,  # two chunks of draws of P0
+            seed=5,
+            evaluator=evaluator,
+        )
 
-    problem = gaussian_linear_problem(2, p=1e-4)
-    rp = RareEventProblem(problem.base, problem.f, problem.gamma)
-    method = get_estimator("toy_splitting", n_particles=4000)
-    steps = []
-    est = run_estimator(
-        method, rp, EstimationContext(seed=3), callback=lambda i, s: steps.append(i)
-    )
-    assert len(steps) == est.details["levels"] == 4  # 1e-4 = 0.1^4
-    assert steps[-1].level == problem.gamma
-    assert 0.2 < steps[-1].accepted < 1.0
-    # its own (rough) relative error is about 20%: 3 of them
-    assert abs(np.log(est.p / problem.p_exact)) < 3 * est.stderr / est.p
+    local, other = run(), run(evaluator)
+    assert other.to_dict() | {"wall_time_s": 0} == local.to_dict() | {"wall_time_s": 0}

@@ -4,32 +4,70 @@ from scipy import optimize, sparse, special, stats
 
 from avrisk.rare import FixedCovNormal, Product, ScaledBeta
 from avrisk.rare.families import box_qp
-from avrisk.testing import check_family
+from avrisk.rare.families.beta import Z_EDGE
+from avrisk.testing import check_family, check_standard_normal_map
+
+FAMILIES = {
+    "beta-s": ScaledBeta(2.0, 2.0, lo=80.0, scale=40.0),
+    "beta-w": ScaledBeta(1.6, 6.5, lo=-3.6, scale=7.2),
+    "beta-unbounded": ScaledBeta(0.7, 0.9, bounds=None),
+    "normal-dense": FixedCovNormal(np.array([1.0, -2.0]), cov=[[2.0, 0.5], [0.5, 1.0]]),
+    "normal-sparse": FixedCovNormal(
+        np.zeros(5), precision=sparse.eye_array(5) * 4.0, max_shift=0.01
+    ),
+    "product": Product(
+        [ScaledBeta(2, 2, 10, 10), FixedCovNormal(np.ones(3), cov=np.eye(3))]
+    ),
+}
+
+
+@pytest.mark.parametrize("family", FAMILIES.values(), ids=FAMILIES.keys())
+def test_family_passes_the_conformance_check(family, rng):
+    check_family(family, rng)
+
+
+def _sparse_correlated_precision(dim):
+    """A tridiagonal (sparse) precision with correlations between neighbours."""
+    return sparse.diags_array(
+        [np.full(dim - 1, -0.4), np.full(dim, 1.5), np.full(dim - 1, -0.4)],
+        offsets=[-1, 0, 1],
+        format="csr",
+    )
 
 
 @pytest.mark.parametrize(
     "family",
     [
-        ScaledBeta(2.0, 2.0, lo=80.0, scale=40.0),
-        ScaledBeta(1.6, 6.5, lo=-3.6, scale=7.2),
-        ScaledBeta(0.7, 0.9, bounds=None),
-        FixedCovNormal(np.array([1.0, -2.0]), cov=[[2.0, 0.5], [0.5, 1.0]]),
-        FixedCovNormal(
-            np.zeros(5), precision=sparse.eye_array(5) * 4.0, max_shift=0.01
-        ),
-        Product([ScaledBeta(2, 2, 10, 10), FixedCovNormal(np.ones(3), cov=np.eye(3))]),
+        *FAMILIES.values(),
+        FixedCovNormal(np.arange(4.0), precision=_sparse_correlated_precision(4)),
+        FixedCovNormal(np.ones(3), cov=np.eye(3) * 0.01, float32_samples=True),
     ],
-    ids=[
-        "beta-s",
-        "beta-w",
-        "beta-unbounded",
-        "normal-dense",
-        "normal-sparse",
-        "product",
-    ],
+    ids=[*FAMILIES.keys(), "normal-sparse-correlated", "normal-float32"],
 )
-def test_family_passes_the_conformance_check(family, rng):
-    check_family(family, rng)
+def test_family_maps_onto_independent_standard_normals(family, rng):
+    check_standard_normal_map(family, rng)
+
+
+def test_fixed_cov_normal_samples_are_its_map_of_the_generators_normals():
+    fam = FixedCovNormal(np.ones(4), precision=_sparse_correlated_precision(4))
+    z = np.random.default_rng(3).standard_normal((50, 4))
+    np.testing.assert_array_equal(
+        fam.sample(50, np.random.default_rng(3)), fam.from_standard_normal(z)
+    )
+
+
+def test_scaled_beta_maps_its_lower_tail_at_full_precision_and_edges_to_finite_z():
+    fam = ScaledBeta(2.0, 2.0)  # on [0, 1]: tiny u are represented exactly
+    z = np.array([[-30.0], [-8.0], [0.0], [5.0]])
+    x = fam.from_standard_normal(z)
+    assert 0 < x[0, 0] < 1e-90
+    np.testing.assert_allclose(fam.to_standard_normal(x), z, rtol=1e-9, atol=1e-12)
+    cdf = stats.beta(2, 2).cdf(x[:2, 0])
+    np.testing.assert_allclose(cdf, stats.norm.cdf(z[:2, 0]), rtol=1e-9)
+    scaled = ScaledBeta(2.0, 2.0, lo=80.0, scale=40.0)
+    edges = scaled.to_standard_normal(np.array([[80.0], [120.0]]))
+    np.testing.assert_array_equal(edges[:, 0], [-Z_EDGE, Z_EDGE])
+    np.testing.assert_allclose(scaled.from_standard_normal(edges)[:, 0], [80, 120])
 
 
 def test_scaled_beta_log_prob_matches_scipy():

@@ -122,6 +122,54 @@ class ExponentialFamily(abc.ABC):
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable description: family name and parameters."""
 
+    def to_standard_normal(self, x: FloatArray) -> FloatArray:
+        """Map samples to independent standard normals: ``T(X) ~ N(0, I_dim)``.
+
+        ``T`` is a bijection (up to the edges of a bounded support) with
+        inverse :meth:`from_standard_normal`. Subset simulation
+        (:mod:`avrisk.rare.splitting`) moves its particles in that space, where
+        a preconditioned Crank-Nicolson step leaves ``N(0, I)``, and so ``P0``,
+        invariant.
+
+        Parameters
+        ----------
+        x : ndarray of shape (n, dim)
+
+        Returns
+        -------
+        ndarray of shape (n, dim)
+
+        Raises
+        ------
+        NotImplementedError
+            If the family has no such map (the default).
+        """
+        raise NotImplementedError(
+            f"{type(self).__name__} has no map to standard normals; implement "
+            "to_standard_normal and from_standard_normal to use it with splitting"
+        )
+
+    def from_standard_normal(self, z: FloatArray) -> FloatArray:
+        """Inverse of :meth:`to_standard_normal`: ``z ~ N(0, I)`` to samples.
+
+        Parameters
+        ----------
+        z : ndarray of shape (n, dim)
+
+        Returns
+        -------
+        ndarray of shape (n, dim)
+
+        Raises
+        ------
+        NotImplementedError
+            If the family has no such map (the default).
+        """
+        raise NotImplementedError(
+            f"{type(self).__name__} has no map from standard normals; implement "
+            "to_standard_normal and from_standard_normal to use it with splitting"
+        )
+
     def __repr__(self) -> str:
         params = ", ".join(
             f"{k}={v!r}" for k, v in self.to_dict().items() if k != "family"

@@ -123,7 +123,20 @@ class FixedCovNormal(ExponentialFamily):
 
     def sample(self, n: int, rng: np.random.Generator) -> FloatArray:
         """Draw ``n`` samples, shape (n, D): ``mu + L^-T z`` with ``P = L L^T``."""
-        z = rng.standard_normal((n, self.dim))  # row-major: row i independent of n
+        # row-major: row i independent of n
+        return self.from_standard_normal(rng.standard_normal((n, self.dim)))
+
+    def to_standard_normal(self, x: FloatArray) -> FloatArray:
+        """``z = L^T (x - mu)`` per row, shape (n, D), with ``P = L L^T``.
+
+        ``L`` is the Cholesky factor of the precision (dense, also when the
+        precision was given sparse), the one :meth:`sample` uses.
+        """
+        return (as_sample_array(x, self.dim) - self.mean) @ self._chol
+
+    def from_standard_normal(self, z: FloatArray) -> FloatArray:
+        """``x = mu + L^-T z`` per row, shape (n, D) (rounded like :meth:`sample`)."""
+        z = as_sample_array(z, self.dim, "z")
         y = linalg.solve_triangular(self._chol, z.T, lower=True, trans="T")
         x = self.mean + y.T
         if self.float32_samples:

@@ -82,6 +82,22 @@ class Product(ExponentialFamily):
         ]
         return np.concatenate(parts, axis=1)
 
+    def to_standard_normal(self, x: FloatArray) -> FloatArray:
+        """Each block's map on its columns, shape (n, D)."""
+        parts = [
+            b.to_standard_normal(xb)
+            for b, xb in zip(self.blocks, self._split_x(x), strict=True)
+        ]
+        return np.concatenate(parts, axis=1)
+
+    def from_standard_normal(self, z: FloatArray) -> FloatArray:
+        """Each block's inverse map on its columns, shape (n, D)."""
+        parts = [
+            b.from_standard_normal(zb)
+            for b, zb in zip(self.blocks, self._split_x(z), strict=True)
+        ]
+        return np.concatenate(parts, axis=1)
+
     @property
     def natural_params(self) -> FloatArray:
         """Concatenated natural parameters."""

@@ -1,0 +1,333 @@
+"""Subset simulation: exact problems, ties, errors, seeds, resume, diagnostics."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
+from avrisk.rare import (
+    EstimationContext,
+    FixedCovNormal,
+    SplittingError,
+    get_estimator,
+    run_estimator,
+    subset_simulation,
+)
+from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem
+from avrisk.rare.splitting import (
+    MAX_ROUNDS_WITHOUT_MOVE,
+    SplittingSettings,
+    SubsetSimulation,
+    level_cov_squared,
+    next_level,
+)
+from avrisk.testing import (
+    beta_sum_problem,
+    check_estimator,
+    four_branch_problem,
+    gaussian_linear_problem,
+)
+
+NORMAL_1D = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+
+
+def sus(problem, seed=0, **kw):
+    return subset_simulation(problem.f, problem.base, problem.gamma, seed=seed, **kw)
+
+
+def without_clock(estimate):
+    return estimate.to_dict() | {"wall_time_s": 0}
+
+
+def without_wall_time(summary_estimate):
+    return {k: v for k, v in summary_estimate.items() if k != "wall_time_s"}
+
+
+@pytest.mark.parametrize(
+    "problem",
+    [
+        gaussian_linear_problem(2, p=1e-6),
+        gaussian_linear_problem(100, p=1e-6),
+        beta_sum_problem(6, p=1e-5),
+        four_branch_problem(),
+    ],
+    ids=lambda p: p.name,
+)
+def test_subset_simulation_finds_p_of_exact_problems_within_its_stderr(problem):
+    est = check_estimator(sus, problem, seed=4)
+    levels = est.details["levels"]
+    assert levels[-1] == problem.gamma and np.all(np.diff(levels) < 0)
+    assert len(levels) == len(est.history)
+    survivors = est.details["survivors"]
+    n = est.details["n_particles"]
+    expected = np.prod(np.array(survivors, dtype=float) / n)
+    assert est.p == pytest.approx(expected, rel=1e-12)  # exact counts, not p0^L
+    assert survivors[-1] == est.n_hits
+    cov = np.sqrt(np.sum(np.square(est.details["level_cov"])))
+    assert est.stderr == pytest.approx(est.p * cov)
+    assert est.n_evals == est.history[-1].n_evals < n * len(levels)
+    assert est.details["n_failed"] == 0
+
+
+def test_pcn_mixes_as_well_in_100_dimensions_as_in_2():
+    by_dim = {}
+    for dim in (2, 100):
+        est = sus(gaussian_linear_problem(dim, p=1e-6), seed=1)
+        moved = est.history[1:]
+        by_dim[dim] = (
+            np.array([h.acceptance for h in moved]),
+            np.array([h.cov for h in moved]),
+        )
+    for acceptance, _ in by_dim.values():
+        assert ((0.2 < acceptance) & (acceptance < 0.45)).all(), acceptance
+    # a level's c.o.v. carries the chains' correlation: it must not grow with D
+    assert by_dim[100][1].mean() < 1.25 * by_dim[2][1].mean()
+
+
+@pytest.mark.slow
+def test_the_95_percent_interval_covers_p_in_most_runs():
+    problems = [
+        gaussian_linear_problem(2, p=1e-6),
+        gaussian_linear_problem(100, p=1e-6),
+        beta_sum_problem(6, p=1e-5),
+        four_branch_problem(),
+    ]
+    covered = {}
+    for problem in problems:
+        runs = [sus(problem, seed=100 + s, n_particles=1000) for s in range(20)]
+        covered[problem.name] = np.mean(
+            [lo <= problem.p_exact <= hi for lo, hi in (e.ci for e in runs)]
+        )
+    assert np.mean(list(covered.values())) >= 0.85, covered
+    assert min(covered.values()) >= 0.7, covered
+
+
+def test_same_seed_same_result_whatever_the_batch_size():
+    problem = four_branch_problem()
+    whole = sus(problem, seed=3, n_particles=500)
+    batched = sus(problem, seed=3, n_particles=500, batch_size=37)
+    assert without_clock(batched) == without_clock(whole)
+    assert without_clock(sus(problem, seed=4, n_particles=500)) != without_clock(whole)
+
+
+def test_a_level_larger_than_a_chunk_goes_out_in_chunks_with_distinct_seeds():
+    problem = gaussian_linear_problem(2, p=1e-3)
+    seeded_calls = []
+
+    def f(x, seeds):
+        seeded_calls.append(seeds)
+        return problem.f(x)
+
+    f.needs_seeds = True
+    batches = []
+    est = subset_simulation(
+        f,
+        problem.base,
+        problem.gamma,
+        n_particles=SAMPLE_CHUNK + 100,
+        on_batch=batches.append,
+    )
+    keys = [(b.stage, b.chunk) for b in batches]
+    assert len(set(keys)) == len(keys)
+    assert max(len(b.values) for b in batches) == SAMPLE_CHUNK
+    assert sum(len(b.values) for b in batches) == est.n_evals
+    seeds = np.concatenate(seeded_calls)
+    assert len(np.unique(seeds)) == len(seeds) == est.n_evals  # a fresh seed each
+    assert abs(est.p - problem.p_exact) < 5 * est.stderr
+
+
+def test_a_seeded_f_interrupted_mid_level_resumes_to_the_same_summary(tmp_path):
+    problem = gaussian_linear_problem(2, p=1e-4)
+    settings = RunSettings("splitting", gamma=0.0, seed=2, n_particles=500)
+
+    def noisy(x, seeds):  # a stochastic f: its outcome depends on the seed too
+        return problem.f(x) + 0.1 * (seeds % 1000) / 1000
+
+    noisy.needs_seeds = True
+
+    def run(path, f=noisy):
+        directory = RunDirectory(path, ["x0", "x1"])
+        return run_estimation(directory, problem.base, f, settings)
+
+    reference = run(tmp_path / "reference")
+    calls = []
+
+    def interrupted(x, seeds):
+        if len(calls) == 14:  # P0, then 9 rounds of level 1 and 4 of level 2
+            raise KeyboardInterrupt
+        calls.append(len(x))
+        return noisy(x, seeds)
+
+    interrupted.needs_seeds = True
+    with pytest.raises(KeyboardInterrupt):
+        run(tmp_path / "run", f=interrupted)
+    resumed = run(tmp_path / "run")
+    assert resumed["method"] == "splitting"
+    assert without_wall_time(resumed["estimate"]) == without_wall_time(
+        reference["estimate"]
+    )
+    assert resumed["timing"]["rollouts_replayed"] == sum(calls)
+
+
+def test_a_coarse_f_with_ties_still_reaches_gamma_and_finds_p():
+    # f = floor(2 x): ties at every half-integer of x; P(f <= -6) = Phi(-2.5)
+    est = subset_simulation(
+        lambda x: np.floor(2 * x[:, 0]), NORMAL_1D, -6.0, n_particles=2000, seed=1
+    )
+    levels = est.details["levels"]
+    assert levels[-1] == -6.0 and all(level == int(level) for level in levels)
+    # a tied level keeps more survivors than p0 N: they are counted, not assumed
+    assert max(est.details["survivors"][:-1]) > 200
+    assert abs(est.p - stats.norm.cdf(-2.5)) < 5 * est.stderr
+
+
+def test_a_mostly_infinite_f_starts_below_the_ties_at_infinity():
+    # f is inf (no encounter) for 93% of P0; P(f <= 0) = P(x <= -4) = Phi(-4)
+    def f(x):
+        return np.where(x[:, 0] < -1.5, 4.0 + x[:, 0], np.inf)
+
+    est = subset_simulation(f, NORMAL_1D, 0.0, n_particles=2000, seed=2)
+    first = est.history[0]
+    assert np.isfinite(first.level) and first.n_survivors < 0.1 * 2000
+    assert abs(est.p - stats.norm.cdf(-4.0)) < 5 * est.stderr
+
+
+@pytest.mark.parametrize(
+    ("values", "current", "p0_max", "expected"),
+    [
+        ([0, 1, 1, 1, 1, 2, 3, 4, 5, 6], np.inf, 0.5, 1.0),  # 5 tied survivors: kept
+        ([0, 1, 1, 1, 1, 2, 3, 4, 5, 6], np.inf, 0.4, 0.0),  # too many: go below
+        ([1, 1, 1, 1, 1, 2, 3, 4, 5, 6], np.inf, 0.4, 1.0),  # nothing below: keep
+        ([1, 1, 1, 1, 1, 2, 3, 3, 3, 3], 3.0, 0.4, 1.0),  # still below the current
+        ([-2, 1, 1, 1, 1, 2, 3, 4, 5, 6], np.inf, 0.4, -1.0),  # below gamma: gamma
+        ([0, 1, 2, 3, 4, 5, 6, np.inf, np.inf, np.inf], np.inf, 0.5, 1.0),
+    ],
+)
+def test_next_level_is_the_quantile_or_the_value_below_its_ties(
+    values, current, p0_max, expected
+):
+    level = next_level(np.array(values, dtype=float), current, -1.0, 0.2, p0_max)
+    assert level == expected
+
+
+@pytest.mark.parametrize(
+    ("values", "current"), [([3.0] * 10, 3.0), ([np.inf] * 10, np.inf)]
+)
+def test_next_level_refuses_a_set_flat_at_the_current_level(values, current):
+    with pytest.raises(SplittingError, match="f is flat there"):
+        next_level(np.array(values), current, -1.0, 0.1, 0.5)
+
+
+def test_an_f_flat_above_gamma_is_an_error_not_a_number():
+    # floor(2 x) but never below -3: the event f <= -5 is impossible
+    def f(x):
+        return np.maximum(np.floor(2 * x[:, 0]), -3.0)
+
+    with pytest.raises(SplittingError, match=r"have f = -3, above gamma = -5"):
+        subset_simulation(f, NORMAL_1D, -5.0, n_particles=500)
+    with pytest.raises(SplittingError, match=r"have f = inf"):
+        subset_simulation(lambda x: np.full(len(x), np.inf), NORMAL_1D, 0.0)
+
+
+def test_an_event_out_of_reach_of_the_levels_is_an_error_not_a_number():
+    # f >= 10 everywhere: the levels creep towards 10 and never reach gamma = 5
+    def f(x):
+        return 10.0 + x[:, 0] ** 2
+
+    with pytest.raises(SplittingError, match="after max_levels=4 levels"):
+        subset_simulation(f, NORMAL_1D, 5.0, n_particles=500, max_levels=4)
+
+
+def test_chains_that_never_move_are_an_error():
+    calls = []
+
+    def f(x):  # finite on the draws of P0 only: every proposal is rejected
+        calls.append(len(x))
+        return x[:, 0] if len(calls) == 1 else np.full(len(x), np.inf)
+
+    with pytest.raises(SplittingError, match="no chain accepted"):
+        subset_simulation(f, NORMAL_1D, -5.0, n_particles=500)
+    assert len(calls) == 1 + MAX_ROUNDS_WITHOUT_MOVE
+
+
+def test_failed_evaluations_count_as_outside_the_level_and_are_reported():
+    problem = gaussian_linear_problem(2, p=1e-4)
+
+    def f(x):  # about 1 in 1,000 evaluations fails, wherever it is
+        bad = np.abs(np.sin(1e4 * x[:, 0])) < 5e-4 * np.pi
+        return {
+            "f": np.where(bad, np.nan, problem.f(x)),
+            "status": bad.astype(np.int8),
+        }
+
+    batches = []
+    with pytest.warns(UserWarning, match="evaluations of f failed"):
+        est = subset_simulation(
+            f, problem.base, 0.0, n_particles=2000, seed=1, on_batch=batches.append
+        )
+    n_failed = sum(int(np.count_nonzero(b.failed)) for b in batches)
+    assert est.details["n_failed"] == n_failed > 0
+    assert abs(est.p - problem.p_exact) < 5 * est.stderr
+
+
+def test_test_thresholds_come_from_the_deepest_level_that_holds_them():
+    problem = gaussian_linear_problem(2, p=1e-4)
+    beta = stats.norm.isf(problem.p_exact)
+    est = subset_simulation(
+        problem.f,
+        problem.base,
+        0.0,
+        gamma_test=(2.0, 1.0, -0.3, -4.0),
+        n_particles=2000,
+        seed=5,
+    )
+    for g in (2.0, 1.0, -0.3):
+        part = est.by_gamma[g]
+        assert abs(part.p - stats.norm.sf(beta - g)) < 5 * part.stderr
+        assert part.ci[0] < part.p < part.ci[1]
+    unseen = est.by_gamma[-4.0]  # below every particle: bounded by gamma's interval
+    assert unseen.p == unseen.n_hits == 0 and unseen.ci == (0.0, est.ci[1])
+
+
+def test_the_au_beck_cov_grows_with_correlation_along_the_chains():
+    independent = np.arange(100.0).reshape(100, 1)  # 100 chains of one state
+    assert level_cov_squared(independent, 9.5) == pytest.approx(0.9 / (100 * 0.1))
+    chained = np.repeat(np.arange(10.0), 10).reshape(10, 10)  # chains stuck in place
+    # every chain is all in or all out: 10 states count as 1 (1 + gamma_l = 10)
+    assert level_cov_squared(chained, 0.5) == pytest.approx(0.9 / (100 * 0.1) * 10)
+    padded = np.array([[0.0, 1.0, 2.0], [3.0, 4.0, np.nan]])  # 5 states in all
+    assert level_cov_squared(padded, 10.0) == 0.0  # every particle below: p = 1
+
+
+def test_settings_are_validated_by_name():
+    with pytest.raises(ValueError, match=r"p0_max \(0.05\) must be at least p0"):
+        get_estimator("splitting", p0=0.1, p0_max=0.05)
+    with pytest.raises(ValueError, match="n_moves"):
+        get_estimator("splitting", n_moves=0)
+    assert SplittingSettings().recorded()["n_particles"] == 2000
+
+
+def test_protocol_budget_progress_checkpoint_and_diagnostics():
+    method = get_estimator("splitting", n_particles=400, max_levels=6, n_moves=2)
+    assert method.budget() == 400 * (1 + 5 * 2)
+    assert method.describe() == (
+        "subset simulation, 400 particles per level, p0 0.1, 2 moves per state"
+    )
+    problem = gaussian_linear_problem(2, p=1e-4)
+    rp = RareEventProblem(problem.base, problem.f, problem.gamma)
+    steps = []
+    est = run_estimator(
+        method, rp, EstimationContext(seed=3), callback=lambda i, s: steps.append(s)
+    )
+    assert est.n_evals <= method.budget()
+    assert method.progress(est.history[0]).endswith("independent draws")
+    assert "accepted" in method.progress(est.history[1])
+    record = method.checkpoint(steps[-1], est.history)
+    assert json.loads(json.dumps(record))["levels_done"] == len(est.history)
+    (table,) = SubsetSimulation.diagnostics(json.loads(json.dumps(est.to_dict())))
+    assert table.lines == ("level",) and table.bars == "survivors"
+    assert table.column("level") == est.details["levels"]
+    assert table.column("acceptance")[0] is None
+    assert SubsetSimulation.diagnostics({"history": []}) == []
