@@ -36,7 +36,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from avrisk.rare.defensive import DefensiveMixture
 from avrisk.rare.evaluation import EvalTask, Evaluator, LocalEvaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
-from avrisk.rare.problem import RareEventProblem, sample_seeds
+from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem, sample_seeds
 from avrisk.rare.results import Estimate
 from avrisk.rare.stages import (
     BatchCache,
@@ -228,6 +228,9 @@ class EstimationContext(NamedTuple):
     ) -> tuple[FloatArray, np.ndarray]:
         """``f`` at given points (e.g. MCMC proposals) as chunk ``chunk`` of ``stage``.
 
+        At most :data:`~avrisk.rare.problem.SAMPLE_CHUNK` points; their sample
+        ids (and so their seeds) are those of chunk ``chunk`` of the stage.
+
         For estimators whose samples are not fresh draws of one distribution.
         The points are recorded like any chunk (their weight is 1: ``log q =
         log p0``) and replayed on resume when the record holds the same points;
@@ -239,6 +242,10 @@ class EstimationContext(NamedTuple):
         values : ndarray of shape (m,)
         failed : ndarray of bool, shape (m,)
         """
+        if len(x) > SAMPLE_CHUNK:
+            raise ValueError(
+                f"evaluate takes at most {SAMPLE_CHUNK} points per chunk; got {len(x)}"
+            )
         cached = self.cache(stage, chunk) if self.cache is not None else None
         if (
             cached is not None
@@ -247,7 +254,7 @@ class EstimationContext(NamedTuple):
             and not cached.failed.any()
         ):
             return cached.values, cached.failed
-        ids = np.arange(len(x), dtype=np.int64)
+        ids = chunk * SAMPLE_CHUNK + np.arange(len(x), dtype=np.int64)
         task = EvalTask(stage, chunk, ids, x, sample_seeds(self.seed, stage, ids))
         evaluator = self.evaluator or LocalEvaluator()
         (result,) = evaluator.evaluate(problem, [task])
