@@ -75,19 +75,22 @@ def execute(
     """Run (or resume, or read back) one estimation into ``out`` with progress.
 
     The traces of the ``failures`` most likely dangerous rollouts are recorded
-    as the run goes (``out/failures.parquet``), for its report.
+    as the run goes (``out/failures.parquet``), for its report (none: no
+    traces are recorded).
     """
     run_dir = samples_directory(out, objective.layout)
     base = base_distribution(objective.simulator.spec)
     definition = objective.definition()
-    recorder = FailureRecorder(
-        out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
-    )
+    if failures:
+        recorder = FailureRecorder(
+            out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
+        )
+        objective = objective.recording(recorder)
     with RichRunMonitor(err_console, label) as monitor:
         run_estimation(
             run_dir,
             base,
-            objective.recording(recorder),
+            objective,
             run_settings,
             context={"scenario": spec_json, "defines_p": definition},
             monitor=monitor,
