@@ -5,6 +5,7 @@ from avrisk.testing.problems import (
     AnalyticProblem,
     beta_sum_cdf,
     beta_sum_problem,
+    four_branch_problem,
     gaussian_linear_problem,
     mixed_problem,
 )
@@ -15,6 +16,7 @@ __all__ = [
     "beta_sum_problem",
     "check_estimator",
     "check_family",
+    "four_branch_problem",
     "gaussian_linear_problem",
     "mixed_problem",
 ]

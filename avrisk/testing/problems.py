@@ -8,6 +8,8 @@
 * :func:`mixed_problem` -- a Beta block and a Normal block that must *both* be
   extreme: ``f = max(beta part, normal part)``, so ``p`` is the product of the
   two exact probabilities.
+* :func:`four_branch_problem` -- the four-branch series system of structural
+  reliability: a 2-D standard normal failing in any of four separate regions.
 """
 
 from __future__ import annotations
@@ -139,3 +141,33 @@ def mixed_problem(
 
     p_exact = beta_sum_cdf(t, k) * float(stats.norm.sf(beta))
     return AnalyticProblem("mixed_beta_normal", base, f, 0.0, p_exact)
+
+
+def four_branch_problem() -> AnalyticProblem:
+    """The four-branch series system: ``N(0, I_2)``, four separate failure regions.
+
+    ``f = min(3 + 0.1 (x1-x2)^2 - (x1+x2)/sqrt 2, 3 + 0.1 (x1-x2)^2 + (x1+x2)/sqrt 2,
+    (x1-x2) + 7/sqrt 2, (x2-x1) + 7/sqrt 2)``, failure ``f <= 0``. In the rotated
+    coordinates ``u = (x1+x2)/sqrt 2``, ``v = (x1-x2)/sqrt 2`` (again standard
+    normal) the event is ``|u| >= 3 + 0.2 v^2`` or ``|v| >= 3.5``: two curved
+    branches with design points at distance 3 along ``+-(1, 1)`` and two flat ones
+    at distance 3.5 along ``+-(1, -1)``, so ``p = 2 Phi(-3.5) + int phi(v) 2
+    Phi(-(3 + 0.2 v^2)) dv`` over ``|v| < 3.5``, 2.2228e-3 (checked by quadrature
+    in ``tests/testing``).
+    """
+    root2 = np.sqrt(2.0)
+
+    def f(x: FloatArray) -> FloatArray:
+        x1, x2 = x[:, 0], x[:, 1]
+        bowl = 3.0 + 0.1 * (x1 - x2) ** 2
+        return np.minimum.reduce(
+            [
+                bowl - (x1 + x2) / root2,
+                bowl + (x1 + x2) / root2,
+                (x1 - x2) + 7.0 / root2,
+                (x2 - x1) + 7.0 / root2,
+            ]
+        )
+
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    return AnalyticProblem("four_branch", base, f, 0.0, 2.2228e-3)
