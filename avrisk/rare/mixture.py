@@ -20,7 +20,8 @@ Straub 2019). For iteration ``k = 0 .. n_iter - 1``, with ``q`` the base at
    ``f <= gamma_k``, weighted by ``w = p0 / q`` self-normalised in log space
    (:func:`~avrisk.rare.cross_entropy.search_level`, shared with CE);
 3. fit the components to the weighted elite by EM (:func:`fit_mixture`). The
-   E-step gives each elite its responsibilities ``r_ik`` from ``pi_k q_k(x_i)``;
+   E-step gives each elite its responsibilities ``r_ik`` from ``pi_k q_k(x_i)``
+   (from the sufficient statistics alone, :func:`component_log_kernels`);
    the M-step gives each component the weighted mean sufficient statistic
    ``m_k = sum_i w_i r_ik T(x_i) / sum_i w_i r_ik`` of its elites, projected into
    the search box by the family's own CE projection (``project(m_k)``: the
@@ -39,20 +40,25 @@ Initialisation. At the first iteration the elite (of the base) is split by
 weighted k-means++ seeding (:func:`kmeans_plus_plus`) in the standardised
 sufficient-statistic space: the first centre is an elite drawn by weight,
 each next one is drawn with probability proportional to weight times squared
-distance to the nearest centre already chosen (the best of a few such draws),
-so distant groups of elites, the candidate modes, get a centre each. Every
-elite goes to its nearest centre, each group's M-step gives its component,
-and EM refines them. Later iterations start EM from the components that
-sampled them, so each component follows its mode down the levels.
+distance to the nearest centre already chosen, so distant groups of elites,
+the candidate modes, get a centre each. Of ``SEEDINGS`` such seedings the one
+with the lowest k-means potential is kept (one seeding alone can put two
+centres in a large group and none in a small distant one). Every elite goes to
+its nearest centre, each group's M-step gives its component, and EM refines
+them (:func:`seed_components`). Later iterations start EM from the components
+that sampled them, so each component follows its mode down the levels.
 
-Death and merging. An M-step that leaves a component less than ``min_weight``
-of the elite weight removes it (it explains too few elites for its fit to be
-trusted, and samples spent on it are mostly wasted); after the smoothing, two
-components whose symmetric Kullback-Leibler divergence ``(theta_i - theta_j)^T
-(m_i - m_j)`` is below ``MERGE_DIVERGENCE`` are one: they are replaced by the
-projection of their weight-averaged mean parameters. So ``K`` starts at
-``n_components`` (fewer for fewer distinct elites) and can only fall: a mode
-that has no elite at the first level is not found later (as with CE).
+Death and merging. The mixture weights are the components' shares of the
+elite weight, with a floor: an M-step that leaves a component less than
+``min_weight`` removes it (it explains too few elites for its fit to be
+trusted, and samples spent on it are mostly wasted). After the smoothing, two
+components whose symmetric Kullback-Leibler divergence ``(theta_i -
+theta_j)^T (m_i - m_j)`` is below ``MERGE_DIVERGENCE`` are one: they are
+replaced by the projection of their weight-averaged mean parameters (on a
+single mode, EM pulls the components together, and they merge within a few
+iterations). So ``K`` starts at ``n_components`` (fewer for fewer distinct
+elites) and can only fall: a mode that has no elite at the first level is not
+found later (as with CE), and only the defensive share of ``P0`` samples it.
 
 :class:`MixtureCrossEntropy` is the method behind the estimator protocol
 (:mod:`avrisk.rare.estimator`), registered as ``"mixture"``;
@@ -254,16 +260,12 @@ class MixtureFit(NamedTuple):
         The mean statistics ``m_k`` of the last M-step (before projection).
     origin : ndarray of int, shape (K',)
         Index of the starting component each one grew from.
-    log_likelihood : float
-        Weighted mean log-likelihood of the elite before the last M-step
-        (carrier ``h`` left out).
     """
 
     components: tuple[ExponentialFamily, ...]
     weights: FloatArray
     targets: FloatArray
     origin: np.ndarray
-    log_likelihood: float
 
 
 def fit_mixture(
@@ -319,9 +321,7 @@ def fit_mixture(
         if log_likelihood - previous < EM_TOLERANCE:
             break
         previous = log_likelihood
-    return MixtureFit(
-        tuple(components), np.exp(log_pi), targets, origin, log_likelihood
-    )
+    return MixtureFit(tuple(components), np.exp(log_pi), targets, origin)
 
 
 def kmeans_plus_plus(
