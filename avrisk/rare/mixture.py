@@ -564,30 +564,26 @@ class MixtureCrossEntropy:
         stats = result.stats[level.elite][positive]
         elite_weights = level.elite_weights[positive]
         if state.iteration == 0:
-            rng = np.random.default_rng(
-                np.random.SeedSequence(
-                    [context.seed, stage], spawn_key=(SEEDING_STREAM,)
-                )
+            seeding = np.random.SeedSequence(
+                [context.seed, stage], spawn_key=(SEEDING_STREAM,)
             )
-            fit = fit_mixture(
-                *seed_components(
-                    problem.base, stats, elite_weights, s.n_components, rng
-                ),
+            start = seed_components(
+                problem.base,
                 stats,
                 elite_weights,
-                s.min_weight,
+                s.n_components,
+                np.random.default_rng(seeding),
             )
-            grew_from = [problem.base] * s.n_components
+            grew_from = [problem.base] * len(start[0])
         else:
-            fit = fit_mixture(
-                sampled.components, sampled.weights, stats, elite_weights, s.min_weight
-            )
+            start = sampled.components, sampled.weights
             grew_from = list(sampled.components)
+        fit = fit_mixture(*start, stats, elite_weights, s.min_weight)
         smoothed = [
-            previous.project(s.alpha * m + (1.0 - s.alpha) * previous.mean_param())
-            for previous, m in zip(
-                (grew_from[k] for k in fit.origin), fit.targets, strict=True
+            grew_from[k].project(
+                s.alpha * m + (1.0 - s.alpha) * grew_from[k].mean_param()
             )
+            for k, m in zip(fit.origin, fit.targets, strict=True)
         ]
         components, weights = merge_overlapping(smoothed, fit.weights)
         n_evals = state.n_evals + s.n_per_iter
