@@ -36,17 +36,19 @@ Straub 2019). For iteration ``k = 0 .. n_iter - 1``, with ``q`` the base at
 The estimate comes from ``n_final`` fresh samples of the remembered mixture,
 ``mean(w 1{f <= g})`` per threshold, with ESS and Pareto ``k`` per threshold.
 
-Initialisation. At the first iteration the elite (of the base) is split by
-weighted k-means++ seeding (:func:`kmeans_plus_plus`) in the standardised
-sufficient-statistic space: the first centre is an elite drawn by weight,
-each next one is drawn with probability proportional to weight times squared
-distance to the nearest centre already chosen, so distant groups of elites,
-the candidate modes, get a centre each. Of ``SEEDINGS`` such seedings the one
-with the lowest k-means potential is kept (one seeding alone can put two
-centres in a large group and none in a small distant one). Every elite goes to
-its nearest centre, each group's M-step gives its component, and EM refines
-them (:func:`seed_components`). Later iterations start EM from the components
-that sampled them, so each component follows its mode down the levels.
+Initialisation. At the first iteration the elite (of the base) is split into
+groups (:func:`seed_components`): weighted k-means++ seeding
+(:func:`kmeans_plus_plus`) draws ``OVERSEEDING`` times ``n_components``
+centres in the standardised sufficient-statistic space, the first one an
+elite drawn by weight, each next one with probability proportional to weight
+times squared distance to the nearest centre so far, so distant groups of
+elites, the candidate modes, get a centre each; every elite joins its nearest
+centre. The groups are merged pairwise (Ward: least rise of the k-means
+potential first) down to ``n_components``, so a large group's several centres
+go back together before a small distant group loses its own. Each group's
+M-step gives its component, and EM refines them. Later iterations start EM
+from the components that sampled them, so each component follows its mode
+down the levels.
 
 Death and merging. The mixture weights are the components' shares of the
 elite weight, with a floor: an M-step that leaves a component less than
@@ -104,13 +106,14 @@ from avrisk.rare.stages import BatchCache, BatchRecorder
 
 #: EM stops once an iteration gains less than this in weighted mean log-likelihood.
 EM_TOLERANCE = 1e-6
-#: At most this many EM iterations per search iteration.
-MAX_EM_STEPS = 200
+#: At most this many EM iterations per search iteration (the next one goes on from
+#: where it stopped).
+MAX_EM_STEPS = 50
 #: Components closer than this symmetric Kullback-Leibler divergence merge (for
 #: normals of a fixed covariance: means less than 1 standard deviation apart).
 MERGE_DIVERGENCE = 1.0
-#: k-means++ seedings tried at the first iteration (:func:`seed_components`).
-SEEDINGS = 10
+#: k-means++ centres per component at the first iteration (:func:`seed_components`).
+OVERSEEDING = 3
 #: Extra key of the seeding generator, so that it draws no chunk's stream.
 SEEDING_STREAM = 0x6D6978
 
@@ -372,15 +375,16 @@ def seed_components(
     n_components: int,
     rng: np.random.Generator,
 ) -> tuple[list[ExponentialFamily], FloatArray]:
-    """Starting components: the elite split around k-means++ centres.
+    """Starting components: the elite split into groups around k-means++ centres.
 
-    The statistics are standardised by their weighted standard deviations.
-    One seeding can put two centres in a large group of elites and none in a
-    small distant one (a mode with few elites at the first level), and EM
-    rarely moves a component across to it; so the seeding kept is the one of
-    ``SEEDINGS`` with the lowest weighted potential. Every elite joins its
-    nearest centre, and each group's weighted mean statistic, projected by
-    ``base``, is a component with the group's weight.
+    In the sufficient-statistic space standardised by the weighted standard
+    deviations, k-means++ draws ``OVERSEEDING * n_components`` centres and
+    every elite joins its nearest one. Groups are then merged pairwise, the
+    pair whose union raises the weighted k-means potential least first (Ward),
+    down to ``n_components``: the several centres that a large group of elites
+    draws go back together before a small distant group (a mode with few
+    elites at the first level) loses its own. Each group's weighted mean
+    statistic, projected by ``base``, is a component with the group's weight.
 
     Parameters
     ----------
@@ -402,19 +406,27 @@ def seed_components(
     centre = elite_weights @ stats
     spread = np.sqrt(elite_weights @ (stats - centre) ** 2)
     standard = (stats - centre) / np.where(spread > 0, spread, 1.0)
-
-    def squared_distances(centres: np.ndarray) -> FloatArray:
-        return ((standard[:, None, :] - standard[None, centres, :]) ** 2).sum(-1)
-
-    seedings = [
-        squared_distances(kmeans_plus_plus(standard, elite_weights, n_components, rng))
-        for _ in range(SEEDINGS)
+    seeds = standard[
+        kmeans_plus_plus(standard, elite_weights, OVERSEEDING * n_components, rng)
     ]
-    distances = min(seedings, key=lambda d: float(elite_weights @ d.min(axis=1)))
-    members = np.eye(distances.shape[1], dtype=bool)[np.argmin(distances, axis=1)]
-    mass = elite_weights[:, None] * members
-    shares = mass.sum(axis=0)
-    targets = (mass.T @ stats) / shares[:, None]
+    nearest = np.argmin(((standard[:, None, :] - seeds[None]) ** 2).sum(-1), axis=1)
+    members = np.eye(len(seeds), dtype=bool)[nearest].T  # (groups, n)
+    shares = members @ elite_weights
+    means = (members * elite_weights) @ standard / shares[:, None]
+    while len(shares) > n_components:
+        gap = ((means[:, None] - means[None]) ** 2).sum(-1)
+        cost = np.outer(shares, shares) / np.add.outer(shares, shares) * gap
+        np.fill_diagonal(cost, np.inf)
+        i, j = np.unravel_index(np.argmin(cost), cost.shape)
+        means[i] = (shares[i] * means[i] + shares[j] * means[j]) / (
+            shares[i] + shares[j]
+        )
+        shares[i] += shares[j]
+        members[i] |= members[j]
+        means, shares, members = (
+            np.delete(a, j, axis=0) for a in (means, shares, members)
+        )
+    targets = (members * elite_weights) @ stats / shares[:, None]
     return [base.project(m) for m in targets], shares
 
 

@@ -274,8 +274,12 @@ def test_zero_iterations_is_plain_monte_carlo():
 
 
 @pytest.mark.slow
-def test_mixture_intervals_cover_the_truth_over_repeated_seeds():
-    problem = four_branch_problem()
+@pytest.mark.parametrize(
+    "problem",
+    [four_branch_problem(), gaussian_linear_problem(2), beta_sum_problem(6)],
+    ids=lambda p: p.name,
+)
+def test_mixture_intervals_cover_the_truth_over_repeated_seeds(problem):
     reps = 20
     covered = sum(
         est.ci[0] <= problem.p_exact <= est.ci[1]
