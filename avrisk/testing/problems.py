@@ -9,7 +9,8 @@
   extreme: ``f = max(beta part, normal part)``, so ``p`` is the product of the
   two exact probabilities.
 * :func:`four_branch_problem` -- the four-branch series system of structural
-  reliability: a 2-D standard normal failing in any of four separate regions.
+  reliability: a 2-d standard normal and four failure regions in different
+  directions (a test of methods that follow one failure mode only).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from dataclasses import dataclass
 from math import comb, factorial
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import integrate, optimize, stats
 
 from avrisk.rare import FixedCovNormal, Product, ScaledBeta
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
@@ -144,30 +145,41 @@ def mixed_problem(
 
 
 def four_branch_problem() -> AnalyticProblem:
-    """The four-branch series system: ``N(0, I_2)``, four separate failure regions.
+    """The four-branch series system (Au & Beck 2001, example 2; ``k = 7``).
 
-    ``f = min(3 + 0.1 (x1-x2)^2 - (x1+x2)/sqrt 2, 3 + 0.1 (x1-x2)^2 + (x1+x2)/sqrt 2,
-    (x1-x2) + 7/sqrt 2, (x2-x1) + 7/sqrt 2)``, failure ``f <= 0``. In the rotated
-    coordinates ``u = (x1+x2)/sqrt 2``, ``v = (x1-x2)/sqrt 2`` (again standard
-    normal) the event is ``|u| >= 3 + 0.2 v^2`` or ``|v| >= 3.5``: two curved
-    branches with design points at distance 3 along ``+-(1, 1)`` and two flat ones
-    at distance 3.5 along ``+-(1, -1)``, so ``p = 2 Phi(-3.5) + int phi(v) 2
-    Phi(-(3 + 0.2 v^2)) dv`` over ``|v| < 3.5``, 2.2228e-3 (checked by quadrature
-    in ``tests/testing``).
+    ``X ~ N(0, I_2)`` and ``f = min(g_1, .., g_4)`` with
+
+        g_1,2 = 3 + 0.1 (x1 - x2)^2 -+ (x1 + x2) / sqrt(2)
+        g_3,4 = +-(x1 - x2) + 7 / sqrt(2)
+
+    and failure ``f <= 0``. In the rotated coordinates ``u = (x1 + x2) /
+    sqrt(2)``, ``v = (x1 - x2) / sqrt(2)`` (independent standard normals) the
+    failure set is ``|v| >= 3.5`` or ``|u| >= 3 + 0.2 v^2``, so
+
+        p = 2 Phi(-3.5) + int_{|v| < 3.5} phi(v) 2 Phi(-(3 + 0.2 v^2)) dv
+
+    computed by adaptive quadrature: ``p = 2.2228e-3``.
     """
-    root2 = np.sqrt(2.0)
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
 
     def f(x: FloatArray) -> FloatArray:
-        x1, x2 = x[:, 0], x[:, 1]
-        bowl = 3.0 + 0.1 * (x1 - x2) ** 2
+        along, across = x[:, 0] + x[:, 1], x[:, 0] - x[:, 1]
+        bowl = 3.0 + 0.1 * across**2
         return np.minimum.reduce(
             [
-                bowl - (x1 + x2) / root2,
-                bowl + (x1 + x2) / root2,
-                (x1 - x2) + 7.0 / root2,
-                (x2 - x1) + 7.0 / root2,
+                bowl - along / np.sqrt(2),
+                bowl + along / np.sqrt(2),
+                across + 7 / np.sqrt(2),
+                -across + 7 / np.sqrt(2),
             ]
         )
 
-    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    return AnalyticProblem("four_branch", base, f, 0.0, 2.2228e-3)
+    inside, _ = integrate.quad(
+        lambda v: stats.norm.pdf(v) * 2 * stats.norm.sf(3 + 0.2 * v * v),
+        -3.5,
+        3.5,
+        epsabs=1e-15,
+        epsrel=1e-12,
+    )
+    p_exact = 2 * float(stats.norm.sf(3.5)) + inside
+    return AnalyticProblem("four_branch", base, f, 0.0, p_exact)
