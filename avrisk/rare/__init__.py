@@ -16,9 +16,10 @@ from avrisk.rare.estimator import (
 from avrisk.rare.evaluation import EvalResult, EvalTask, Evaluator, LocalEvaluator
 from avrisk.rare.families import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
 from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
+from avrisk.rare.mixture import MixtureCrossEntropy, MixtureProposal, mixture_ce
 from avrisk.rare.naive_mc import NaiveMC, naive_mc
 from avrisk.rare.problem import InvalidOutputError, RareEventProblem
-from avrisk.rare.results import CEInfo, Estimate, GammaEstimate
+from avrisk.rare.results import CEInfo, Estimate, GammaEstimate, MixtureInfo
 from avrisk.rare.splitting import SplittingError, SubsetSimulation, subset_simulation
 from avrisk.rare.stages import StageBatch, run_stage
 
@@ -32,6 +33,9 @@ __all__ = [
     "EvalTask",
     "Evaluator",
     "LocalEvaluator",
+    "MixtureCrossEntropy",
+    "MixtureInfo",
+    "MixtureProposal",
     "NaiveMC",
     "Estimate",
     "ExponentialFamily",
@@ -49,6 +53,7 @@ __all__ = [
     "cross_entropy",
     "estimator_names",
     "get_estimator",
+    "mixture_ce",
     "naive_mc",
     "run_estimator",
     "run_stage",

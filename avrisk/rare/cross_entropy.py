@@ -46,8 +46,8 @@ from avrisk.rare.estimator import (
     run_estimator,
 )
 from avrisk.rare.evaluation import Evaluator
-from avrisk.rare.families.base import ExponentialFamily
-from avrisk.rare.final_stage import bracket_failures, importance_estimates
+from avrisk.rare.families.base import ExponentialFamily, FloatArray
+from avrisk.rare.final_stage import weighted_stage_estimates
 from avrisk.rare.problem import (
     FINAL_STAGE,
     BatchFunction,
@@ -55,7 +55,7 @@ from avrisk.rare.problem import (
     threshold_list,
 )
 from avrisk.rare.results import CEInfo, Estimate
-from avrisk.rare.stages import BatchCache, BatchRecorder
+from avrisk.rare.stages import BatchCache, BatchRecorder, StageResult
 from avrisk.rare.stopping import StoppingRule
 from avrisk.rare.weights import (
     kish_ess,
@@ -95,23 +95,102 @@ class CEState(NamedTuple):
 MIN_HITS_FOR_VARIANCE = 10
 
 
-def _quantile_score(info: CEInfo) -> tuple[float, ...]:
-    return (info.quantile,)
+class SearchLevel(NamedTuple):
+    """The level of one search iteration and what its samples say at it.
+
+    Attributes
+    ----------
+    quantile : float
+        ``rho``-quantile of ``f`` over the iteration's samples.
+    gamma_k : float
+        Level of the update, ``max(gamma, quantile)``.
+    elite : ndarray of bool, shape (n,)
+        Samples with ``f <= gamma_k`` (failed samples count as safe).
+    elite_weights : ndarray of shape (n_elite,)
+        Self-normalised likelihood ratios ``p0 / q`` of the elite samples.
+    elite_ess : float
+        Kish effective sample size of those weights.
+    n_hits : int
+        Samples with ``f <= gamma``.
+    rel_var : float
+        Relative variance per sample of importance sampling with the sampled
+        proposal, ``Var(w 1{f <= gamma}) / p^2``, from these samples (``inf``
+        without hits).
+    """
+
+    quantile: float
+    gamma_k: float
+    elite: np.ndarray
+    elite_weights: FloatArray
+    elite_ess: float
+    n_hits: int
+    rel_var: float
 
 
-def _variance_score(info: CEInfo) -> tuple[float, ...]:
-    if info.n_hits >= MIN_HITS_FOR_VARIANCE:
-        return (-math.inf, info.rel_var)
-    return (info.quantile, math.inf)
+def search_level(
+    stage: StageResult, rho: float, gamma: float, iteration: int
+) -> SearchLevel:
+    """Steps 2-3 of the module docstring: the level ``gamma_k`` and its elite.
+
+    Samples that failed to evaluate count as safe (they only steer the search;
+    the final stage brackets them).
+
+    Parameters
+    ----------
+    stage : StageResult
+        The ``n`` evaluated samples of search iteration ``iteration``.
+    rho : float
+        Quantile level of the elite, in (0, 1).
+    gamma : float
+        Threshold of the event.
+    iteration : int
+        Index of the iteration (for the error message).
+
+    Raises
+    ------
+    FloatingPointError
+        If every elite sample has zero base density (no weight to fit to).
+    """
+    values = np.where(stage.failed, np.inf, stage.values)
+    log_w = stage.log_w
+    quantile = float(np.quantile(values, rho, method="inverted_cdf"))
+    gamma_k = max(gamma, quantile)
+    elite = values <= gamma_k
+    if not np.isfinite(log_w[elite]).any():
+        raise FloatingPointError(
+            f"iteration {iteration}: every elite sample has zero base density"
+        )
+    hits = values <= gamma
+    p_k, se_k = weighted_mean_and_stderr(log_w, hits)
+    return SearchLevel(
+        quantile=quantile,
+        gamma_k=gamma_k,
+        elite=elite,
+        elite_weights=normalized_weights(log_w[elite]),
+        elite_ess=kish_ess(log_w[elite]),
+        n_hits=int(np.count_nonzero(hits)),
+        rel_var=values.size * (se_k / p_k) ** 2 if p_k > 0 else math.inf,
+    )
 
 
-#: How the proposal of the final stage is chosen among the evaluated iterates.
+def _quantile_score(level: SearchLevel) -> tuple[float, ...]:
+    return (level.quantile,)
+
+
+def _variance_score(level: SearchLevel) -> tuple[float, ...]:
+    if level.n_hits >= MIN_HITS_FOR_VARIANCE:
+        return (-math.inf, level.rel_var)
+    return (level.quantile, math.inf)
+
+
+#: How the proposal of the final stage is chosen among the evaluated iterates,
+#: from their :class:`SearchLevel` (smaller score is better).
 #: ``"quantile"``: lowest ``rho``-quantile (paper). Once the quantiles fall below
 #: ``gamma`` this favours proposals that overshoot into the event, which in high
 #: dimension can have degenerate weights. ``"variance"``: among iterates with at
 #: least ``MIN_HITS_FOR_VARIANCE`` hits, the lowest estimated relative variance
-#: (``CEInfo.rel_var``); before any has, the lowest quantile.
-SELECTION_RULES: dict[str, Callable[[CEInfo], tuple[float, ...]]] = {
+#: (``SearchLevel.rel_var``); before any has, the lowest quantile.
+SELECTION_RULES: dict[str, Callable[[SearchLevel], tuple[float, ...]]] = {
     "quantile": _quantile_score,
     "variance": _variance_score,
 }
@@ -198,32 +277,22 @@ class CrossEntropy:
         stage = state.iteration + 1
         proposal = state.proposal
         result = context.stage(problem, proposal, s.n_per_iter, stage, keep_stats=True)
-        values = np.where(result.failed, np.inf, result.values)
-        log_w, stats = result.log_w, result.stats
-        assert stats is not None
-        quantile = float(np.quantile(values, s.rho, method="inverted_cdf"))
-        gamma_k = max(problem.gamma, quantile)
-        elite = values <= gamma_k
-        if not np.isfinite(log_w[elite]).any():
-            raise FloatingPointError(
-                f"iteration {state.iteration}: every elite sample has zero base density"
-            )
-        target = normalized_weights(log_w[elite]) @ stats[elite]
+        assert result.stats is not None
+        level = search_level(result, s.rho, problem.gamma, state.iteration)
+        target = level.elite_weights @ result.stats[level.elite]
         m = s.alpha * target + (1.0 - s.alpha) * proposal.mean_param()
-        hits = values <= problem.gamma
-        p_k, se_k = weighted_mean_and_stderr(log_w, hits)
         n_evals = state.n_evals + s.n_per_iter
         info = CEInfo(
             iteration=state.iteration,
-            gamma_k=gamma_k,
-            quantile=quantile,
-            ess=kish_ess(log_w[elite]),
-            n_elite=int(elite.sum()),
-            n_hits=int(np.count_nonzero(hits)),
+            gamma_k=level.gamma_k,
+            quantile=level.quantile,
+            ess=level.elite_ess,
+            n_elite=int(level.elite.sum()),
+            n_hits=level.n_hits,
             n_evals=n_evals,
-            rel_var=s.n_per_iter * (se_k / p_k) ** 2 if p_k > 0 else math.inf,
+            rel_var=level.rel_var,
         )
-        score = SELECTION_RULES[s.select](info)
+        score = SELECTION_RULES[s.select](level)
         better = score < state.best_score
         new_state = CEState(
             proposal=proposal.project(m),
@@ -249,15 +318,10 @@ class CrossEntropy:
         stage = context.stage(
             problem, sampled, s.n_final, FINAL_STAGE, final_after=state.n_evals
         )
-        by_gamma = bracket_failures(
-            lambda v: importance_estimates(v, stage.log_w, problem.thresholds),
-            stage.values,
-            stage.failed,
-        )
         return Estimate(
             method="cross_entropy",
             gamma=problem.gamma,
-            by_gamma=by_gamma,
+            by_gamma=weighted_stage_estimates(stage, problem.thresholds),
             n_evals=state.n_evals + stage.values.size,
             proposal=proposal,
             best_iteration=None if state.best_iteration < 0 else state.best_iteration,

@@ -11,6 +11,7 @@ import numpy as np
 from avrisk.rare.families.base import FloatArray
 from avrisk.rare.intervals import clopper_pearson, normal_interval, wilson
 from avrisk.rare.results import GammaEstimate
+from avrisk.rare.stages import StageResult
 from avrisk.rare.weights import (
     MAX_RELIABLE_PARETO_K,
     kish_ess,
@@ -170,3 +171,18 @@ def importance_estimates(
             pareto_k=tail,
         )
     return out
+
+
+def weighted_stage_estimates(
+    stage: StageResult, thresholds: tuple[float, ...]
+) -> dict[float, GammaEstimate]:
+    """Importance-sampling estimates of a final stage, failed samples bracketed.
+
+    :func:`importance_estimates` of the stage's values and log-weights per
+    threshold, through :func:`bracket_failures`.
+    """
+    return bracket_failures(
+        lambda values: importance_estimates(values, stage.log_w, thresholds),
+        stage.values,
+        stage.failed,
+    )

@@ -4,9 +4,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Protocol
 
-from avrisk.rare.families.base import ExponentialFamily
+
+class Proposal(Protocol):
+    """The distribution of a final stage: a family, or a mixture of them."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable description."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -142,6 +148,37 @@ class CEInfo(NamedTuple):
         return _jsonable(self._asdict())
 
 
+class MixtureInfo(NamedTuple):
+    """Diagnostics of one mixture cross-entropy iteration (:mod:`avrisk.rare.mixture`).
+
+    Attributes
+    ----------
+    iteration, gamma_k, quantile, ess, n_elite, n_hits, n_evals, rel_var
+        As in :class:`CEInfo`, for the mixture sampled at this iteration.
+    n_components : int
+        Live components of the mixture fitted at this iteration (after deaths
+        and merges), the proposal of the next one.
+    weights : tuple of float
+        Their mixture weights ``pi_k`` (summing to one; the defensive share of
+        ``P0`` comes on top).
+    """
+
+    iteration: int
+    gamma_k: float
+    quantile: float
+    ess: float
+    n_elite: int
+    n_hits: int
+    n_evals: int
+    rel_var: float
+    n_components: int
+    weights: tuple[float, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary."""
+        return _jsonable(self._asdict())
+
+
 @dataclass(frozen=True)
 class Estimate:
     """Result of a rare-event estimator.
@@ -160,7 +197,7 @@ class Estimate:
         Estimates for ``gamma`` and each ``gamma_test``.
     n_evals : int
         Every call of ``f``, search stages included.
-    proposal : ExponentialFamily or None
+    proposal : ExponentialFamily, MixtureProposal or None
         Proposal of the final stage (``None`` for naive Monte Carlo).
     history : tuple
         The diagnostics (``Info``, with ``to_dict()``) of every step of the
@@ -182,7 +219,7 @@ class Estimate:
     gamma: float
     by_gamma: dict[float, GammaEstimate]
     n_evals: int
-    proposal: ExponentialFamily | None = None
+    proposal: Proposal | None = None
     history: tuple[Any, ...] = field(default_factory=tuple)
     best_iteration: int | None = None
     wall_time_s: float = 0.0

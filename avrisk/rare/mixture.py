@@ -1,0 +1,811 @@
+"""Mixture cross-entropy importance sampling: one proposal for several failure regions.
+
+A cross-entropy proposal (:mod:`avrisk.rare.cross_entropy`) is one member of
+the base family: it sits on one failure region. Where the event has several
+separate modes, its samples miss all but one, and the estimate comes out low
+with an interval that is too narrow. Here the proposal is the mixture
+
+    q = lam P0 + (1 - lam) sum_k pi_k q_k
+
+of ``K`` members ``q_k`` of the base family (each a copy of the base's
+structure, its own parameter in the base's search box) and of the base itself
+with weight ``lam`` (defensive, :mod:`avrisk.rare.defensive`: every weight is
+``p0 / q <= 1 / lam``). It is searched as cross-entropy searches one member
+(improved cross-entropy with mixtures: Kurtz & Song 2013; Geyer, Papaioannou &
+Straub 2019). For iteration ``k = 0 .. n_iter - 1``, with ``q`` the base at
+``k = 0``:
+
+1. draw ``N`` samples of ``q`` and evaluate ``f``;
+2. the level ``gamma_k = max(gamma, rho-quantile of f)`` and its elite
+   ``f <= gamma_k``, weighted by ``w = p0 / q`` self-normalised in log space
+   (:func:`~avrisk.rare.cross_entropy.search_level`, shared with CE);
+3. fit the components to the weighted elite by EM (:func:`fit_mixture`). The
+   E-step gives each elite its responsibilities ``r_ik`` from ``pi_k q_k(x_i)``
+   (from the sufficient statistics alone, :func:`component_log_kernels`);
+   the M-step gives each component the weighted mean sufficient statistic
+   ``m_k = sum_i w_i r_ik T(x_i) / sum_i w_i r_ik`` of its elites, projected into
+   the search box by the family's own CE projection (``project(m_k)``: the
+   maximum-likelihood fit), and the weight ``pi_k = sum_i w_i r_ik``. The steps
+   repeat until the weighted log-likelihood gains less than ``EM_TOLERANCE``;
+4. smooth each component as CE does: ``project(alpha m_k + (1 - alpha) grad
+   A(theta_k))`` with ``theta_k`` the component it grew from (the base at
+   ``k = 0``);
+5. remember the sampled mixture with the best selection score
+   (:data:`~avrisk.rare.cross_entropy.SELECTION_RULES`, as CE).
+
+The estimate comes from ``n_final`` fresh samples of the remembered mixture,
+``mean(w 1{f <= g})`` per threshold, with ESS and Pareto ``k`` per threshold.
+
+Initialisation. At the first iteration the elite (of the base) is split into
+groups (:func:`seed_components`): weighted k-means++ seeding
+(:func:`kmeans_plus_plus`) draws ``OVERSEEDING`` times ``n_components``
+centres in the standardised sufficient-statistic space, the first one an
+elite drawn by weight, each next one with probability proportional to weight
+times squared distance to the nearest centre so far, so distant groups of
+elites, the candidate modes, get a centre each; every elite joins its nearest
+centre. The groups are merged pairwise (Ward: least rise of the k-means
+potential first) down to ``n_components``, so a large group's several centres
+go back together before a small distant group loses its own. Each group's
+M-step gives its component, and EM refines them. Later iterations start EM
+from the components that sampled them, so each component follows its mode
+down the levels.
+
+Death and merging. The mixture weights are the components' shares of the
+elite weight, with a floor: an M-step that leaves a component less than
+``min_weight`` removes it (it explains too few elites for its fit to be
+trusted, and samples spent on it are mostly wasted). After the smoothing, two
+components whose symmetric Kullback-Leibler divergence ``(theta_i -
+theta_j)^T (m_i - m_j)`` is below ``MERGE_DIVERGENCE`` are one: they are
+replaced by the projection of their weight-averaged mean parameters (on a
+single mode, EM pulls the components together, and they merge within a few
+iterations). So ``K`` starts at ``n_components`` (fewer for fewer distinct
+elites) and can only fall: a mode that has no elite at the first level is not
+found later (as with CE), and only the defensive share of ``P0`` samples it.
+
+:class:`MixtureCrossEntropy` is the method behind the estimator protocol
+(:mod:`avrisk.rare.estimator`), registered as ``"mixture"``;
+:func:`mixture_ce` is the top-level function.
+
+References
+----------
+N. Kurtz, J. Song. "Cross-entropy-based adaptive importance sampling using
+Gaussian mixture." Structural Safety 42, 2013.
+S. Geyer, I. Papaioannou, D. Straub. "Cross entropy-based importance sampling
+using Gaussian densities revisited." Structural Safety 76, 2019.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any, Literal, NamedTuple
+
+import numpy as np
+from pydantic import Field
+from scipy.special import logsumexp
+
+from avrisk.rare.cross_entropy import SELECTION_RULES, search_level
+from avrisk.rare.estimator import (
+    DiagnosticTable,
+    EstimationContext,
+    EstimatorSettings,
+    register_estimator,
+    run_estimator,
+)
+from avrisk.rare.evaluation import Evaluator
+from avrisk.rare.families.base import ExponentialFamily, FloatArray
+from avrisk.rare.final_stage import weighted_stage_estimates
+from avrisk.rare.problem import (
+    FINAL_STAGE,
+    BatchFunction,
+    RareEventProblem,
+    threshold_list,
+)
+from avrisk.rare.results import Estimate, MixtureInfo
+from avrisk.rare.stages import BatchCache, BatchRecorder
+from avrisk.rare.stopping import StoppingRule
+
+#: EM stops once an iteration gains less than this in weighted mean log-likelihood.
+EM_TOLERANCE = 1e-6
+#: At most this many EM iterations per search iteration (the next one goes on from
+#: where it stopped).
+MAX_EM_STEPS = 50
+#: Components closer than this symmetric Kullback-Leibler divergence merge (for
+#: normals of a fixed covariance: means less than 1 standard deviation apart).
+MERGE_DIVERGENCE = 1.0
+#: k-means++ centres per component at the first iteration (:func:`seed_components`).
+OVERSEEDING = 3
+#: Extra key of the seeding generator, so that it draws no chunk's stream.
+SEEDING_STREAM = 0x6D6978
+
+
+class MixtureProposal:
+    """``q = lam P0 + (1 - lam) sum_k pi_k q_k`` (see the module docstring).
+
+    Parameters
+    ----------
+    components : sequence of ExponentialFamily
+        The ``q_k``, of the base's structure.
+    weights : array_like of shape (K,)
+        Their weights ``pi_k``, positive (normalised to sum to one).
+    base : ExponentialFamily
+        ``P0``.
+    defensive : float
+        Weight ``lam`` of ``P0``, in [0, 1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from avrisk.rare import FixedCovNormal
+    >>> base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    >>> left, right = base.project(np.array([-4.0])), base.project(np.array([4.0]))
+    >>> q = MixtureProposal([left, right], [0.5, 0.5], base, defensive=0.1)
+    >>> x = q.sample(100_000, np.random.default_rng(0))
+    >>> w = np.exp(base.log_prob(x) - q.log_prob(x))  # p0 / q, mean 1, at most 10
+    >>> bool(w.max() <= 10.0), bool(abs(w.mean() - 1.0) < 0.03)
+    (True, True)
+    """
+
+    def __init__(
+        self,
+        components: Sequence[ExponentialFamily],
+        weights: Any,
+        base: ExponentialFamily,
+        defensive: float,
+    ) -> None:
+        weights = np.asarray(weights, dtype=np.float64)
+        if len(components) == 0 or weights.shape != (len(components),):
+            raise ValueError(
+                f"need one weight per component; got {weights.shape} weights for "
+                f"{len(components)} components"
+            )
+        if not (weights > 0).all() or not np.isfinite(weights).all():
+            raise ValueError(f"weights must be positive; got {weights}")
+        if not 0.0 <= defensive < 1.0:
+            raise ValueError(f"defensive must be in [0, 1); got {defensive}")
+        if any(c.dim != base.dim for c in components):
+            raise ValueError("every component must have the base's dimension")
+        self.components = tuple(components)
+        self.weights = weights / weights.sum()
+        self.base = base
+        self.defensive = float(defensive)
+
+    @property
+    def dim(self) -> int:
+        """Dimension ``D`` of a sample."""
+        return self.base.dim
+
+    @property
+    def n_components(self) -> int:
+        """Number ``K`` of components besides the defensive ``P0``."""
+        return len(self.components)
+
+    def sample(self, n: int, rng: np.random.Generator) -> FloatArray:
+        """Draw ``n`` samples, shape (n, D).
+
+        Component choices, ``P0``'s draws and each component's draws come from
+        separate children of ``rng``, so row ``i`` does not depend on ``n``
+        (the engine's prefix consistency).
+        """
+        choose, from_base, *from_components = rng.spawn(2 + self.n_components)
+        shares = (1.0 - self.defensive) * self.weights
+        edges = self.defensive + np.concatenate([[0.0], np.cumsum(shares)[:-1]])
+        which = np.searchsorted(edges, choose.random(n), side="right")  # 0: P0
+        x = np.empty((n, self.dim))
+        if self.defensive > 0:
+            use = which == 0
+            x[use] = self.base.sample(n, from_base)[use]
+        for k, (component, stream) in enumerate(
+            zip(self.components, from_components, strict=True), start=1
+        ):
+            use = which == k
+            x[use] = component.sample(n, stream)[use]
+        return x
+
+    def log_prob(self, x: FloatArray) -> FloatArray:
+        """Log-density of the mixture (a log-sum-exp of its terms), shape (n,)."""
+        terms = [
+            math.log1p(-self.defensive) + math.log(pi) + c.log_prob(x)
+            for c, pi in zip(self.components, self.weights, strict=True)
+        ]
+        if self.defensive > 0:
+            terms.append(math.log(self.defensive) + self.base.log_prob(x))
+        return logsumexp(np.stack(terms), axis=0)
+
+    def sufficient_stat(self, x: FloatArray) -> FloatArray:
+        """The components' common sufficient statistic ``T(x)``, shape (n, S)."""
+        return self.base.sufficient_stat(x)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Weights, defensive share and the components' descriptions."""
+        return {
+            "family": "Mixture",
+            "defensive": self.defensive,
+            "weights": self.weights.tolist(),
+            "components": [c.to_dict() for c in self.components],
+        }
+
+
+def component_log_kernels(
+    components: Sequence[ExponentialFamily], stats: FloatArray
+) -> FloatArray:
+    """``theta_k^T T(x_i) - A(theta_k)``: ``log q_k(x_i)`` less ``log h(x_i)``.
+
+    Components of one structure share the carrier ``h``, so these differ from
+    their log-densities by the same amount per sample: enough for
+    responsibilities and for comparing fits.
+
+    Parameters
+    ----------
+    components : sequence of ExponentialFamily
+        ``K`` members of one structure.
+    stats : ndarray of shape (n, S)
+        Sufficient statistics ``T(x_i)``.
+
+    Returns
+    -------
+    ndarray of shape (n, K)
+    """
+    theta = np.stack([c.natural_params for c in components])
+    log_partition = np.array([c.log_partition() for c in components])
+    return stats @ theta.T - log_partition
+
+
+class MixtureFit(NamedTuple):
+    """Components fitted by :func:`fit_mixture`.
+
+    Attributes
+    ----------
+    components : tuple of ExponentialFamily
+        The ``K'`` surviving components (``K' <= K``).
+    weights : ndarray of shape (K',)
+        Their mixture weights, summing to one.
+    targets : ndarray of shape (K', S)
+        The mean statistics ``m_k`` of the last M-step (before projection).
+    origin : ndarray of int, shape (K',)
+        Index of the starting component each one grew from.
+    """
+
+    components: tuple[ExponentialFamily, ...]
+    weights: FloatArray
+    targets: FloatArray
+    origin: np.ndarray
+
+
+def fit_mixture(
+    components: Sequence[ExponentialFamily],
+    weights: FloatArray,
+    stats: FloatArray,
+    elite_weights: FloatArray,
+    min_weight: float,
+) -> MixtureFit:
+    """Weighted EM from the given components (step 3 of the module docstring).
+
+    Each M-step projects a component's weighted mean statistic with the
+    family's CE projection, so every component stays in the search box, and
+    removes the components left with less than ``min_weight`` of the elite
+    weight (never the heaviest).
+
+    Parameters
+    ----------
+    components : sequence of ExponentialFamily
+        ``K`` starting components, of one structure.
+    weights : ndarray of shape (K,)
+        Their starting weights, positive.
+    stats : ndarray of shape (n, S)
+        Sufficient statistics of the elite samples.
+    elite_weights : ndarray of shape (n,)
+        Their self-normalised importance weights, positive, summing to one.
+    min_weight : float
+        Share of the elite weight below which a component dies.
+
+    Returns
+    -------
+    MixtureFit
+    """
+    components = list(components)
+    log_pi = np.log(weights)
+    origin = np.arange(len(components))
+    previous = -math.inf
+    for _ in range(MAX_EM_STEPS):
+        log_joint = log_pi + component_log_kernels(components, stats)
+        log_mixture = logsumexp(log_joint, axis=1)
+        log_likelihood = float(elite_weights @ log_mixture)
+        mass = elite_weights[:, None] * np.exp(log_joint - log_mixture[:, None])
+        shares = mass.sum(axis=0)
+        alive = shares >= min_weight
+        alive[np.argmax(shares)] = True
+        targets = (mass[:, alive].T @ stats) / shares[alive, None]
+        components = [
+            components[k].project(m)
+            for k, m in zip(np.flatnonzero(alive), targets, strict=True)
+        ]
+        log_pi = np.log(shares[alive] / shares[alive].sum())
+        origin = origin[alive]
+        if log_likelihood - previous < EM_TOLERANCE:
+            break
+        previous = log_likelihood
+    return MixtureFit(tuple(components), np.exp(log_pi), targets, origin)
+
+
+def kmeans_plus_plus(
+    points: FloatArray, weights: FloatArray, k: int, rng: np.random.Generator
+) -> np.ndarray:
+    """Weighted greedy k-means++ seeding (Arthur & Vassilvitskii 2007).
+
+    The first centre is a point drawn by weight; each next one is the best
+    (lowest weighted potential ``sum_i w_i min_c |z_i - c|^2``) of ``2 + ln k``
+    points drawn with probability proportional to weight times squared
+    distance to the nearest centre so far. Stops early when every point is a
+    centre's duplicate.
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, S)
+    weights : ndarray of shape (n,)
+        Non-negative, not all zero.
+    k : int
+        Centres wanted.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray of int, shape (k',)
+        Indices of the centres among ``points`` (``k' <= k``).
+    """
+    trials = 2 + int(math.log(k))
+    centres = [int(rng.choice(len(points), p=weights / weights.sum()))]
+    nearest = ((points - points[centres[0]]) ** 2).sum(axis=1)
+    while len(centres) < k:
+        potential = weights * nearest
+        if potential.sum() <= 0:
+            break
+        candidates = rng.choice(len(points), trials, p=potential / potential.sum())
+        distances = ((points[None, :, :] - points[candidates, None, :]) ** 2).sum(-1)
+        closer = np.minimum(nearest, distances)
+        best = int(np.argmin(closer @ weights))
+        centres.append(int(candidates[best]))
+        nearest = closer[best]
+    return np.array(centres)
+
+
+def seed_components(
+    base: ExponentialFamily,
+    stats: FloatArray,
+    elite_weights: FloatArray,
+    n_components: int,
+    rng: np.random.Generator,
+) -> tuple[list[ExponentialFamily], FloatArray]:
+    """Starting components: the elite split into groups around k-means++ centres.
+
+    In the sufficient-statistic space standardised by the weighted standard
+    deviations, k-means++ draws ``OVERSEEDING * n_components`` centres and
+    every elite joins its nearest one. Groups are then merged pairwise, the
+    pair whose union raises the weighted k-means potential least first (Ward),
+    down to ``n_components``: the several centres that a large group of elites
+    draws go back together before a small distant group (a mode with few
+    elites at the first level) loses its own. Each group's weighted mean
+    statistic, projected by ``base``, is a component with the group's weight.
+
+    Parameters
+    ----------
+    base : ExponentialFamily
+        The structure of the components.
+    stats : ndarray of shape (n, S)
+        Sufficient statistics of the elite samples.
+    elite_weights : ndarray of shape (n,)
+        Their self-normalised importance weights, positive.
+    n_components : int
+        Components wanted (fewer if the elite has fewer distinct points).
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    components : list of ExponentialFamily
+    weights : ndarray of shape (K,)
+    """
+    centre = elite_weights @ stats
+    spread = np.sqrt(elite_weights @ (stats - centre) ** 2)
+    standard = (stats - centre) / np.where(spread > 0, spread, 1.0)
+    seeds = standard[
+        kmeans_plus_plus(standard, elite_weights, OVERSEEDING * n_components, rng)
+    ]
+    nearest = np.argmin(((standard[:, None, :] - seeds[None]) ** 2).sum(-1), axis=1)
+    members = np.eye(len(seeds), dtype=bool)[nearest].T  # (groups, n)
+    shares = members @ elite_weights
+    means = (members * elite_weights) @ standard / shares[:, None]
+    while len(shares) > n_components:
+        gap = ((means[:, None] - means[None]) ** 2).sum(-1)
+        cost = np.outer(shares, shares) / np.add.outer(shares, shares) * gap
+        np.fill_diagonal(cost, np.inf)
+        i, j = np.unravel_index(np.argmin(cost), cost.shape)
+        means[i] = (shares[i] * means[i] + shares[j] * means[j]) / (
+            shares[i] + shares[j]
+        )
+        shares[i] += shares[j]
+        members[i] |= members[j]
+        means, shares, members = (
+            np.delete(a, j, axis=0) for a in (means, shares, members)
+        )
+    targets = (members * elite_weights) @ stats / shares[:, None]
+    return [base.project(m) for m in targets], shares
+
+
+def merge_overlapping(
+    components: Sequence[ExponentialFamily], weights: FloatArray
+) -> tuple[list[ExponentialFamily], FloatArray]:
+    """Merge the closest pair while its divergence is below ``MERGE_DIVERGENCE``.
+
+    The symmetric Kullback-Leibler divergence of two members of one
+    exponential family is ``(theta_i - theta_j)^T (m_i - m_j)`` (natural and
+    mean parameters). A merged pair is the projection of the weight-average of
+    their mean parameters (the fit to their union), with the sum of weights.
+
+    Returns
+    -------
+    components : list of ExponentialFamily
+    weights : ndarray of shape (K',)
+    """
+    components, weights = list(components), np.array(weights, dtype=np.float64)
+    while len(components) > 1:
+        theta = np.stack([c.natural_params for c in components])
+        mean = np.stack([c.mean_param() for c in components])
+        divergence = (
+            (theta[:, None] - theta[None]) * (mean[:, None] - mean[None])
+        ).sum(-1)
+        np.fill_diagonal(divergence, np.inf)
+        i, j = np.unravel_index(np.argmin(divergence), divergence.shape)
+        if divergence[i, j] >= MERGE_DIVERGENCE:
+            break
+        pooled = (weights[i] * mean[i] + weights[j] * mean[j]) / (
+            weights[i] + weights[j]
+        )
+        components[i] = components[i].project(pooled)
+        weights[i] += weights[j]
+        del components[j]
+        weights = np.delete(weights, j)
+    return components, weights
+
+
+class MixtureSettings(EstimatorSettings):
+    """Settings of mixture cross-entropy importance sampling."""
+
+    n_components: int = Field(
+        4, ge=1, description="Components K at the start (they may die or merge)."
+    )
+    rho: float = Field(0.1, gt=0.0, lt=1.0, description="Elite quantile level.")
+    alpha: float = Field(0.8, gt=0.0, le=1.0, description="Smoothing of the update.")
+    n_per_iter: int = Field(5000, ge=1, description="Samples per search iteration.")
+    n_iter: int = Field(20, ge=0, description="Search iterations.")
+    n_final: int = Field(100_000, ge=1, description="Samples of the final stage.")
+    select: Literal["quantile", "variance"] = Field(
+        "quantile", description="Rule choosing the final mixture (SELECTION_RULES)."
+    )
+    defensive: float = Field(
+        0.1,
+        ge=0.0,
+        lt=1.0,
+        description="Weight of P0 in every mixture (weights <= 1/defensive).",
+    )
+    min_weight: float = Field(
+        0.02,
+        gt=0.0,
+        lt=1.0,
+        description="Share of the elite weight below which a component dies.",
+    )
+
+
+class MixtureState(NamedTuple):
+    """What the next iteration of mixture cross-entropy needs.
+
+    Attributes
+    ----------
+    proposal : MixtureProposal
+        Mixture to sample at the next iteration.
+    iteration : int
+        Iterations completed.
+    best : MixtureProposal
+        Evaluated mixture with the best selection score so far.
+    best_score : tuple of float
+        That score, smaller is better (``(inf,)`` before the first iteration).
+    best_iteration : int
+        Iteration that sampled ``best`` (-1: none yet, ``best`` is the base).
+    n_evals : int
+        Calls of ``f`` so far.
+    """
+
+    proposal: MixtureProposal
+    iteration: int
+    best: MixtureProposal
+    best_score: tuple[float, ...]
+    best_iteration: int
+    n_evals: int
+
+
+@register_estimator
+class MixtureCrossEntropy:
+    """Mixture cross-entropy importance sampling (module docstring) as an Estimator."""
+
+    name = "mixture"
+    label = "cross-entropy, mixture"
+    Settings: type[MixtureSettings] = MixtureSettings
+    weighted = True
+    decomposable = True
+
+    def __init__(self, settings: MixtureSettings) -> None:
+        self.settings = settings
+
+    def budget(self) -> int:
+        """Search iterations times their samples, plus the final stage."""
+        s = self.settings
+        return s.n_iter * s.n_per_iter + s.n_final
+
+    def describe(self) -> str:
+        """``"mixture CE (4 components) 20x5,000 + 100,000, defensive 0.1"``."""
+        s = self.settings
+        return (
+            f"mixture CE ({s.n_components} components) {s.n_iter}x{s.n_per_iter:,} "
+            f"+ {s.n_final:,}, defensive {s.defensive:g}"
+        )
+
+    def init(self, problem: RareEventProblem) -> MixtureState:
+        """Before the first iteration: the proposal is the base distribution."""
+        base = problem.base
+        start = MixtureProposal([base], [1.0], base, self.settings.defensive)
+        return MixtureState(start, 0, start, (math.inf,), -1, 0)
+
+    def done(self, state: MixtureState) -> bool:
+        """After ``n_iter`` iterations."""
+        return state.iteration >= self.settings.n_iter
+
+    def step(
+        self, state: MixtureState, problem: RareEventProblem, context: EstimationContext
+    ) -> tuple[MixtureState, MixtureInfo]:
+        """One iteration (steps 1-5 of the module docstring).
+
+        The samples of iteration ``k`` come from stage ``k + 1`` and the
+        seeding of the first iteration from a generator of the run seed and
+        that stage, so an iteration re-run from a checkpointed state gives the
+        same result.
+        """
+        s = self.settings
+        stage = state.iteration + 1
+        sampled = state.proposal
+        result = context.stage(problem, sampled, s.n_per_iter, stage, keep_stats=True)
+        assert result.stats is not None
+        level = search_level(result, s.rho, problem.gamma, state.iteration)
+        positive = level.elite_weights > 0
+        stats = result.stats[level.elite][positive]
+        elite_weights = level.elite_weights[positive]
+        if state.iteration == 0:
+            seeding = np.random.SeedSequence(
+                [context.seed, stage], spawn_key=(SEEDING_STREAM,)
+            )
+            start = seed_components(
+                problem.base,
+                stats,
+                elite_weights,
+                s.n_components,
+                np.random.default_rng(seeding),
+            )
+            grew_from = [problem.base] * len(start[0])
+        else:
+            start = sampled.components, sampled.weights
+            grew_from = list(sampled.components)
+        fit = fit_mixture(*start, stats, elite_weights, s.min_weight)
+        smoothed = [
+            grew_from[k].project(
+                s.alpha * m + (1.0 - s.alpha) * grew_from[k].mean_param()
+            )
+            for k, m in zip(fit.origin, fit.targets, strict=True)
+        ]
+        components, weights = merge_overlapping(smoothed, fit.weights)
+        n_evals = state.n_evals + s.n_per_iter
+        info = MixtureInfo(
+            iteration=state.iteration,
+            gamma_k=level.gamma_k,
+            quantile=level.quantile,
+            ess=level.elite_ess,
+            n_elite=int(level.elite.sum()),
+            n_hits=level.n_hits,
+            n_evals=n_evals,
+            rel_var=level.rel_var,
+            n_components=len(components),
+            weights=tuple(float(w) for w in weights),
+        )
+        score = SELECTION_RULES[s.select](level)
+        better = score < state.best_score
+        new_state = MixtureState(
+            proposal=MixtureProposal(components, weights, problem.base, s.defensive),
+            iteration=stage,
+            best=sampled if better else state.best,
+            best_score=score if better else state.best_score,
+            best_iteration=state.iteration if better else state.best_iteration,
+            n_evals=n_evals,
+        )
+        return new_state, info
+
+    def finalize(
+        self, state: MixtureState, problem: RareEventProblem, context: EstimationContext
+    ) -> Estimate:
+        """Fresh samples of the best mixture."""
+        s = self.settings
+        stage = context.stage(
+            problem, state.best, s.n_final, FINAL_STAGE, final_after=state.n_evals
+        )
+        return Estimate(
+            method="mixture_ce",
+            gamma=problem.gamma,
+            by_gamma=weighted_stage_estimates(stage, problem.thresholds),
+            n_evals=state.n_evals + stage.values.size,
+            proposal=state.best,
+            best_iteration=None if state.best_iteration < 0 else state.best_iteration,
+            stopped_by=stage.stopped_by or "budget",
+        )
+
+    def progress(self, info: MixtureInfo) -> str:
+        """``"iter 3: gamma_k=0.21 hits=12 ESS=40 components=4"``."""
+        return (
+            f"iter {info.iteration}: gamma_k={info.gamma_k:.3g} "
+            f"hits={info.n_hits} ESS={info.ess:.0f} components={info.n_components}"
+        )
+
+    def checkpoint(
+        self, state: MixtureState, infos: Sequence[MixtureInfo]
+    ) -> dict[str, Any]:
+        """The mixtures (components and weights) and the iterations so far."""
+        return {
+            "iterations_done": state.iteration,
+            "n_evals": state.n_evals,
+            "proposal": state.proposal.to_dict(),
+            "best": state.best.to_dict(),
+            "best_iteration": state.best_iteration,
+            "history": [h.to_dict() for h in infos],
+        }
+
+    @staticmethod
+    def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
+        """The search: levels, quantiles, hits, ESS and live components."""
+        history = estimate.get("history") or []
+        if not history:
+            return []
+        columns = (
+            "iteration",
+            "rho-quantile of f",
+            "gamma_k",
+            "samples with f <= gamma",
+            "elite ESS",
+            "live components",
+        )
+        rows = [
+            (
+                h["iteration"],
+                h["quantile"],
+                h["gamma_k"],
+                h["n_hits"],
+                h["ess"],
+                h["n_components"],
+            )
+            for h in history
+        ]
+        return [
+            DiagnosticTable(
+                "Mixture cross-entropy search",
+                columns,
+                rows,
+                lines=("rho-quantile of f", "gamma_k"),
+                bars="samples with f <= gamma",
+            )
+        ]
+
+
+def mixture_ce(
+    f: BatchFunction,
+    base: ExponentialFamily,
+    gamma: float,
+    *,
+    n_components: int = 4,
+    rho: float = 0.1,
+    alpha: float = 0.8,
+    n_per_iter: int = 5000,
+    n_iter: int = 20,
+    n_final: int = 100_000,
+    defensive: float = 0.1,
+    min_weight: float = 0.02,
+    select: str = "quantile",
+    seed: int = 0,
+    gamma_test: Sequence[float] | float = (),
+    batch_size: int | None = None,
+    callback: Callable[[MixtureInfo, MixtureState], None] | None = None,
+    on_batch: BatchRecorder | None = None,
+    cache: BatchCache | None = None,
+    evaluator: Evaluator | None = None,
+    stopping: StoppingRule | None = None,
+) -> Estimate:
+    """Estimate ``P0(f(X) <= gamma)`` by mixture cross-entropy importance sampling.
+
+    Parameters
+    ----------
+    f : callable
+        Batched black box, ``(n, D)`` float64 array to ``(n,)`` values.
+    base : ExponentialFamily
+        ``P0``; its structure and search box are the components'.
+    gamma : float
+        Threshold of the event ``f <= gamma``.
+    n_components : int, default=4
+        Components at the first iteration; they may die or merge later.
+    rho : float, default=0.1
+        Quantile level of the elite, in (0, 1); EM needs elites for every
+        component, hence more than CE's 0.01.
+    alpha : float, default=0.8
+        Smoothing of each component's update, in (0, 1].
+    n_per_iter : int, default=5000
+        Samples per search iteration.
+    n_iter : int, default=20
+        Search iterations (0: the final stage samples the base).
+    n_final : int, default=100000
+        Fresh samples of the chosen mixture for the estimate.
+    defensive : float, default=0.1
+        Weight ``lam`` of ``base`` in every mixture, in [0, 1): every weight is
+        at most ``1 / lam``.
+    min_weight : float, default=0.02
+        Share of the elite weight below which a component dies.
+    select : {"quantile", "variance"}, default="quantile"
+        Rule choosing the final mixture among the iterates (as CE's).
+    seed : int, default=0
+        Run seed; same seed, same result, whatever ``batch_size``.
+    gamma_test : float or sequence of float, default=()
+        Further thresholds estimated from the final samples.
+    batch_size : int or None, default=None
+        Largest number of rows per call of ``f``.
+    callback : callable, optional
+        Called after each iteration with its :class:`MixtureInfo` and the new
+        :class:`MixtureState`.
+    on_batch : callable, optional
+        Called with each evaluated :class:`~avrisk.rare.stages.StageBatch`.
+    cache : callable, optional
+        ``cache(stage, chunk)`` returns a recorded batch of an interrupted run
+        with the same settings, or ``None``: resuming replays the record.
+    evaluator : Evaluator, optional
+        Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
+    stopping : StoppingRule, optional
+        Ends the final stage early (:mod:`avrisk.rare.stopping`).
+
+    Returns
+    -------
+    Estimate
+        ``proposal`` is the chosen :class:`MixtureProposal`; ``n_evals =
+        n_iter * n_per_iter + n_final``.
+
+    Examples
+    --------
+    Two failure regions, ``|x1| >= 4``, one on each side:
+
+    >>> import numpy as np
+    >>> from scipy.stats import norm
+    >>> from avrisk.rare import FixedCovNormal, mixture_ce
+    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    >>> f = lambda x: 4.0 - np.abs(x[:, 0])   # P(f <= 0) = 2 Phi(-4)
+    >>> est = mixture_ce(f, base, 0.0, n_components=2, n_per_iter=2000, n_iter=6,
+    ...                  n_final=10_000, seed=0)
+    >>> sorted(round(float(c.mean[0])) for c in est.proposal.components)
+    [-4, 4]
+    >>> bool(abs(est.p / (2 * norm.sf(4.0)) - 1) < 0.1)
+    True
+    """
+    settings = MixtureSettings.validated(
+        n_components=n_components,
+        rho=rho,
+        alpha=alpha,
+        n_per_iter=n_per_iter,
+        n_iter=n_iter,
+        n_final=n_final,
+        defensive=defensive,
+        min_weight=min_weight,
+        select=select,
+    )
+    problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
+    context = EstimationContext(seed, evaluator, on_batch, cache, stopping=stopping)
+    return run_estimator(
+        MixtureCrossEntropy(settings), problem, context, callback=callback
+    )
