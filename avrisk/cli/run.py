@@ -58,7 +58,10 @@ GammaTest = Annotated[
     str, typer.Option(help="Further thresholds [s], comma-separated, e.g. 0.1,0.2,0.3.")
 ]
 Rho = Annotated[
-    float | None, typer.Option(help="CE quantile level, in (0, 1) [default: 0.01].")
+    float | None,
+    typer.Option(
+        help="Elite quantile level, in (0, 1) [default: 0.01 for ce, 0.1 for mixture]."
+    ),
 ]
 Alpha = Annotated[
     float | None,
