@@ -65,15 +65,15 @@ from avrisk.rare.weights import (
 
 
 class CEState(NamedTuple):
-    """What the next cross-entropy iteration needs.
+    """What the next cross-entropy iteration needs (plain or mixture CE).
 
     Attributes
     ----------
-    proposal : ExponentialFamily
+    proposal : ExponentialFamily or MixtureProposal
         Proposal to sample at the next iteration.
     iteration : int
         Iterations completed.
-    best : ExponentialFamily
+    best : ExponentialFamily or MixtureProposal
         Evaluated proposal with the best selection score so far.
     best_score : tuple of float
         That score, smaller is better (``(inf,)`` before the first iteration).
@@ -83,9 +83,9 @@ class CEState(NamedTuple):
         Calls of ``f`` so far.
     """
 
-    proposal: ExponentialFamily
+    proposal: Any
     iteration: int
-    best: ExponentialFamily
+    best: Any
     best_score: tuple[float, ...]
     best_iteration: int
     n_evals: int
@@ -230,6 +230,18 @@ class DefensiveCESettings(CESettings):
     )
 
 
+def search_checkpoint(state: CEState, infos: Sequence[Any]) -> dict[str, Any]:
+    """JSON record of a cross-entropy search: its proposals and iterations."""
+    return {
+        "iterations_done": state.iteration,
+        "n_evals": state.n_evals,
+        "proposal": state.proposal.to_dict(),
+        "best": state.best.to_dict(),
+        "best_iteration": state.best_iteration,
+        "history": [h.to_dict() for h in infos],
+    }
+
+
 @register_estimator
 class CrossEntropy:
     """Cross-entropy importance sampling (module docstring) as an Estimator."""
@@ -337,14 +349,7 @@ class CrossEntropy:
 
     def checkpoint(self, state: CEState, infos: Sequence[CEInfo]) -> dict[str, Any]:
         """The proposals and the iterations so far (for inspection and reports)."""
-        return {
-            "iterations_done": state.iteration,
-            "n_evals": state.n_evals,
-            "proposal": state.proposal.to_dict(),
-            "best": state.best.to_dict(),
-            "best_iteration": state.best_iteration,
-            "history": [h.to_dict() for h in infos],
-        }
+        return search_checkpoint(state, infos)
 
     @staticmethod
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:

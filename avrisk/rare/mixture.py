@@ -84,7 +84,12 @@ import numpy as np
 from pydantic import Field
 from scipy.special import logsumexp
 
-from avrisk.rare.cross_entropy import SELECTION_RULES, search_level
+from avrisk.rare.cross_entropy import (
+    SELECTION_RULES,
+    CEState,
+    search_checkpoint,
+    search_level,
+)
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
@@ -495,33 +500,6 @@ class MixtureSettings(EstimatorSettings):
     )
 
 
-class MixtureState(NamedTuple):
-    """What the next iteration of mixture cross-entropy needs.
-
-    Attributes
-    ----------
-    proposal : MixtureProposal
-        Mixture to sample at the next iteration.
-    iteration : int
-        Iterations completed.
-    best : MixtureProposal
-        Evaluated mixture with the best selection score so far.
-    best_score : tuple of float
-        That score, smaller is better (``(inf,)`` before the first iteration).
-    best_iteration : int
-        Iteration that sampled ``best`` (-1: none yet, ``best`` is the base).
-    n_evals : int
-        Calls of ``f`` so far.
-    """
-
-    proposal: MixtureProposal
-    iteration: int
-    best: MixtureProposal
-    best_score: tuple[float, ...]
-    best_iteration: int
-    n_evals: int
-
-
 @register_estimator
 class MixtureCrossEntropy:
     """Mixture cross-entropy importance sampling (module docstring) as an Estimator."""
@@ -548,19 +526,19 @@ class MixtureCrossEntropy:
             f"+ {s.n_final:,}, defensive {s.defensive:g}"
         )
 
-    def init(self, problem: RareEventProblem) -> MixtureState:
+    def init(self, problem: RareEventProblem) -> CEState:
         """Before the first iteration: the proposal is the base distribution."""
         base = problem.base
         start = MixtureProposal([base], [1.0], base, self.settings.defensive)
-        return MixtureState(start, 0, start, (math.inf,), -1, 0)
+        return CEState(start, 0, start, (math.inf,), -1, 0)
 
-    def done(self, state: MixtureState) -> bool:
+    def done(self, state: CEState) -> bool:
         """After ``n_iter`` iterations."""
         return state.iteration >= self.settings.n_iter
 
     def step(
-        self, state: MixtureState, problem: RareEventProblem, context: EstimationContext
-    ) -> tuple[MixtureState, MixtureInfo]:
+        self, state: CEState, problem: RareEventProblem, context: EstimationContext
+    ) -> tuple[CEState, MixtureInfo]:
         """One iteration (steps 1-5 of the module docstring).
 
         The samples of iteration ``k`` come from stage ``k + 1`` and the
@@ -615,7 +593,7 @@ class MixtureCrossEntropy:
         )
         score = SELECTION_RULES[s.select](level)
         better = score < state.best_score
-        new_state = MixtureState(
+        new_state = CEState(
             proposal=MixtureProposal(components, weights, problem.base, s.defensive),
             iteration=stage,
             best=sampled if better else state.best,
@@ -626,7 +604,7 @@ class MixtureCrossEntropy:
         return new_state, info
 
     def finalize(
-        self, state: MixtureState, problem: RareEventProblem, context: EstimationContext
+        self, state: CEState, problem: RareEventProblem, context: EstimationContext
     ) -> Estimate:
         """Fresh samples of the best mixture."""
         s = self.settings
@@ -651,17 +629,10 @@ class MixtureCrossEntropy:
         )
 
     def checkpoint(
-        self, state: MixtureState, infos: Sequence[MixtureInfo]
+        self, state: CEState, infos: Sequence[MixtureInfo]
     ) -> dict[str, Any]:
         """The mixtures (components and weights) and the iterations so far."""
-        return {
-            "iterations_done": state.iteration,
-            "n_evals": state.n_evals,
-            "proposal": state.proposal.to_dict(),
-            "best": state.best.to_dict(),
-            "best_iteration": state.best_iteration,
-            "history": [h.to_dict() for h in infos],
-        }
+        return search_checkpoint(state, infos)
 
     @staticmethod
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
@@ -716,7 +687,7 @@ def mixture_ce(
     seed: int = 0,
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
-    callback: Callable[[MixtureInfo, MixtureState], None] | None = None,
+    callback: Callable[[MixtureInfo, CEState], None] | None = None,
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
@@ -760,7 +731,7 @@ def mixture_ce(
         Largest number of rows per call of ``f``.
     callback : callable, optional
         Called after each iteration with its :class:`MixtureInfo` and the new
-        :class:`MixtureState`.
+        :class:`CEState`.
     on_batch : callable, optional
         Called with each evaluated :class:`~avrisk.rare.stages.StageBatch`.
     cache : callable, optional
