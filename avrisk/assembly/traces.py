@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+import torch
 from numpy.typing import NDArray
 
 from avrisk.assembly.builder import ScenarioSimulator
@@ -87,27 +88,23 @@ class RolloutTrace:
         return float(self.ttc_so_far[self.n_frames - 1])
 
 
-def ttc_series(result: Any) -> FloatArray:
+def ttc_series(ttc: FloatArray, alive: np.ndarray) -> FloatArray:
     """Minimum time-to-collision so far at every recorded step [s].
 
     Parameters
     ----------
-    result : avrisk.sim.simulator.RolloutResult
-        Recorded with ``record_trace=True``.
+    ttc : ndarray of shape (B, T+1)
+        Instantaneous TTC of each frame (a recorded trace's ``ttc``) [s].
+    alive : ndarray of bool, shape (B, T+1)
+        Whether each frame was simulated.
 
     Returns
     -------
     ndarray of shape (B, T+1)
-        Running minimum over steps ``0..k`` of the instantaneous safety value
-        (TTC); constant after a rollout ends; ``inf`` while nothing approaches.
+        Running minimum over steps ``0..k``; constant after a rollout ends;
+        ``inf`` while nothing approaches.
     """
-    trace = result.trace
-    if trace is None:
-        raise ValueError("the rollout was run without record_trace=True")
-    series = trace.ttc.detach().cpu().numpy().astype(np.float64)
-    alive = trace.alive.detach().cpu().numpy().astype(bool)
-    series = np.where(alive, series, np.inf)
-    return np.minimum.accumulate(series, axis=1)
+    return np.minimum.accumulate(np.where(alive, ttc, np.inf), axis=1)
 
 
 def traces_from_rollout(
@@ -142,34 +139,36 @@ def traces_from_rollout(
     if trace is None:
         raise ValueError("the rollout was run without record_trace=True")
 
-    def np_(t: Any) -> np.ndarray:
-        return t.detach().cpu().numpy()
+    chosen = list(range(len(result.f))) if rows is None else list(rows)
+    pick = torch.as_tensor(chosen, dtype=torch.long, device=result.f.device)
+
+    def np_(t: Any) -> np.ndarray:  # only the chosen rollouts leave the device
+        return t.index_select(0, pick).detach().cpu().numpy()
 
     xs, ys, hs, vs = (
         np_(getattr(trace, k)).astype(np.float64)
         for k in ("x", "y", "heading", "speed")
     )
     alive = np_(trace.alive).astype(bool)
-    ttc = ttc_series(result)  # (B, T+1), running minimum
+    ttc = ttc_series(np_(trace.ttc).astype(np.float64), alive)
     spec = sim.spec
     length = np.array([v.length for v in spec.vehicles], dtype=np.float64)
     width = np.array([v.width for v in spec.vehicles], dtype=np.float64)
     crash = np_(result.crash).astype(bool)
     out = []
-    chosen = range(xs.shape[0]) if rows is None else rows
-    for n, b in enumerate(chosen):
-        n_frames = int(alive[b].sum()) if alive[b].any() else 1
+    for n in range(len(chosen)):
+        n_frames = int(alive[n].sum()) if alive[n].any() else 1
         out.append(
             RolloutTrace(
-                x=xs[b],
-                y=ys[b],
-                heading=hs[b],
-                speed=vs[b],
+                x=xs[n],
+                y=ys[n],
+                heading=hs[n],
+                speed=vs[n],
                 length=length,
                 width=width,
-                ttc_so_far=ttc[b],
+                ttc_so_far=ttc[n],
                 n_frames=n_frames,
-                crashed=bool(crash[b]),
+                crashed=bool(crash[n]),
                 label=labels[n] if labels is not None else "",
             )
         )
@@ -255,14 +254,13 @@ class FailureRecorder:
         if hits.size == 0 or self.k == 0:
             return
         scores = self.log_p0(x[hits])
-        floor = self._floor()
-        better = [i for i, s in zip(hits, scores, strict=True) if s > floor]
-        if not better:
+        better = scores > self._floor()
+        if not better.any():
             return
-        traces = traces_from_rollout(sim, x, result, rows=better)
-        for i, trace in zip(better, traces, strict=True):
-            j = int(np.flatnonzero(hits == i)[0])
-            self.kept[int(seeds[i])] = (float(scores[j]), trace)
+        rows = hits[better].tolist()
+        traces = traces_from_rollout(sim, x, result, rows=rows)
+        for i, score, trace in zip(rows, scores[better], traces, strict=True):
+            self.kept[int(seeds[i])] = (float(score), trace)
         ranked = sorted(self.kept.items(), key=lambda kv: -kv[1][0])[: self.k]
         self.kept = dict(ranked)
         self._write()

@@ -42,8 +42,8 @@ from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
     EstimatorSettings,
+    estimate_black_box,
     register_estimator,
-    run_estimator,
 )
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
@@ -52,7 +52,6 @@ from avrisk.rare.problem import (
     FINAL_STAGE,
     BatchFunction,
     RareEventProblem,
-    threshold_list,
 )
 from avrisk.rare.results import CEInfo, Estimate
 from avrisk.rare.stages import BatchCache, BatchRecorder, StageResult
@@ -242,6 +241,67 @@ def search_checkpoint(state: CEState, infos: Sequence[Any]) -> dict[str, Any]:
     }
 
 
+def search_final_estimate(
+    method: str,
+    state: CEState,
+    sampled: Any,
+    n_final: int,
+    problem: RareEventProblem,
+    context: EstimationContext,
+) -> Estimate:
+    """The estimate of a CE search: ``n_final`` fresh samples of ``sampled``.
+
+    ``sampled`` is the best proposal ``state.best`` or a defensive mixture of
+    it; the final stage may end early by the context's stopping rule.
+    """
+    stage = context.stage(
+        problem, sampled, n_final, FINAL_STAGE, final_after=state.n_evals
+    )
+    return Estimate(
+        method=method,
+        gamma=problem.gamma,
+        by_gamma=weighted_stage_estimates(stage, problem.thresholds),
+        n_evals=state.n_evals + stage.values.size,
+        proposal=state.best,
+        best_iteration=None if state.best_iteration < 0 else state.best_iteration,
+        stopped_by=stage.stopped_by or "budget",
+    )
+
+
+def search_diagnostics(
+    title: str,
+    estimate: dict[str, Any],
+    step: str = "iteration",
+    extra: tuple[tuple[str, str], ...] = (),
+) -> list[DiagnosticTable]:
+    """A CE search's trajectory per iteration: levels, quantiles, hits, ESS.
+
+    ``step`` names the iteration column; ``extra`` adds ``(column name,
+    history key)`` pairs after the others.
+    """
+    history = estimate.get("history") or []
+    if not history:
+        return []
+    keys = (
+        (step, "iteration"),
+        ("rho-quantile of f", "quantile"),
+        ("gamma_k", "gamma_k"),
+        ("samples with f <= gamma", "n_hits"),
+        ("elite ESS", "ess"),
+        *extra,
+    )
+    rows = [tuple(h[key] for _, key in keys) for h in history]
+    return [
+        DiagnosticTable(
+            title,
+            tuple(name for name, _ in keys),
+            rows,
+            lines=("rho-quantile of f", "gamma_k"),
+            bars="samples with f <= gamma",
+        )
+    ]
+
+
 @register_estimator
 class CrossEntropy:
     """Cross-entropy importance sampling (module docstring) as an Estimator."""
@@ -321,23 +381,13 @@ class CrossEntropy:
     ) -> Estimate:
         """Fresh samples of the best proposal (or its defensive mixture)."""
         s = self.settings
-        proposal = state.best
         sampled = (
-            DefensiveMixture(proposal, problem.base, s.defensive)
+            DefensiveMixture(state.best, problem.base, s.defensive)
             if s.defensive
-            else proposal
+            else state.best
         )
-        stage = context.stage(
-            problem, sampled, s.n_final, FINAL_STAGE, final_after=state.n_evals
-        )
-        return Estimate(
-            method="cross_entropy",
-            gamma=problem.gamma,
-            by_gamma=weighted_stage_estimates(stage, problem.thresholds),
-            n_evals=state.n_evals + stage.values.size,
-            proposal=proposal,
-            best_iteration=None if state.best_iteration < 0 else state.best_iteration,
-            stopped_by=stage.stopped_by or "budget",
+        return search_final_estimate(
+            "cross_entropy", state, sampled, s.n_final, problem, context
         )
 
     def progress(self, info: CEInfo) -> str:
@@ -354,29 +404,7 @@ class CrossEntropy:
     @staticmethod
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
         """The search trajectory: levels, quantiles, hits and ESS per iteration."""
-        history = estimate.get("history") or []
-        if not history:
-            return []
-        columns = (
-            "CE iteration",
-            "rho-quantile of f",
-            "gamma_k",
-            "samples with f <= gamma",
-            "elite ESS",
-        )
-        rows = [
-            (h["iteration"], h["quantile"], h["gamma_k"], h["n_hits"], h["ess"])
-            for h in history
-        ]
-        return [
-            DiagnosticTable(
-                "Cross-entropy search",
-                columns,
-                rows,
-                lines=("rho-quantile of f", "gamma_k"),
-                bars="samples with f <= gamma",
-            )
-        ]
+        return search_diagnostics("Cross-entropy search", estimate, "CE iteration")
 
 
 @register_estimator
@@ -486,6 +514,17 @@ def cross_entropy(
         select=select,
         defensive=defensive,
     )
-    problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    context = EstimationContext(seed, evaluator, on_batch, cache, stopping=stopping)
-    return run_estimator(CrossEntropy(settings), problem, context, callback=callback)
+    return estimate_black_box(
+        CrossEntropy(settings),
+        f,
+        base,
+        gamma,
+        seed=seed,
+        gamma_test=gamma_test,
+        batch_size=batch_size,
+        callback=callback,
+        on_batch=on_batch,
+        cache=cache,
+        evaluator=evaluator,
+        stopping=stopping,
+    )

@@ -36,7 +36,12 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from avrisk.rare.defensive import DefensiveMixture
 from avrisk.rare.evaluation import EvalTask, Evaluator, LocalEvaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
-from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem, sample_seeds
+from avrisk.rare.problem import (
+    SAMPLE_CHUNK,
+    RareEventProblem,
+    sample_seeds,
+    threshold_list,
+)
 from avrisk.rare.results import Estimate
 from avrisk.rare.stages import (
     BatchCache,
@@ -55,6 +60,7 @@ __all__ = [
     "Estimator",
     "EstimatorSettings",
     "TooManyFailuresError",
+    "estimate_black_box",
     "estimator_names",
     "get_estimator",
     "register_estimator",
@@ -425,3 +431,29 @@ def run_estimator(
     return replace(
         estimate, history=tuple(history), wall_time_s=time.perf_counter() - start
     )
+
+
+def estimate_black_box(
+    estimator: Estimator[Any, Info],
+    f: Callable[..., Any],
+    base: ExponentialFamily,
+    gamma: float,
+    *,
+    seed: int = 0,
+    gamma_test: Sequence[float] | float = (),
+    batch_size: int | None = None,
+    callback: Callable[[Info, Any], None] | None = None,
+    on_batch: BatchRecorder | None = None,
+    cache: BatchCache | None = None,
+    evaluator: Evaluator | None = None,
+    stopping: StoppingRule | None = None,
+) -> Estimate:
+    """Run ``estimator`` on a black box ``f`` under ``base`` (the top-level functions).
+
+    The arguments are those the top-level functions (:func:`cross_entropy`,
+    :func:`naive_mc` ...) share; see :class:`RareEventProblem` and
+    :class:`EstimationContext`.
+    """
+    problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
+    context = EstimationContext(seed, evaluator, on_batch, cache, stopping=stopping)
+    return run_estimator(estimator, problem, context, callback=callback)

@@ -88,23 +88,22 @@ from avrisk.rare.cross_entropy import (
     SELECTION_RULES,
     CEState,
     search_checkpoint,
+    search_diagnostics,
+    search_final_estimate,
     search_level,
 )
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
     EstimatorSettings,
+    estimate_black_box,
     register_estimator,
-    run_estimator,
 )
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
-from avrisk.rare.final_stage import weighted_stage_estimates
 from avrisk.rare.problem import (
-    FINAL_STAGE,
     BatchFunction,
     RareEventProblem,
-    threshold_list,
 )
 from avrisk.rare.results import Estimate, MixtureInfo
 from avrisk.rare.stages import BatchCache, BatchRecorder
@@ -608,17 +607,8 @@ class MixtureCrossEntropy:
     ) -> Estimate:
         """Fresh samples of the best mixture."""
         s = self.settings
-        stage = context.stage(
-            problem, state.best, s.n_final, FINAL_STAGE, final_after=state.n_evals
-        )
-        return Estimate(
-            method="mixture_ce",
-            gamma=problem.gamma,
-            by_gamma=weighted_stage_estimates(stage, problem.thresholds),
-            n_evals=state.n_evals + stage.values.size,
-            proposal=state.best,
-            best_iteration=None if state.best_iteration < 0 else state.best_iteration,
-            stopped_by=stage.stopped_by or "budget",
+        return search_final_estimate(
+            "mixture_ce", state, state.best, s.n_final, problem, context
         )
 
     def progress(self, info: MixtureInfo) -> str:
@@ -637,37 +627,11 @@ class MixtureCrossEntropy:
     @staticmethod
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
         """The search: levels, quantiles, hits, ESS and live components."""
-        history = estimate.get("history") or []
-        if not history:
-            return []
-        columns = (
-            "iteration",
-            "rho-quantile of f",
-            "gamma_k",
-            "samples with f <= gamma",
-            "elite ESS",
-            "live components",
+        return search_diagnostics(
+            "Mixture cross-entropy search",
+            estimate,
+            extra=(("live components", "n_components"),),
         )
-        rows = [
-            (
-                h["iteration"],
-                h["quantile"],
-                h["gamma_k"],
-                h["n_hits"],
-                h["ess"],
-                h["n_components"],
-            )
-            for h in history
-        ]
-        return [
-            DiagnosticTable(
-                "Mixture cross-entropy search",
-                columns,
-                rows,
-                lines=("rho-quantile of f", "gamma_k"),
-                bars="samples with f <= gamma",
-            )
-        ]
 
 
 def mixture_ce(
@@ -775,8 +739,17 @@ def mixture_ce(
         min_weight=min_weight,
         select=select,
     )
-    problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    context = EstimationContext(seed, evaluator, on_batch, cache, stopping=stopping)
-    return run_estimator(
-        MixtureCrossEntropy(settings), problem, context, callback=callback
+    return estimate_black_box(
+        MixtureCrossEntropy(settings),
+        f,
+        base,
+        gamma,
+        seed=seed,
+        gamma_test=gamma_test,
+        batch_size=batch_size,
+        callback=callback,
+        on_batch=on_batch,
+        cache=cache,
+        evaluator=evaluator,
+        stopping=stopping,
     )

@@ -19,8 +19,8 @@ from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
     EstimatorSettings,
+    estimate_black_box,
     register_estimator,
-    run_estimator,
 )
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily
@@ -29,7 +29,6 @@ from avrisk.rare.problem import (
     FINAL_STAGE,
     BatchFunction,
     RareEventProblem,
-    threshold_list,
 )
 from avrisk.rare.results import Estimate
 from avrisk.rare.stages import BatchCache, BatchRecorder
@@ -178,7 +177,16 @@ def naive_mc(
     True
     """
     settings = NaiveSettings.validated(n_final=n, interval=interval)
-    estimator = NaiveMC(settings)
-    problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    context = EstimationContext(seed, evaluator, on_batch, cache, stopping=stopping)
-    return run_estimator(estimator, problem, context)
+    return estimate_black_box(
+        NaiveMC(settings),
+        f,
+        base,
+        gamma,
+        seed=seed,
+        gamma_test=gamma_test,
+        batch_size=batch_size,
+        on_batch=on_batch,
+        cache=cache,
+        evaluator=evaluator,
+        stopping=stopping,
+    )

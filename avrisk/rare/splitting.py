@@ -112,8 +112,8 @@ from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
     EstimatorSettings,
+    estimate_black_box,
     register_estimator,
-    run_estimator,
 )
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
@@ -122,7 +122,6 @@ from avrisk.rare.problem import (
     SAMPLE_CHUNK,
     BatchFunction,
     RareEventProblem,
-    threshold_list,
 )
 from avrisk.rare.results import Estimate, GammaEstimate
 from avrisk.rare.stages import BatchCache, BatchRecorder
@@ -806,8 +805,16 @@ def subset_simulation(
         n_moves=n_moves,
         initial_beta=initial_beta,
     )
-    problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    context = EstimationContext(seed, evaluator, on_batch, cache)
-    return run_estimator(
-        SubsetSimulation(settings), problem, context, callback=callback
+    return estimate_black_box(
+        SubsetSimulation(settings),
+        f,
+        base,
+        gamma,
+        seed=seed,
+        gamma_test=gamma_test,
+        batch_size=batch_size,
+        callback=callback,
+        on_batch=on_batch,
+        cache=cache,
+        evaluator=evaluator,
     )
