@@ -129,6 +129,11 @@ def print_summary(runs: list[tuple[str, RunDirectory]]) -> None:
     out_console.print(table)
     for label, run_dir in runs:
         est = run_dir.summary()["estimate"]
+        main = next(g for g in est["by_gamma"] if g["gamma"] == est["gamma"])
+        if main.get("interval"):  # absent from older summaries
+            out_console.print(
+                f"{label}: 95% interval: {main['interval']}", highlight=False
+            )
         if est.get("stopped_by", "budget") != "budget":
             out_console.print(
                 f"{label}: stopped by its {est['stopped_by'].replace('_', ' ')} rule "

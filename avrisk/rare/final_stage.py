@@ -23,6 +23,15 @@ CONFIDENCE = 0.95
 
 BINOMIAL_INTERVALS = {"clopper-pearson": clopper_pearson, "wilson": wilson}
 
+#: The ``interval`` of :class:`GammaEstimate`, by how it was computed.
+INTERVAL_NAMES = {
+    "clopper-pearson": "exact binomial (Clopper-Pearson)",
+    "wilson": "binomial score (Wilson)",
+    "normal": "normal approximation of the weighted mean (CLT; trusted while the "
+    "hits' weights have Pareto k <= 0.7 and at least 10 effective hits)",
+    "uninformative": "(0, 1): no hit, and the weights of unseen events are unknown",
+}
+
 
 #: Below this effective number of hits the standard error itself is unreliable.
 MIN_RELIABLE_ESS = 10.0
@@ -111,6 +120,7 @@ def binomial_estimates(
             ess=float(k),
             n_samples=n,
             confidence=CONFIDENCE,
+            interval=INTERVAL_NAMES[interval],
         )
     return out
 
@@ -169,6 +179,7 @@ def importance_estimates(
             n_samples=values.size,
             confidence=CONFIDENCE,
             pareto_k=tail,
+            interval=INTERVAL_NAMES["normal" if k else "uninformative"],
         )
     return out
 

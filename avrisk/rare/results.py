@@ -52,6 +52,8 @@ class GammaEstimate:
     p_if_failed_dangerous : float
         The estimate with the failed samples counted dangerous (the upper end
         of the bracket; equals ``p`` when none failed).
+    interval : str
+        How ``ci`` was computed, in words (shown in summaries and reports).
     """
 
     gamma: float
@@ -65,6 +67,7 @@ class GammaEstimate:
     pareto_k: float = math.nan
     n_failed: int = 0
     p_if_failed_dangerous: float = math.nan
+    interval: str = ""
 
     def __post_init__(self) -> None:
         if math.isnan(self.p_if_failed_dangerous):
@@ -103,6 +106,7 @@ class GammaEstimate:
                 "variance_reduction": self.variance_reduction,
                 "n_failed": self.n_failed,
                 "p_if_failed_dangerous": self.p_if_failed_dangerous,
+                "interval": self.interval,
             }
         )
 

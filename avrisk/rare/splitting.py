@@ -140,7 +140,10 @@ STDERR_METHOD = (
     "(1 + gamma_l), gamma_l from the indicators' correlation along the chains, "
     "summed over levels taken as uncorrelated"
 )
-INTERVAL_METHOD = "normal on log p, Var(log p) = log(1 + cov^2)"
+INTERVAL_METHOD = (
+    "log-normal: normal on log p, Var(log p) = log(1 + cov^2), cov from the "
+    "levels' survivor counts and the chains' correlation"
+)
 
 
 class SplittingError(ValueError):
@@ -407,7 +410,6 @@ class SubsetSimulation:
                 "n_particles": n,
                 "n_failed": state.n_failed,
                 "stderr_method": STDERR_METHOD,
-                "interval": INTERVAL_METHOD,
             },
         )
 
@@ -581,6 +583,7 @@ def _estimate_at(
         ess=float(n_hits),
         n_samples=n,
         confidence=CONFIDENCE,
+        interval=INTERVAL_METHOD,
     )
 
 

@@ -118,6 +118,7 @@ def _run_view(
         "n_evals": est["n_evals"],
         "by_gamma": by_gamma,
         "warning": warning,
+        "interval": main.get("interval"),  # absent from older summaries
         "timing": (
             f"{timing['wall_time_s']:.1f} s wall time; "
             f"{timing['rollouts_evaluated']:,} rollouts evaluated"

@@ -143,3 +143,24 @@ def test_heavy_tailed_hit_weights_are_reported_and_warned_about():
         warnings.simplefilter("error")
         light = importance_estimates(values, log_w, (0.5,))[0.5]
     assert light.pareto_k < 0.5
+
+
+@pytest.mark.parametrize(
+    ("method", "settings", "words"),
+    [
+        ("naive", dict(n_final=4000), "Clopper-Pearson"),
+        ("naive", dict(n_final=4000, interval="wilson"), "Wilson"),
+        ("ce", dict(rho=0.1, n_per_iter=500, n_iter=3, n_final=2000), "normal"),
+        ("splitting", dict(n_particles=200), "log-normal"),
+    ],
+)
+def test_every_estimate_names_the_interval_it_reports(method, settings, words):
+    from avrisk.rare.estimator import estimate_black_box, get_estimator
+    from avrisk.testing import gaussian_linear_problem
+
+    problem = gaussian_linear_problem(2, p=1e-2)
+    est = estimate_black_box(
+        get_estimator(method, **settings), problem.f, problem.base, problem.gamma
+    )
+    assert words in est.by_gamma[problem.gamma].interval
+    assert est.to_dict()["by_gamma"][0]["interval"] == est.main.interval
