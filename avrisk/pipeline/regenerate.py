@@ -189,13 +189,18 @@ class Regenerator:
             block = self.checked_block(int(s), int(c), meta)
             picked = block[ids[rows] - int(c) * SAMPLE_CHUNK]
             values[rows] = self._select(picked, names, among=meta["columns"])
-        for j, name in enumerate(names):
-            column = pa.array(values[:, j])
-            if name in table.column_names:
-                table = table.set_column(table.column_names.index(name), name, column)
-            else:
-                table = table.append_column(name, column)
-        return table
+        filled = {name: pa.array(values[:, j]) for j, name in enumerate(names)}
+        kept = [c for c in table.column_names if c not in filled]
+        schema = pa.schema(
+            [
+                *(table.schema.field(c) for c in kept),
+                *(pa.field(name, pa.float64()) for name in filled),
+            ],
+            metadata=table.schema.metadata,
+        )
+        return pa.Table.from_arrays(
+            [*(table[c] for c in kept), *filled.values()], schema=schema
+        )
 
     def checked_block(self, stage: int, chunk: int, meta: Any) -> np.ndarray:
         """The left-out columns of one chunk, drawn again and checked, shape (m, k).
