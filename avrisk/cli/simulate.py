@@ -46,14 +46,9 @@ from avrisk.assembly import (
     param_layout,
 )
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
+from avrisk.pipeline.files import write_parquet_atomic
 from avrisk.pipeline.regenerate import META_KEY, RegenerationError
-from avrisk.pipeline.store import (
-    CONFIG_FILE,
-    SAMPLES_FILE,
-    RunDirectory,
-    samples_table,
-    write_parquet_atomic,
-)
+from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE, RunDirectory, samples_table
 from avrisk.rare import RareEventProblem, StageBatch, run_stage
 from avrisk.rare.problem import FINAL_STAGE
 from avrisk.registry import ComponentError

@@ -35,7 +35,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from avrisk.pipeline.files import write_atomic, write_json, write_parquet_atomic
+from avrisk.pipeline.files import write_json, write_parquet_atomic
 from avrisk.pipeline.regenerate import (
     META_KEY,
     PROPOSALS_FILE,
@@ -45,15 +45,6 @@ from avrisk.pipeline.regenerate import (
 )
 from avrisk.rare import ExponentialFamily, StageBatch
 from avrisk.rare.problem import FINAL_STAGE
-
-__all__ = [
-    "RunDirectory",
-    "RunDirectoryError",
-    "samples_table",
-    "write_atomic",
-    "write_json",
-    "write_parquet_atomic",
-]
 
 SUMMARY_SCHEMA = "avrisk.summary/1"
 CONFIG_FILE = "config.json"
