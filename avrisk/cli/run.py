@@ -21,7 +21,7 @@ from typing import Annotated, Any
 import typer
 import yaml
 
-from avrisk.assembly import ScenarioSimulator, SimulationObjective, param_layout
+from avrisk.assembly import ScenarioSimulator, SimulationObjective
 from avrisk.cli.common import CliError, user_errors
 from avrisk.cli.workflow import (
     EXPECTED,
@@ -215,6 +215,13 @@ def run(
     max_rollouts: MaxRollouts = None,
     max_time: MaxTime = None,
     failures: Failures = 6,
+    store_full_samples: Annotated[
+        bool,
+        typer.Option(
+            help="Store every column of the samples table, the learned drivers' "
+            "xi too (by default xi is drawn again, and checked, when read)."
+        ),
+    ] = False,
     device: Device = "cpu",
 ) -> None:
     """Estimate how likely the ego gets within gamma seconds of a collision.
@@ -248,7 +255,13 @@ def run(
         objective = SimulationObjective(spec, device=device, allow_import=True)
         label = method_label(method)
         run_dir = execute(
-            label, out, objective, spec.model_dump(mode="json"), run_settings, failures
+            label,
+            out,
+            objective,
+            spec.model_dump(mode="json"),
+            run_settings,
+            failures,
+            store_full=store_full_samples,
         )
         print_summary([(label, run_dir)])
         write_run_report(
@@ -346,10 +359,9 @@ def report(
             simulator = ScenarioSimulator(given, device=device, allow_import=True)
         elif not spec.import_paths():
             simulator = ScenarioSimulator(spec, device=device)
-        layout = param_layout(spec)
         runs = []
         for name, path in dirs:
-            directory = samples_directory(path, layout)
+            directory = samples_directory(path, spec)
             if not directory.is_complete:
                 raise CliError(
                     f"{path} is not finished; rerun its command to resume it"
@@ -357,6 +369,6 @@ def report(
             label = method_label(directory.config()["settings"]["method"])
             runs.append((label if single else f"{label} ({name})", directory))
         reference = dict(parts).get("reference")
-        ref_dir = samples_directory(reference, layout) if reference else None
+        ref_dir = samples_directory(reference, spec) if reference else None
         print_summary(runs)
         write_run_report(run_dir, runs, spec, failures, ref_dir, simulator=simulator)

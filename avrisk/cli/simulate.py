@@ -46,12 +46,9 @@ from avrisk.assembly import (
     param_layout,
 )
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
-from avrisk.pipeline.store import (
-    CONFIG_FILE,
-    SAMPLES_FILE,
-    samples_table,
-    write_parquet_atomic,
-)
+from avrisk.pipeline.files import write_parquet_atomic
+from avrisk.pipeline.regenerate import META_KEY, RegenerationError
+from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE, RunDirectory, samples_table
 from avrisk.rare import RareEventProblem, StageBatch, run_stage
 from avrisk.rare.problem import FINAL_STAGE
 from avrisk.registry import ComponentError
@@ -317,7 +314,7 @@ def replay(
     from avrisk.assembly import resimulate
     from avrisk.report.animate import animate_rollouts, save_frame_png
 
-    with user_errors(ScenarioSpecError, ComponentError):
+    with user_errors(ScenarioSpecError, ComponentError, RegenerationError):
         if file.is_dir():
             file = file / SAMPLES_FILE
         if not file.is_file():
@@ -336,13 +333,17 @@ def replay(
         else:
             order = np.argsort(table.column("f").to_numpy(), kind="stable")
             picked = [int(i) for i in order[:worst]]
-        missing = [c for c in (*layout.columns, "seed") if c not in table.column_names]
+        sub = table.take(picked)
+        if META_KEY in (table.schema.metadata or {}):  # a run's, xi left out
+            base = base_distribution(spec)
+            run_dir = RunDirectory(file.parent, layout.columns, base=base)
+            sub = run_dir.samples(rows=picked)
+        missing = [c for c in (*layout.columns, "seed") if c not in sub.column_names]
         if missing:
             raise CliError(
                 f"{file}: lacks column(s) {missing[:4]} needed to replay scenario "
                 f"{spec.name!r}"
             )
-        sub = table.take(picked)
         x = np.stack([sub.column(c).to_numpy() for c in layout.columns], axis=1)
         seeds = sub.column("seed").to_numpy()
         sim = ScenarioSimulator(spec, allow_import=scenario is not None)

@@ -32,17 +32,19 @@ from avrisk.pipeline.provenance import (
     check_same_definition,
     stamp,
 )
+from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.report.animate import animate_rollouts, animate_samples
 from avrisk.report.html import write_report
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
-from avrisk.scenario import ParamLayout, ScenarioSpec, ScenarioSpecError, load_spec
+from avrisk.scenario import ScenarioSpec, ScenarioSpecError, load_spec
 
 #: Failures reported as one red line (no traceback).
 EXPECTED = (
     ScenarioSpecError,
     RunDirectoryError,
+    RegenerationError,
     InvalidOutputError,
     TooManyFailuresError,
     ProvenanceMismatchError,
@@ -71,15 +73,18 @@ def execute(
     spec_json: dict[str, Any],
     run_settings: RunSettings,
     failures: int,
+    *,
+    store_full: bool = False,
 ) -> RunDirectory:
     """Run (or resume, or read back) one estimation into ``out`` with progress.
 
     The traces of the ``failures`` most likely dangerous rollouts are recorded
     as the run goes (``out/failures.parquet``), for its report (none: no
-    traces are recorded).
+    traces are recorded). ``store_full``: keep every column of the samples
+    (else the learned drivers' ``xi`` is drawn again when read).
     """
-    run_dir = samples_directory(out, objective.layout)
     base = base_distribution(objective.simulator.spec)
+    run_dir = samples_directory(out, objective.simulator.spec, store_full=store_full)
     definition = objective.definition()
     if failures:
         recorder = FailureRecorder(
@@ -100,10 +105,22 @@ def execute(
     return run_dir
 
 
-def samples_directory(out: Path, layout: ParamLayout) -> RunDirectory:
-    """A run directory whose samples table records the scenario's units."""
+def samples_directory(
+    out: Path, spec: ScenarioSpec, *, store_full: bool = False
+) -> RunDirectory:
+    """A run directory of ``spec``: its units recorded, its large blocks regenerated.
+
+    See :class:`~avrisk.pipeline.RunDirectory` for ``store_full``.
+    """
+    layout = param_layout(spec)
     units = {**layout.units(), "f": "s", "log_p0": "log density"}
-    return RunDirectory(out, layout.columns, units)
+    return RunDirectory(
+        out,
+        layout.columns,
+        units,
+        base=base_distribution(spec),
+        store_full=store_full,
+    )
 
 
 def print_summary(runs: list[tuple[str, RunDirectory]]) -> None:

@@ -6,6 +6,7 @@
       config.json      resolved scenario and options; a different run is refused
       chunks/          one Parquet file per evaluated chunk while the run goes on
       checkpoint.json  the estimator's state and steps after its latest step
+      proposals.json   each stage's proposal, to draw its large blocks again
       samples.parquet  every rollout of every stage, once the run is complete
       summary.json     estimates, intervals, ESS, timing, versions (SUMMARY_SCHEMA)
 
@@ -13,12 +14,18 @@ Every file is written to a temporary name and renamed into place, so a run
 killed at any moment (even ``kill -9``) leaves only whole files. Rerunning the
 same command replays the recorded chunks (bit-identical numbers, see
 :mod:`avrisk.rare.stages`) and evaluates only what is missing.
+
+Given the run's base distribution, a run directory leaves the columns of its
+large blocks (a learned driver's 404-d ``xi``) out of the chunks it drew fresh
+and draws them again, checked, when they are read
+(:mod:`avrisk.pipeline.regenerate`); ``store_full`` keeps every column.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -28,7 +35,15 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from avrisk.rare import StageBatch
+from avrisk.pipeline.files import write_json, write_parquet_atomic
+from avrisk.pipeline.regenerate import (
+    META_KEY,
+    PROPOSALS_FILE,
+    RegenerationError,
+    Regenerator,
+    chunk_meta,
+)
+from avrisk.rare import ExponentialFamily, StageBatch
 from avrisk.rare.problem import FINAL_STAGE
 
 SUMMARY_SCHEMA = "avrisk.summary/1"
@@ -47,34 +62,6 @@ class RunDirectoryError(ValueError):
     """The output directory cannot be used for this run (says why and what to do)."""
 
 
-def write_atomic(path: Path, data: bytes | str) -> None:
-    """Write ``data`` to ``path`` through a temporary file and a rename.
-
-    A failure or interruption leaves no file at ``path`` (nor a stray temporary).
-    """
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_bytes(data.encode() if isinstance(data, str) else data)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def write_parquet_atomic(table: pa.Table, path: Path) -> None:
-    """Write ``table`` as Parquet to ``path``, atomically (see :func:`write_atomic`)."""
-    sink = pa.BufferOutputStream()
-    pq.write_table(table, sink)
-    write_atomic(path, sink.getvalue().to_pybytes())
-
-
-def write_json(path: Path, obj: Any) -> None:
-    """Write ``obj`` as indented JSON, atomically."""
-    write_atomic(
-        path, json.dumps(obj, indent=2, sort_keys=False, allow_nan=False) + "\n"
-    )
-
-
 class RunDirectory:
     """A run's output directory.
 
@@ -86,6 +73,14 @@ class RunDirectory:
         Names of the ``D`` coordinates of ``X`` (Parquet column names).
     units : mapping of str to str, optional
         Unit of each parameter (and of ``f``), recorded as field metadata.
+    base : ExponentialFamily, optional
+        The run's ``P0``: with it, chunks drawn fresh are stored without the
+        columns of its large blocks, and such columns are drawn again when
+        read (:mod:`avrisk.pipeline.regenerate`); without it every column is
+        stored, and a directory that left some out cannot be read.
+    store_full : bool, default=False
+        Store every column even with ``base`` (samples.parquet then holds
+        them all, drawn again where a chunk had left them out).
     """
 
     def __init__(
@@ -93,8 +88,12 @@ class RunDirectory:
         path: str | os.PathLike[str],
         param_names: Sequence[str],
         units: Mapping[str, str] | None = None,
+        *,
+        base: ExponentialFamily | None = None,
+        store_full: bool = False,
     ) -> None:
         self.path = Path(path)
+        self.store_full = store_full
         self.units = dict(units or {})
         self.param_names = list(param_names)
         if len(set(self.param_names)) != len(self.param_names):
@@ -104,6 +103,9 @@ class RunDirectory:
             raise ValueError(
                 f"parameter names clash with table columns: {sorted(clash)}"
             )
+        self._regenerator = (
+            None if base is None else Regenerator(self.path, base, self.param_names)
+        )
 
     # -- lifecycle -----------------------------------------------------------------
 
@@ -159,17 +161,23 @@ class RunDirectory:
         """Turn a complete run back into recorded chunks, to evaluate again.
 
         The samples table is split into its chunk files (the same rows a
-        resumed run replays), then it and the summary are removed: the next
-        run evaluates the chunks with failed rollouts again and finishes anew.
+        resumed run replays, left-out columns still left out), then it and
+        the summary are removed: the next run evaluates the chunks with
+        failed rollouts again and finishes anew.
         """
-        table = self.samples()
+        path = self.path / SAMPLES_FILE
+        table = pq.read_table(path)
+        _, left_out = _table_meta(table.schema)
         keys = np.column_stack([table["stage"].to_numpy(), table["chunk"].to_numpy()])
         (self.path / CHUNKS_DIR).mkdir(exist_ok=True)
         for stage, chunk in np.unique(keys, axis=0):
             rows = table.filter(pa.array((keys == (stage, chunk)).all(axis=1)))
+            meta = left_out.get((int(stage), int(chunk)))
+            if meta is not None:
+                rows = _leaving_out(rows, meta)
             write_parquet_atomic(rows, self._chunk_path(int(stage), int(chunk)))
         (self.path / SUMMARY_FILE).unlink()
-        (self.path / SAMPLES_FILE).unlink()
+        path.unlink()
 
     def discard(self) -> None:
         """Remove the directory (a run that failed before recording anything)."""
@@ -185,7 +193,7 @@ class RunDirectory:
         files = sorted((self.path / CHUNKS_DIR).glob(f"stage{FINAL_STAGE:04d}-*"))
         tables = []
         for path in files:
-            table = pq.read_table(path)
+            table = self._read_chunk(path, columns)
             tables.append(
                 pa.table(
                     {
@@ -200,16 +208,21 @@ class RunDirectory:
         return self.path / CHUNKS_DIR / f"stage{stage:04d}-chunk{chunk:06d}.parquet"
 
     def record(self, batch: StageBatch) -> None:
-        """Store one evaluated chunk (atomically)."""
+        """Store one evaluated chunk (atomically), large blocks left out if it can."""
         path = self._chunk_path(batch.stage, batch.chunk)
-        write_parquet_atomic(samples_table(batch, self.param_names, self.units), path)
+        table = samples_table(batch, self.param_names, self.units)
+        if self._regenerator is not None and not self.store_full:
+            meta = self._regenerator.leave_out(batch)
+            if meta is not None:
+                table = _leaving_out(table, meta)
+        write_parquet_atomic(table, path)
 
     def cached(self, stage: int, chunk: int) -> StageBatch | None:
         """The recorded chunk ``(stage, chunk)``, or ``None``."""
         path = self._chunk_path(stage, chunk)
         if not path.is_file():
             return None
-        table = pq.read_table(path)
+        table = self._read_chunk(path)
         cols = {name: table.column(name).to_numpy() for name in table.column_names}
         x = np.column_stack([cols[name] for name in self.param_names])
         known = set(BOOKKEEPING + DENSITIES + tuple(self.param_names))
@@ -226,6 +239,27 @@ class RunDirectory:
             seeds=cols["seed"],
         )
 
+    def _read_chunk(self, path: Path, columns: Sequence[str] | None = None) -> pa.Table:
+        """A chunk file, its left-out columns drawn again if ``columns`` wants them."""
+        table = pq.read_table(path)
+        meta = chunk_meta(table.schema)
+        if meta is None:
+            return table
+        left_out = meta.get("columns")
+        if columns is not None and not set(columns) & set(left_out or ()):
+            return table
+        filled = self._regenerate().fill(table, left_out, {_chunk_key(path): meta})
+        return filled.replace_schema_metadata(None)
+
+    def _regenerate(self) -> Regenerator:
+        if self._regenerator is None:
+            raise RunDirectoryError(
+                f"{self.path} stores its large blocks of X as a seed and a proposal "
+                f"({PROPOSALS_FILE}): open it with its base distribution "
+                "(RunDirectory(..., base=...)) to draw them again"
+            )
+        return self._regenerator
+
     # -- checkpoints and the end of a run ---------------------------------------
 
     def checkpoint(self, record: dict[str, Any]) -> None:
@@ -238,19 +272,31 @@ class RunDirectory:
     def finish(self, summary: dict[str, Any]) -> None:
         """Gather the chunks into ``samples.parquet``, then write ``summary.json``.
 
-        The summary is written last: its presence marks a complete run.
+        The table's schema metadata (:data:`~avrisk.pipeline.regenerate.META_KEY`)
+        lists the chunks whose large blocks were left out, with their digests
+        (with ``store_full``, those are drawn again and stored instead). The
+        summary is written last: its presence marks a complete run.
         """
         files = sorted(
             (self.path / CHUNKS_DIR).glob("*.parquet"),
             key=lambda p: (p.name.startswith("stage0000"), p.name),  # final stage last
         )
+        metas = {_chunk_key(p): chunk_meta(pq.read_schema(p)) for p in files}
+        left_out = {k: m for k, m in metas.items() if m is not None}
         target = self.path / SAMPLES_FILE
         tmp = target.with_name(f".{target.name}.tmp-{os.getpid()}")
-        schema = _widest_schema([pq.read_schema(path) for path in files])
+        schema = _widest_schema(
+            [self._gathered_schema(p, metas[_chunk_key(p)]) for p in files],
+            self.param_names,
+        )
+        if schema is not None and left_out and not self.store_full:
+            schema = schema.with_metadata({META_KEY: _table_meta_json(left_out)})
         writer = None
         try:
             for path in files:
-                table = pq.read_table(path)
+                table = (
+                    self._read_chunk(path) if self.store_full else pq.read_table(path)
+                )
                 if writer is None:
                     writer = pq.ParquetWriter(tmp, schema)
                 writer.write_table(_conformed(table, schema))
@@ -263,6 +309,15 @@ class RunDirectory:
         write_json(self.path / SUMMARY_FILE, summary)
         shutil.rmtree(self.path / CHUNKS_DIR, ignore_errors=True)
 
+    def _gathered_schema(self, path: Path, meta: dict[str, Any] | None) -> pa.Schema:
+        """A chunk's schema in samples.parquet (left-out columns back if store_full)."""
+        schema = pq.read_schema(path).remove_metadata()
+        if meta is None or not self.store_full:
+            return schema
+        for name in meta["columns"]:
+            schema = schema.append(pa.field(name, pa.float64()))
+        return schema
+
     def summary(self) -> dict[str, Any]:
         """The summary of a complete run."""
         return json.loads((self.path / SUMMARY_FILE).read_text())
@@ -271,9 +326,44 @@ class RunDirectory:
         """The resolved configuration of the run."""
         return json.loads((self.path / CONFIG_FILE).read_text())
 
-    def samples(self, columns: Sequence[str] | None = None) -> pa.Table:
-        """The samples table of a complete run."""
-        return pq.read_table(self.path / SAMPLES_FILE, columns=columns)
+    def samples(
+        self, columns: Sequence[str] | None = None, rows: Any = None
+    ) -> pa.Table:
+        """The samples table of a complete run, every column present.
+
+        Left-out columns are drawn again, and checked, for the rows asked for
+        only (float64; see :mod:`avrisk.pipeline.regenerate`).
+
+        Parameters
+        ----------
+        columns : sequence of str, optional
+            Columns to read (default: all, parameters in their order).
+        rows : array_like of int, optional
+            Row numbers to read (default: all), in the order given.
+
+        Raises
+        ------
+        RegenerationError
+            If a left-out block cannot be drawn again as recorded.
+        """
+        path = self.path / SAMPLES_FILE
+        schema = pq.read_schema(path)
+        names_left_out, left_out = _table_meta(schema)
+        names = (
+            list(columns)
+            if columns is not None
+            else _full_order([*schema.names, *names_left_out], self.param_names)
+        )
+        fill = [c for c in names if c in names_left_out]
+        read = [c for c in names if c in schema.names]
+        if fill:
+            read = list(dict.fromkeys([*read, "stage", "chunk", "sample_id"]))
+        table = pq.read_table(path, columns=read)
+        if rows is not None:
+            table = table.take(pa.array(np.asarray(rows, dtype=np.int64)))
+        if fill:
+            table = self._regenerate().fill(table, fill, left_out)
+        return table.select(names)
 
 
 def samples_table(
@@ -344,11 +434,14 @@ def _narrowest(column: np.ndarray) -> np.ndarray:
     return narrow if np.array_equal(narrow, column) else column
 
 
-def _widest_schema(schemas: Sequence[pa.Schema]) -> pa.Schema | None:
-    """Every chunk's columns in order of appearance, float64 where any stored it.
+def _widest_schema(
+    schemas: Sequence[pa.Schema], param_names: Sequence[str]
+) -> pa.Schema | None:
+    """Every chunk's columns, float64 where any stored it, parameters in order.
 
     Chunks recorded by an earlier avrisk may lack columns that later chunks
-    have (a run resumed across versions): those are null in the older rows.
+    have (a run resumed across versions), chunks with left-out blocks lack
+    those: such columns are null in their rows.
     """
     if not schemas:
         return None
@@ -359,7 +452,78 @@ def _widest_schema(schemas: Sequence[pa.Schema]) -> pa.Schema | None:
             fields.setdefault(
                 f.name, f.with_type(pa.float64()) if f.name in wide else f
             )
-    return pa.schema(list(fields.values()), metadata=schemas[0].metadata)
+    order = _full_order(list(fields), param_names)
+    return pa.schema([fields[name] for name in order if name in fields])
+
+
+def _full_order(names: Sequence[str], param_names: Sequence[str]) -> list[str]:
+    """``names`` in the samples-table order: bookkeeping, parameters, the rest."""
+    present = set(names)
+    params = [p for p in param_names if p in present]
+    rest = [n for n in names if n not in BOOKKEEPING and n not in set(params)]
+    return [n for n in names if n in BOOKKEEPING] + params + rest
+
+
+_CHUNK_NAME = re.compile(r"stage(\d{4})-chunk(\d{6})\.parquet")
+
+
+def _chunk_key(path: Path) -> tuple[int, int]:
+    """``(stage, chunk)`` of a chunk file's name."""
+    match = _CHUNK_NAME.fullmatch(path.name)
+    if match is None:
+        raise RunDirectoryError(f"{path}: not a chunk file name")
+    return int(match[1]), int(match[2])
+
+
+def _leaving_out(table: pa.Table, meta: dict[str, Any]) -> pa.Table:
+    """A chunk's rows without the columns ``meta`` lists, ``meta`` in the schema."""
+    present = [c for c in meta["columns"] if c in table.column_names]
+    return table.drop_columns(present).replace_schema_metadata(
+        {META_KEY: json.dumps(meta)}
+    )
+
+
+def _table_meta_json(left_out: Mapping[tuple[int, int], dict[str, Any]]) -> str:
+    """samples.parquet's record: the left-out columns once, then each chunk's digest."""
+    columns = next(iter(left_out.values()))["columns"]
+    if any(m["columns"] != columns for m in left_out.values()):
+        raise RegenerationError("the chunks of one run left out different columns")
+    return json.dumps(
+        {
+            "columns": columns,
+            "chunks": [
+                [s, c, m["rows"], m["sha256"]] for (s, c), m in left_out.items()
+            ],
+        }
+    )
+
+
+def _table_meta(
+    schema: pa.Schema,
+) -> tuple[list[str], dict[tuple[int, int], dict[str, Any]]]:
+    """Left-out columns of a samples table and ``(stage, chunk) -> chunk record``."""
+    meta = chunk_meta(schema)
+    if meta is None:
+        return [], {}
+    columns, chunks = meta.get("columns"), meta.get("chunks")
+    ok = (
+        isinstance(columns, list)
+        and all(isinstance(c, str) for c in columns)
+        and isinstance(chunks, list)
+        and all(
+            isinstance(c, list)
+            and len(c) == 4
+            and all(isinstance(v, int) for v in c[:3])
+            and isinstance(c[3], str)
+            for c in chunks
+        )
+    )
+    if not ok:
+        raise RegenerationError("malformed record of the samples' left-out columns")
+    return columns, {
+        (s, c): {"columns": columns, "rows": rows, "sha256": digest}
+        for s, c, rows, digest in chunks
+    }
 
 
 def _conformed(table: pa.Table, schema: pa.Schema) -> pa.Table:

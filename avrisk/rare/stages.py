@@ -36,6 +36,17 @@ from avrisk.rare.problem import (
 )
 
 
+class ChunkDraw(NamedTuple):
+    """What a chunk's samples were drawn from: its stage's proposal and the run seed.
+
+    ``x`` of chunk ``j`` (``m`` rows) of stage ``s`` is
+    ``chunk_task(proposal, seed, s, j, m).x``, whatever process drew it.
+    """
+
+    proposal: ExponentialFamily | DefensiveMixture
+    seed: int
+
+
 class StageBatch(NamedTuple):
     """One evaluated chunk of a stage: everything a samples table records.
 
@@ -57,6 +68,9 @@ class StageBatch(NamedTuple):
         Log-densities under the base and under the distribution sampled.
     seeds : ndarray of int64, shape (m,)
         Per-sample seeds passed to a seeded ``f``.
+    draw : ChunkDraw or None
+        How ``x`` was drawn, when it is a fresh draw of the stage's proposal
+        (so it can be drawn again); None for given points (MCMC moves).
     """
 
     stage: int
@@ -68,6 +82,7 @@ class StageBatch(NamedTuple):
     log_p0: FloatArray
     log_q: FloatArray
     seeds: np.ndarray
+    draw: ChunkDraw | None = None
 
     @property
     def failed(self) -> np.ndarray:
@@ -183,7 +198,7 @@ def run_stage(
     stopped_by = why_stop()
     if stopped_by is None:
         for result in (evaluator or LocalEvaluator()).evaluate(problem, tasks()):
-            batch = _stage_batch(problem, proposal, result)
+            batch = _stage_batch(problem, ChunkDraw(proposal, seed), result)
             batches[batch.chunk] = batch
             if on_batch is not None:
                 on_batch(batch)
@@ -226,11 +241,10 @@ def chunk_task(
 
 
 def _stage_batch(
-    problem: RareEventProblem,
-    proposal: ExponentialFamily | DefensiveMixture,
-    result: EvalResult,
+    problem: RareEventProblem, draw: ChunkDraw, result: EvalResult
 ) -> StageBatch:
     task = result.task
+    proposal = draw.proposal
     log_p0 = problem.base.log_prob(task.x)
     log_q = log_p0 if proposal is problem.base else proposal.log_prob(task.x)
     return StageBatch(
@@ -243,4 +257,5 @@ def _stage_batch(
         log_p0,
         log_q,
         task.seeds,
+        draw,
     )

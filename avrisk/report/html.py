@@ -60,12 +60,13 @@ def top_failures(run_dir: RunDirectory, gamma: float, k: int) -> list[dict[str, 
     list of dict
         Samples-table rows, most likely first.
     """
-    table = run_dir.samples()
-    hits = table.filter(pc.less_equal(table["f"], gamma))
-    if hits.num_rows == 0:
+    table = run_dir.samples(["f", "log_p0"])
+    hits = np.flatnonzero(pc.less_equal(table["f"], gamma).to_numpy())
+    if hits.size == 0:
         return []
-    order = np.argsort(-hits["log_p0"].to_numpy(), kind="stable")[:k]
-    return hits.take(order).to_pylist()
+    log_p0 = table["log_p0"].to_numpy()[hits]
+    order = hits[np.argsort(-log_p0, kind="stable")[:k]]
+    return run_dir.samples(rows=order).to_pylist()  # only these rows drawn again
 
 
 def _run_view(

@@ -192,3 +192,33 @@ def test_replay_takes_a_run_directory(short_scenario, tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert gif.is_file() and "warning" not in result.output
+
+
+@pytest.fixture(scope="module")
+def short_learned_scenario(tmp_path_factory) -> Path:
+    """``highway_default`` (learned traffic, 428-d X) cut to 1 s and 36 rays."""
+    data = load_spec("highway_default").model_dump(mode="json")
+    data["simulation"]["horizon"] = 1.0
+    data["safety"]["n_rays"] = 36
+    path = tmp_path_factory.mktemp("scen") / "short_learned.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_a_run_leaves_xi_out_and_replay_draws_it_again(
+    short_learned_scenario, tmp_path
+):
+    args = ["run", str(short_learned_scenario), "--method", "naive"]
+    args += ["--n-final", "30", "--failures", "0"]
+    for name, extra in (("compact", []), ("full", ["--store-full-samples"])):
+        result = runner.invoke(app, [*args, "--out", str(tmp_path / name), *extra])
+        assert result.exit_code == 0, result.output
+    compact = pq.read_schema(tmp_path / "compact" / "samples.parquet").names
+    full = pq.read_schema(tmp_path / "full" / "samples.parquet")
+    assert "xi.0" not in compact and "veh1.s" in compact and "xi.403" in full.names
+    gif = tmp_path / "worst.gif"
+    result = runner.invoke(
+        app, ["replay", str(tmp_path / "compact"), "--worst", "1", "--out", str(gif)]
+    )
+    assert result.exit_code == 0, result.output
+    assert gif.is_file() and "warning" not in result.output

@@ -122,6 +122,21 @@ class ExponentialFamily(abc.ABC):
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable description: family name and parameters."""
 
+    def exact_params(self) -> FloatArray:
+        """The current parameter as sampling uses it, shape (n_stats,).
+
+        :meth:`with_exact_params` gives back a family that draws the same
+        samples bit for bit (a run directory records proposals this way, to
+        draw their samples again). The natural parameter by default; a family
+        that samples from another parametrisation (:class:`FixedCovNormal`
+        from its mean) overrides both methods.
+        """
+        return self.natural_params
+
+    def with_exact_params(self, params: FloatArray) -> ExponentialFamily:
+        """The family of the same structure at ``params`` of :meth:`exact_params`."""
+        return self.with_natural_params(params)
+
     def to_standard_normal(self, x: FloatArray) -> FloatArray:
         """Map samples to independent standard normals: ``T(X) ~ N(0, I_dim)``.
 

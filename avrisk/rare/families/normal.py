@@ -163,6 +163,17 @@ class FixedCovNormal(ExponentialFamily):
         """The family at ``mu = P^-1 theta``."""
         return self._at(linalg.cho_solve((self._chol, True), theta))
 
+    def exact_params(self) -> FloatArray:
+        """``mu`` (the mean :meth:`sample` adds; ``P mu`` would not invert exactly)."""
+        return self.mean.copy()
+
+    def with_exact_params(self, params: FloatArray) -> FixedCovNormal:
+        """The family at mean ``params``, shape (D,)."""
+        mu = np.asarray(params, dtype=np.float64)
+        if mu.shape != (self.dim,) or not np.isfinite(mu).all():
+            raise ValueError(f"need a finite mean of shape ({self.dim},)")
+        return self._at(mu)
+
     def log_partition(self) -> float:
         """``mu^T P mu / 2``."""
         return float(0.5 * self._quad(self.mean[None, :])[0])

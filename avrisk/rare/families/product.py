@@ -110,6 +110,17 @@ class Product(ExponentialFamily):
             [b.with_natural_params(t) for b, t in zip(self.blocks, parts, strict=True)]
         )
 
+    def exact_params(self) -> FloatArray:
+        """Concatenated exact parameters of the blocks, shape (n_stats,)."""
+        return np.concatenate([b.exact_params() for b in self.blocks])
+
+    def with_exact_params(self, params: FloatArray) -> Product:
+        """Each block at its slice of ``params``."""
+        parts = self._split_t(params)
+        return Product(
+            [b.with_exact_params(p) for b, p in zip(self.blocks, parts, strict=True)]
+        )
+
     def log_partition(self) -> float:
         """Sum of the blocks' log-partitions."""
         return float(sum(b.log_partition() for b in self.blocks))

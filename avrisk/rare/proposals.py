@@ -1,0 +1,126 @@
+"""A stage's sampling distribution as a JSON record, to draw its samples again.
+
+Chunk ``j`` of stage ``s`` of a run with seed ``seed`` is
+``proposal.sample(size, chunk_rng(seed, s, j))``
+(:func:`avrisk.rare.stages.chunk_task`), so whoever records the proposal can
+draw the chunk again, bit for bit, instead of storing it. Every sampler the
+estimators use is the base distribution's structure at other parameters, or a
+mixture of such members with the base:
+
+================  ============================================================
+``family``        one member: its :meth:`~ExponentialFamily.exact_params`
+``defensive``     :class:`DefensiveMixture`: the member and the base's weight
+``mixture``       :class:`MixtureProposal`: members, their weights, the
+                  defensive share
+================  ============================================================
+
+The record holds numbers only (floats written by ``json`` round-trip
+exactly); the structure (covariances, supports, search boxes) comes from the
+base the reader passes in. A record read from disk is untrusted: a malformed
+one is a ValueError, never an exception from deep inside a family.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from avrisk.rare.defensive import DefensiveMixture
+from avrisk.rare.families.base import ExponentialFamily, FloatArray
+from avrisk.rare.mixture import MixtureProposal
+
+__all__ = ["Sampler", "proposal_from_record", "proposal_record"]
+
+#: What a stage samples from.
+Sampler = ExponentialFamily | DefensiveMixture | MixtureProposal
+
+
+def proposal_record(
+    proposal: Sampler, base: ExponentialFamily
+) -> dict[str, Any] | None:
+    """JSON-ready record of ``proposal`` relative to ``base``, or None.
+
+    None for a sampler of another kind (its samples cannot be drawn again from
+    a record and must be stored).
+    """
+    if isinstance(proposal, ExponentialFamily) and type(proposal) is type(base):
+        return {"kind": "family", "params": _floats(proposal.exact_params())}
+    if isinstance(proposal, DefensiveMixture) and proposal.base is base:
+        inner = proposal_record(proposal.proposal, base)
+        if inner is None:
+            return None
+        return {
+            "kind": "defensive",
+            "weight": proposal.weight,
+            "params": inner["params"],
+        }
+    if isinstance(proposal, MixtureProposal) and proposal.base is base:
+        members = [proposal_record(c, base) for c in proposal.components]
+        if any(m is None or m["kind"] != "family" for m in members):
+            return None
+        return {
+            "kind": "mixture",
+            "defensive": proposal.defensive,
+            "weights": _floats(proposal.weights),
+            "components": [m["params"] for m in members if m is not None],
+        }
+    return None
+
+
+def proposal_from_record(record: Any, base: ExponentialFamily) -> Sampler:
+    """The sampler of :func:`proposal_record`, on ``base``'s structure.
+
+    Raises
+    ------
+    ValueError
+        If ``record`` is not such a record for ``base`` (says what is wrong).
+    """
+    if not isinstance(record, dict) or "kind" not in record:
+        raise ValueError(
+            f"a proposal record is an object with a 'kind'; got {record!r:.80}"
+        )
+    kind = record["kind"]
+    if kind == "family":
+        return _member(record.get("params"), base)
+    if kind == "defensive":
+        return DefensiveMixture(
+            _member(record.get("params"), base), base, _number(record, "weight")
+        )
+    if kind == "mixture":
+        components = record.get("components")
+        if not isinstance(components, list) or not components:
+            raise ValueError("a mixture record needs a non-empty list of components")
+        weights = _vector(record.get("weights"), len(components), "weights")
+        mixture = MixtureProposal(
+            [_member(c, base) for c in components],
+            weights,
+            base,
+            _number(record, "defensive"),
+        )
+        mixture.weights = weights  # as recorded: normalising again may move a bit
+        return mixture
+    raise ValueError(f"unknown proposal kind {kind!r} (family, defensive, mixture)")
+
+
+def _member(params: Any, base: ExponentialFamily) -> ExponentialFamily:
+    return base.with_exact_params(_vector(params, base.n_stats, "params"))
+
+
+def _vector(values: Any, n: int, name: str) -> FloatArray:
+    if not isinstance(values, list) or len(values) != n:
+        raise ValueError(f"proposal record: {name} must be a list of {n} numbers")
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+        raise ValueError(f"proposal record: {name} must hold numbers only")
+    out = np.array(values, dtype=np.float64)
+    if not np.isfinite(out).all():
+        raise ValueError(f"proposal record: {name} must be finite")
+    return out
+
+
+def _number(record: dict[str, Any], name: str) -> float:
+    return float(_vector([record.get(name)], 1, name)[0])
+
+
+def _floats(values: FloatArray) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=np.float64)]
