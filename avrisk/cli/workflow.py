@@ -32,6 +32,7 @@ from avrisk.pipeline.provenance import (
     check_same_definition,
     stamp,
 )
+from avrisk.pipeline.repeatability import NotRepeatableError
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.report.animate import animate_rollouts, animate_samples
@@ -46,6 +47,7 @@ EXPECTED = (
     InvalidOutputError,
     TooManyFailuresError,
     ProvenanceMismatchError,
+    NotRepeatableError,
 )
 #: Sub-directories of a comparison besides the tested method's own.
 NAIVE_PART, REFERENCE_PART = "naive", "reference"
@@ -76,11 +78,13 @@ def execute(
 
     The traces of the ``failures`` most likely dangerous rollouts are recorded
     as the run goes (``out/failures.parquet``), for its report (none: no
-    traces are recorded).
+    traces are recorded). A few rollouts are replayed first: an objective that
+    is not repeatable stops the run (an external AV that ignores its seeds).
     """
     run_dir = samples_directory(out, objective.layout)
     base = base_distribution(objective.simulator.spec)
     definition = objective.definition()
+    plain = objective
     if failures:
         recorder = FailureRecorder(
             out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
@@ -96,6 +100,7 @@ def execute(
             monitor=monitor,
             provenance=stamp(definition, objective.computed_with()),
             mechanisms=MECHANISMS,
+            replay_check=plain,
         )
     return run_dir
 
