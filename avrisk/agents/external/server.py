@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import torch
 
 from avrisk.agents.external.params import DEFAULT_ADDRESS, DEFAULT_MAX_MESSAGE_BYTES
 from avrisk.agents.external.protocol import (
@@ -28,8 +29,11 @@ from avrisk.agents.external.protocol import (
     pack_array,
     unpack_array,
 )
+from avrisk.agents.external.spaces import hello_message, observation_arrays
+from avrisk.sim.interfaces import Action
+from avrisk.sim.observation import Observation
 
-__all__ = ["AccController", "EgoServer", "serve"]
+__all__ = ["AccController", "EgoServer", "LocalEgo", "serve"]
 
 _MASK64 = (1 << 64) - 1
 
@@ -124,6 +128,34 @@ def _uniform(seeds: np.ndarray, step: int) -> np.ndarray:
         z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
     z = z ^ (z >> np.uint64(31))
     return (z >> np.uint64(11)).astype(np.float64) * 2.0**-52 - 1.0
+
+
+class LocalEgo:
+    """A controller of the AV side run in this process, without the wire.
+
+    The same actions as over the protocol (the same arrays reach the
+    controller): an in-process reference for tests and benchmarks. An
+    :class:`~avrisk.agents.policy.EgoPolicy`.
+
+    Parameters
+    ----------
+    controller : AccController
+        Or any object with the same ``act``.
+    """
+
+    def __init__(self, controller: Any) -> None:
+        self.controller = controller
+
+    def init(self, obs: Observation) -> np.ndarray:
+        """The batch's seeds, shape (B,)."""
+        return obs.seeds.detach().cpu().numpy()
+
+    def act(self, obs: Observation, state: np.ndarray) -> tuple[Action, np.ndarray]:
+        """The controller's actions, fields of shape (B,)."""
+        arrays = observation_arrays(obs)
+        angles = np.asarray(hello_message(arrays, obs.dt)["lidar_angles"])
+        accel, steer = self.controller.act(arrays, angles, state, obs.step)
+        return Action(torch.from_numpy(accel), torch.from_numpy(steer)), state
 
 
 class EgoServer:
