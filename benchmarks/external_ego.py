@@ -91,7 +91,7 @@ def main() -> None:
     for batch in (int(b) for b in args.batches.split(",")):
         local = simulator(LocalEgo(AccController()))
         rate, _ = measure(local, batch, args.seconds)
-        print(f"| in process | {batch} | {rate:,.0f} | - | - |", flush=True)
+        print(f"| in process | {batch} | {rate:,.1f} | - | - |", flush=True)
         for name, command in servers.items():
             address = free_address()
             proc = subprocess.Popen([*command, address], stdout=subprocess.PIPE)
@@ -102,7 +102,7 @@ def main() -> None:
                 sim = simulator(ego)
                 rate, trips = measure(sim, batch, args.seconds)
                 wire = wire_only(ego, sim, batch, args.seconds)
-                print(f"| {name} server | {batch} | {rate:,.0f} | {trips:,.0f} | "
+                print(f"| {name} server | {batch} | {rate:,.1f} | {trips:,.0f} | "
                       f"{wire:,.0f} |", flush=True)  # fmt: skip
             finally:
                 proc.kill()
