@@ -72,7 +72,9 @@ def test_an_unknown_name_lists_the_known_ones():
     assert str(info.value).startswith(
         "unknown controller 'pid'; known: bang_bang, p_control"
     )
-    with pytest.raises(KeyError, match="constant, idm_mobil, lidar_imitation"):
+    with pytest.raises(
+        KeyError, match="constant, external, idm_mobil, lidar_imitation"
+    ):
         get_policy("pilotnet")
 
 

@@ -2,13 +2,16 @@
 
 Each implements :class:`avrisk.sim.interfaces.Actor` for the vehicles it
 controls. Importing the package registers every ego policy by name
-(``"constant"``, ``"idm_mobil"``, ``"lidar_imitation"``; :func:`get_policy`);
+(``"constant"``, ``"idm_mobil"``, ``"lidar_imitation"``, ``"external"``: an AV
+in another process over ZeroMQ, :mod:`avrisk.agents.external`;
+:func:`get_policy`);
 other driver models than IDM+MOBIL and the learned one come by name or import
 path through :func:`get_driver_model`.
 """
 
 from avrisk.agents.driver_models import get_driver_model, register_driver_model
 from avrisk.agents.drivers import LearnedDriver, LearnedEgoPolicy
+from avrisk.agents.external import EXTERNAL
 from avrisk.agents.idm import IDMDriver, IDMParams, IDMPolicy, IDMState
 from avrisk.agents.policy import (
     ConstantPolicy,
@@ -21,6 +24,7 @@ from avrisk.agents.policy import (
 )
 
 __all__ = [
+    "EXTERNAL",
     "ConstantPolicy",
     "EgoActor",
     "EgoPolicy",

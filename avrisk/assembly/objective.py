@@ -25,7 +25,13 @@ from avrisk.fingerprint import sha256_file, sha256_json
 from avrisk.scenario import ParamLayout, ScenarioSpec
 from avrisk.sim.collision import Contact
 
-__all__ = ["EVENT_COLUMNS", "FACT_COLUMNS", "MECHANISMS", "SimulationObjective"]
+__all__ = [
+    "EVENT_COLUMNS",
+    "FACT_COLUMNS",
+    "FAILURE_COLUMN",
+    "MECHANISMS",
+    "SimulationObjective",
+]
 
 #: Per-rollout event flags and step counts recorded besides ``f``.
 EVENT_COLUMNS = ("crash", "offroad", "reversing", "steps")
@@ -36,6 +42,10 @@ FACT_COLUMNS: dict[str, type[np.integer]] = {
     "collision_with": np.int16,
     "contact": np.int8,
 }
+
+#: Why a rollout failed, recorded when the ego policy says (its
+#: ``failure_reasons``, shape (B,), for the batch last simulated).
+FAILURE_COLUMN = "failure"
 
 
 #: The per-rollout column by which ``p`` is decomposed, and its codes' names
@@ -136,7 +146,9 @@ class SimulationObjective:
             ``crash``, ``offroad``, ``reversing`` (n,) bool; ``steps`` (n,)
             int64; ``status`` (n,) int8 (0 ok, 1 an actor failed);
             ``collision_with`` (n,) int16 (vehicle hit, -1 none); ``contact``
-            (n,) int8 (0 none, 1 rear-end, 2 hit from behind, 3 side).
+            (n,) int8 (0 none, 1 rear-end, 2 hit from behind, 3 side); for
+            an ego with ``failure_reasons`` (the external ego), ``failure``
+            (n,) str: why a failed rollout failed, "" for the others.
         """
         record = self.failures is not None
         result = self.simulator.rollout(x, seeds, record_trace=record)
@@ -152,6 +164,9 @@ class SimulationObjective:
                 for name, kind in FACT_COLUMNS.items()
             }
         )
+        reasons = getattr(self.simulator.ego_policy, "failure_reasons", None)
+        if reasons is not None:  # an ego that says why it gave no action
+            out[FAILURE_COLUMN] = np.where(out["status"] != 0, reasons, "")
         return out
 
 

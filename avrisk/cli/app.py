@@ -7,6 +7,7 @@ import typer
 
 from avrisk.cli.demo import demo
 from avrisk.cli.run import compare, report, run
+from avrisk.cli.serve_ego import serve_ego
 from avrisk.cli.simulate import replay, simulate
 from avrisk.cli.train_drivers import train_drivers_command
 
@@ -45,6 +46,7 @@ def _root(
 for command in (run, compare, report, simulate, replay, demo):
     app.command()(command)
 app.command("train-drivers")(train_drivers_command)
+app.command("serve-ego")(serve_ego)
 
 
 def main() -> None:

@@ -33,6 +33,7 @@ from avrisk.pipeline.provenance import (
     stamp,
 )
 from avrisk.pipeline.regenerate import RegenerationError
+from avrisk.pipeline.repeatability import NotRepeatableError
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.report.animate import animate_rollouts, animate_samples
@@ -48,6 +49,7 @@ EXPECTED = (
     InvalidOutputError,
     TooManyFailuresError,
     ProvenanceMismatchError,
+    NotRepeatableError,
 )
 #: Sub-directories of a comparison besides the tested method's own.
 NAIVE_PART, REFERENCE_PART = "naive", "reference"
@@ -81,11 +83,14 @@ def execute(
     The traces of the ``failures`` most likely dangerous rollouts are recorded
     as the run goes (``out/failures.parquet``), for its report (none: no
     traces are recorded). ``store_full``: keep every column of the samples
-    (else the learned drivers' ``xi`` is drawn again when read).
+    (else the learned drivers' ``xi`` is drawn again when read). A few
+    rollouts are replayed first: an objective that is not repeatable stops the
+    run (an external AV that ignores its seeds).
     """
     base = base_distribution(objective.simulator.spec)
     run_dir = samples_directory(out, objective.simulator.spec, store_full=store_full)
     definition = objective.definition()
+    plain = objective
     if failures:
         recorder = FailureRecorder(
             out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
@@ -101,6 +106,7 @@ def execute(
             monitor=monitor,
             provenance=stamp(definition, objective.computed_with()),
             mechanisms=MECHANISMS,
+            replay_check=plain,
         )
     return run_dir
 

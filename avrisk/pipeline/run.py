@@ -18,6 +18,7 @@ import numpy as np
 
 import avrisk
 from avrisk.pipeline.mechanisms import decompose
+from avrisk.pipeline.repeatability import check_repeatable
 from avrisk.pipeline.store import RunDirectory
 from avrisk.rare import (
     Estimate,
@@ -173,6 +174,7 @@ def run_estimation(
     evaluator: Evaluator | None = None,
     provenance: dict[str, Any] | None = None,
     mechanisms: tuple[str, Mapping[int, str]] | None = None,
+    replay_check: Callable[..., Any] | None = None,
 ) -> dict[str, Any]:
     """Run (or resume, or just read back) one estimation into ``run_dir``.
 
@@ -201,6 +203,10 @@ def run_estimation(
         An integer output column of ``f`` and the names of its codes: ``p`` is
         decomposed by it (:mod:`avrisk.pipeline.mechanisms`) in the summary's
         ``mechanisms``, for estimators whose estimate is a final-stage mean.
+    replay_check : callable, optional
+        ``f`` without side effects (no trace recording): a few rollouts are
+        replayed before the run starts or resumes, and a ``f`` that is not
+        repeatable stops it (:func:`~avrisk.pipeline.repeatability.check_repeatable`).
 
     Returns
     -------
@@ -219,6 +225,8 @@ def run_estimation(
     start = time.perf_counter()
     monitor.start(settings.total_rollouts, settings.estimator.describe())
     try:
+        if replay_check is not None:
+            check_repeatable(run_dir, base, replay_check, settings.seed)
         estimate = _estimate(
             run_dir, base, _timed(f, clock), settings, monitor, evaluator
         )
