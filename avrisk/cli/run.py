@@ -22,6 +22,7 @@ import typer
 import yaml
 
 from avrisk.assembly import ScenarioSimulator, SimulationObjective, param_layout
+from avrisk.cli.backends import Address, Backend, BackendOption, Workers, open_evaluator
 from avrisk.cli.common import CliError, user_errors
 from avrisk.cli.workflow import (
     EXPECTED,
@@ -216,6 +217,9 @@ def run(
     max_time: MaxTime = None,
     failures: Failures = 6,
     device: Device = "cpu",
+    workers: Workers = None,
+    backend: BackendOption = Backend.local,
+    address: Address = None,
 ) -> None:
     """Estimate how likely the ego gets within gamma seconds of a collision.
 
@@ -247,9 +251,16 @@ def run(
         )
         objective = SimulationObjective(spec, device=device, allow_import=True)
         label = method_label(method)
-        run_dir = execute(
-            label, out, objective, spec.model_dump(mode="json"), run_settings, failures
-        )
+        with open_evaluator(objective, backend, workers, address) as evaluator:
+            run_dir = execute(
+                label,
+                out,
+                objective,
+                spec.model_dump(mode="json"),
+                run_settings,
+                failures,
+                evaluator,
+            )
         print_summary([(label, run_dir)])
         write_run_report(
             out, [(label, run_dir)], spec, failures, simulator=objective.simulator
@@ -277,6 +288,9 @@ def compare(
     set_: Set = None,
     failures: Failures = 6,
     device: Device = "cpu",
+    workers: Workers = None,
+    backend: BackendOption = Backend.local,
+    address: Address = None,
 ) -> None:
     """A method vs naive Monte Carlo on one scenario (paper's Table 1, Fig. 2-3).
 
@@ -303,7 +317,15 @@ def compare(
                 defensive=defensive,
             ),
         )
-        compare_runs(scenario, out, tested, reference_n, failures, device)
+        compare_runs(
+            scenario,
+            out,
+            tested,
+            reference_n,
+            failures,
+            device,
+            (backend, workers, address),
+        )
 
 
 def report(

@@ -24,6 +24,7 @@ from avrisk.assembly import (
     param_layout,
     read_failure_traces,
 )
+from avrisk.cli.backends import Backend, open_evaluator
 from avrisk.cli.common import CliError, err_console, out_console
 from avrisk.cli.progress import RichRunMonitor
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
@@ -34,6 +35,8 @@ from avrisk.pipeline.provenance import (
 )
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
+from avrisk.rare.evaluation import Evaluator
+from avrisk.rare.parallel import WorkerError
 from avrisk.report.animate import animate_rollouts, animate_samples
 from avrisk.report.html import write_report
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
@@ -46,6 +49,7 @@ EXPECTED = (
     InvalidOutputError,
     TooManyFailuresError,
     ProvenanceMismatchError,
+    WorkerError,
 )
 #: Sub-directories of a comparison besides the tested method's own.
 NAIVE_PART, REFERENCE_PART = "naive", "reference"
@@ -71,17 +75,20 @@ def execute(
     spec_json: dict[str, Any],
     run_settings: RunSettings,
     failures: int,
+    evaluator: Evaluator | None = None,
 ) -> RunDirectory:
     """Run (or resume, or read back) one estimation into ``out`` with progress.
 
     The traces of the ``failures`` most likely dangerous rollouts are recorded
     as the run goes (``out/failures.parquet``), for its report (none: no
-    traces are recorded).
+    traces are recorded). ``evaluator``: where the rollouts are simulated
+    (default: in this process); worker processes record no traces (the
+    report simulates the failures it shows again).
     """
     run_dir = samples_directory(out, objective.layout)
     base = base_distribution(objective.simulator.spec)
     definition = objective.definition()
-    if failures:
+    if failures and evaluator is None:
         recorder = FailureRecorder(
             out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
         )
@@ -94,6 +101,7 @@ def execute(
             run_settings,
             context={"scenario": spec_json, "defines_p": definition},
             monitor=monitor,
+            evaluator=evaluator,
             provenance=stamp(definition, objective.computed_with()),
             mechanisms=MECHANISMS,
         )
@@ -225,12 +233,14 @@ def compare_runs(
     reference_n: int,
     failures: int,
     device: str,
+    backend: tuple[Backend, int | None, str | None] = (Backend.local, None, None),
 ) -> Path:
     """A method, naive MC at its budget and a naive reference into ``out``; report.
 
     The tested method's run goes to ``out/<method>``, naive Monte Carlo with
     the same number of rollouts to ``out/naive`` and the reference (if
-    ``reference_n``) to ``out/reference``.
+    ``reference_n``) to ``out/reference``. ``backend``: ``--backend``,
+    ``--workers`` and ``--address`` (:mod:`avrisk.cli.backends`).
     """
     spec = load_spec(scenario)
     objective = SimulationObjective(spec, device=device, allow_import=True)
@@ -258,10 +268,11 @@ def compare_runs(
                 settings("naive", n_final=reference_n, seed=tested.seed + 2, **shared),
             )
         )
-    runs = [
-        (label, execute(label, path, objective, spec_json, s, failures))
-        for label, path, s in plan
-    ]
+    with open_evaluator(objective, *backend) as evaluator:
+        runs = [
+            (label, execute(label, path, objective, spec_json, s, failures, evaluator))
+            for label, path, s in plan
+        ]
     print_summary(runs)
     reference = runs[2][1] if reference_n else None
     if reference is not None:
