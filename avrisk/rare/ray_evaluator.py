@@ -12,6 +12,7 @@ local run gives.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable, Iterator
 from concurrent.futures import Future
 from typing import Any
@@ -25,11 +26,22 @@ from avrisk.rare.parallel import (
 )
 from avrisk.rare.problem import RareEventProblem, check_positive_int
 
-__all__ = ["RayEvaluator", "import_ray"]
+__all__ = ["LOOPBACK_ONLY", "RayEvaluator", "import_ray"]
+
+#: Environment of a local cluster whose servers listen on 127.0.0.1 only
+#: (Ray's single-machine mode; read when ``ray`` is imported, and inherited by
+#: the cluster's processes).
+LOOPBACK_ONLY = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
 
 
-def import_ray() -> Any:
-    """The ``ray`` module, or an ImportError that says how to install it."""
+def import_ray(loopback_only: bool = False) -> Any:
+    """The ``ray`` module, or an ImportError that says how to install it.
+
+    ``loopback_only``: set :data:`LOOPBACK_ONLY` first (for a local cluster
+    started next; only effective before ``ray`` is first imported).
+    """
+    if loopback_only:
+        os.environ.update(LOOPBACK_ONLY)
     try:
         import ray
     except ImportError:
@@ -52,8 +64,8 @@ class RayEvaluator:
         divided by ``num_cpus``.
     address : str, optional
         Cluster to join (``HOST:PORT`` or ``"auto"``). Default: the cluster
-        this process is already connected to, else a new local one bound to
-        127.0.0.1 (stopped by :meth:`close`).
+        this process is already connected to, else a new local one that
+        listens on 127.0.0.1 only (stopped by :meth:`close`).
     num_cpus, num_gpus : float, default=1, 0
         Resources each task asks for.
     max_retries : int, default=3
@@ -72,7 +84,7 @@ class RayEvaluator:
         num_gpus: float = 0,
         max_retries: int = 3,
     ) -> None:
-        ray = import_ray()
+        ray = import_ray(loopback_only=address is None)
         self._started = not ray.is_initialized()
         if self._started:
             local = {} if address else {"_node_ip_address": "127.0.0.1"}
