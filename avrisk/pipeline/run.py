@@ -194,6 +194,9 @@ def run_estimation(
         Progress display.
     evaluator : Evaluator, optional
         Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
+        Worker processes (:mod:`avrisk.rare.parallel`) build their own ``f``:
+        this one is then not called. The summary's ``timing`` counts the time
+        the run waits for results, on any evaluator.
     provenance : dict, optional
         The run's provenance stamp (:mod:`avrisk.pipeline.provenance`),
         recorded in the summary.

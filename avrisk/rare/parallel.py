@@ -22,6 +22,8 @@ from __future__ import annotations
 import os
 import signal
 import socket
+import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -122,10 +124,25 @@ def in_flight(
             future.cancel()
 
 
-def _start_worker(factory: Factory) -> None:
-    """Pool initializer: Ctrl-C is the parent's to handle; build ``f`` now."""
+def _start_worker(factory: Factory, parent: int) -> None:
+    """Pool initializer: leave Ctrl-C to the parent, die with it, build ``f``.
+
+    A factory that fails here fails again, with its own error, in the
+    worker's first task (which the parent then raises).
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    worker_function(factory)
+    threading.Thread(target=_exit_with, args=(parent,), daemon=True).start()
+    try:
+        worker_function(factory)
+    except Exception:  # raised again, with its type, by the first task
+        pass
+
+
+def _exit_with(parent: int) -> None:
+    """Exit this worker once process ``parent`` is gone (e.g. ``kill -9``)."""
+    while os.getppid() == parent:
+        time.sleep(1.0)
+    os._exit(1)
 
 
 class ProcessPoolEvaluator:
@@ -160,7 +177,7 @@ class ProcessPoolEvaluator:
                 self.workers,
                 mp_context=get_context("spawn"),
                 initializer=_start_worker,
-                initargs=(self.factory,),
+                initargs=(self.factory, os.getpid()),
             )
         pool = self._pool
 

@@ -107,3 +107,15 @@ def test_a_dead_worker_is_an_error_naming_its_chunk_and_the_run_resumes(pool, tm
 def test_workers_must_be_a_positive_integer():
     with pytest.raises(ValueError, match="workers must be an integer >= 1; got 0"):
         ProcessPoolEvaluator(LinearFactory(), workers=0)
+
+
+@dataclass(frozen=True)
+class BrokenFactory:
+    def __call__(self):
+        raise ValueError("no component named 'nope'")
+
+
+def test_a_factory_that_fails_in_the_workers_raises_its_own_error():
+    with ProcessPoolEvaluator(BrokenFactory(), workers=1) as pool:
+        with pytest.raises(ValueError, match="no component named 'nope'"):
+            naive_mc(PROBLEM.f, PROBLEM.base, 0.0, 100, evaluator=pool)
