@@ -1,6 +1,7 @@
 """``avrisk run --workers N``: the numbers of one worker, bit for bit."""
 
 import json
+import sys
 from importlib import resources
 
 import pyarrow.parquet as pq
@@ -69,4 +70,15 @@ def test_bad_backend_options_are_one_clear_line(tiny_scenario, tmp_path, args, m
     result = invoke("run", tiny_scenario, "--out", out, *NAIVE_ARGS, *args)
     assert result.exit_code == 2
     assert message in " ".join(result.output.split()).replace("│", "")
+    assert "Traceback" not in result.output and not out.exists()
+
+
+def test_the_ray_backend_without_ray_installed_says_how_to_install_it(
+    tiny_scenario, tmp_path, monkeypatch
+):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray fails
+    out = tmp_path / "run"
+    result = invoke("run", tiny_scenario, "--out", out, *NAIVE_ARGS, "--backend", "ray")
+    assert result.exit_code == 2
+    assert "the ray backend needs Ray: pip install 'avrisk[ray]'" in result.output
     assert "Traceback" not in result.output and not out.exists()
