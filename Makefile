@@ -5,18 +5,18 @@ PY := $(VENV)/bin/python
 .PHONY: setup demo test test-fast lint bench clean
 
 setup:
-	scripts/setup.sh dev
+	scripts/setup.sh dev,ray
 
 demo:
 	scripts/setup.sh
 	$(VENV)/bin/avrisk demo
 
 test:
-	scripts/setup.sh dev
+	scripts/setup.sh dev,ray
 	$(PY) -m pytest -n 2
 
 test-fast:
-	scripts/setup.sh dev
+	scripts/setup.sh dev,ray
 	$(PY) -m pytest -n 2 -m "not slow"
 
 lint:

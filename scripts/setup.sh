@@ -3,6 +3,7 @@
 #   scripts/setup.sh            -> runtime only
 #   scripts/setup.sh dev        -> with test tools
 #   scripts/setup.sh dev,bench  -> with the benchmark comparators too
+#   scripts/setup.sh dev,ray    -> with Ray (make test: the `ray` tests run)
 # Uses uv when it can be installed (about ten times faster than pip), else pip.
 # Honours a local wheel folder configured for pip (`pip config list`, find-links),
 # which is where a CPU-only torch wheel may live.

@@ -22,6 +22,7 @@ from avrisk.assembly.objective import (
     EVENT_COLUMNS,
     FACT_COLUMNS,
     MECHANISMS,
+    ObjectiveFactory,
     SimulationObjective,
 )
 from avrisk.assembly.traces import (
@@ -39,6 +40,7 @@ __all__ = [
     "FAILURES_FILE",
     "MECHANISMS",
     "FailureRecorder",
+    "ObjectiveFactory",
     "RolloutTrace",
     "ScenarioSimulator",
     "SimulationObjective",

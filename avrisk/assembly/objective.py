@@ -9,6 +9,7 @@ using them.
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -22,7 +23,7 @@ from avrisk.agents.drivers.store import (
 from avrisk.assembly.builder import ScenarioSimulator
 from avrisk.assembly.traces import FailureRecorder
 from avrisk.fingerprint import sha256_file, sha256_json
-from avrisk.scenario import ParamLayout, ScenarioSpec
+from avrisk.scenario import ParamLayout, ScenarioSpec, spec_from_dict
 from avrisk.sim.collision import Contact
 
 __all__ = [
@@ -30,6 +31,7 @@ __all__ = [
     "FACT_COLUMNS",
     "FAILURE_COLUMN",
     "MECHANISMS",
+    "ObjectiveFactory",
     "SimulationObjective",
 ]
 
@@ -74,6 +76,8 @@ class SimulationObjective:
     allow_import : bool, default=False
         Whether components the spec names by import path may be imported
         (only for a spec given on the command line).
+    dtype : torch.dtype, default=torch.float32
+        Floating-point type of the simulation.
 
     Attributes
     ----------
@@ -87,10 +91,15 @@ class SimulationObjective:
     needs_seeds = True
 
     def __init__(
-        self, spec: ScenarioSpec, *, device: str = "cpu", allow_import: bool = False
+        self,
+        spec: ScenarioSpec,
+        *,
+        device: str = "cpu",
+        allow_import: bool = False,
+        dtype: torch.dtype = torch.float32,
     ) -> None:
         self.simulator = ScenarioSimulator(
-            spec, device=device, allow_import=allow_import
+            spec, device=device, dtype=dtype, allow_import=allow_import
         )
         self.failures: FailureRecorder | None = None
 
@@ -132,6 +141,11 @@ class SimulationObjective:
         return other
 
     @property
+    def device(self) -> str:
+        """The simulator's torch device (``"cpu"``, ``"cuda:0"`` ...)."""
+        return str(self.simulator.device)
+
+    @property
     def layout(self) -> ParamLayout:
         """Column layout of ``X``."""
         return self.simulator.layout
@@ -168,6 +182,53 @@ class SimulationObjective:
         if reasons is not None:  # an ego that says why it gave no action
             out[FAILURE_COLUMN] = np.where(out["status"] != 0, reasons, "")
         return out
+
+
+@dataclass(frozen=True)
+class ObjectiveFactory:
+    """Builds a :class:`SimulationObjective` in a worker process, from data.
+
+    What a worker (:mod:`avrisk.rare.parallel`) receives instead of the
+    simulator: the resolved scenario as its JSON-ready dict, and how to build
+    it. A worker computes with one CPU thread (one worker per core).
+
+    Parameters
+    ----------
+    spec : dict
+        ``ScenarioSpec.model_dump(mode="json")`` (what config.json records).
+    device : str, default="cpu"
+    allow_import : bool, default=False
+        As for :class:`SimulationObjective` (the spec came from the command
+        line, and the workers can import the same components).
+    dtype : str, default="float32"
+        Name of the torch floating-point type.
+    """
+
+    spec: dict[str, Any]
+    device: str = "cpu"
+    allow_import: bool = False
+    dtype: str = "float32"
+
+    @classmethod
+    def of(cls, objective: SimulationObjective, allow_import: bool) -> ObjectiveFactory:
+        """The factory that builds ``objective`` again (its spec, device, dtype)."""
+        sim = objective.simulator
+        return cls(
+            sim.spec.model_dump(mode="json"),
+            objective.device,
+            allow_import,
+            str(sim.dtype).removeprefix("torch."),
+        )
+
+    def __call__(self) -> SimulationObjective:
+        """A new objective (sets this process's torch threads to one)."""
+        torch.set_num_threads(1)
+        return SimulationObjective(
+            spec_from_dict(self.spec, source="the run's resolved scenario"),
+            device=self.device,
+            allow_import=self.allow_import,
+            dtype=getattr(torch, self.dtype),
+        )
 
 
 def _numpy(t: torch.Tensor) -> np.ndarray:

@@ -22,6 +22,7 @@ import typer
 import yaml
 
 from avrisk.assembly import ScenarioSimulator, SimulationObjective
+from avrisk.cli.backends import Address, Backend, BackendOption, Workers, open_evaluator
 from avrisk.cli.common import CliError, user_errors
 from avrisk.cli.workflow import (
     EXPECTED,
@@ -223,6 +224,9 @@ def run(
         ),
     ] = False,
     device: Device = "cpu",
+    workers: Workers = None,
+    backend: BackendOption = Backend.local,
+    address: Address = None,
 ) -> None:
     """Estimate how likely the ego gets within gamma seconds of a collision.
 
@@ -254,15 +258,17 @@ def run(
         )
         objective = SimulationObjective(spec, device=device, allow_import=True)
         label = method_label(method)
-        run_dir = execute(
-            label,
-            out,
-            objective,
-            spec.model_dump(mode="json"),
-            run_settings,
-            failures,
-            store_full=store_full_samples,
-        )
+        with open_evaluator(objective, backend, workers, address) as evaluator:
+            run_dir = execute(
+                label,
+                out,
+                objective,
+                spec.model_dump(mode="json"),
+                run_settings,
+                failures,
+                evaluator,
+                store_full=store_full_samples,
+            )
         print_summary([(label, run_dir)])
         write_run_report(
             out, [(label, run_dir)], spec, failures, simulator=objective.simulator
@@ -290,6 +296,9 @@ def compare(
     set_: Set = None,
     failures: Failures = 6,
     device: Device = "cpu",
+    workers: Workers = None,
+    backend: BackendOption = Backend.local,
+    address: Address = None,
 ) -> None:
     """A method vs naive Monte Carlo on one scenario (paper's Table 1, Fig. 2-3).
 
@@ -316,7 +325,15 @@ def compare(
                 defensive=defensive,
             ),
         )
-        compare_runs(scenario, out, tested, reference_n, failures, device)
+        compare_runs(
+            scenario,
+            out,
+            tested,
+            reference_n,
+            failures,
+            device,
+            (backend, workers, address),
+        )
 
 
 def report(

@@ -24,6 +24,7 @@ from avrisk.assembly import (
     param_layout,
     read_failure_traces,
 )
+from avrisk.cli.backends import Backend, open_evaluator
 from avrisk.cli.common import CliError, err_console, out_console
 from avrisk.cli.progress import RichRunMonitor
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
@@ -36,6 +37,8 @@ from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.pipeline.repeatability import NotRepeatableError
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
+from avrisk.rare.evaluation import Evaluator
+from avrisk.rare.parallel import WorkerError
 from avrisk.report.animate import animate_rollouts, animate_samples
 from avrisk.report.html import write_report
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
@@ -50,6 +53,7 @@ EXPECTED = (
     TooManyFailuresError,
     ProvenanceMismatchError,
     NotRepeatableError,
+    WorkerError,
 )
 #: Sub-directories of a comparison besides the tested method's own.
 NAIVE_PART, REFERENCE_PART = "naive", "reference"
@@ -75,6 +79,7 @@ def execute(
     spec_json: dict[str, Any],
     run_settings: RunSettings,
     failures: int,
+    evaluator: Evaluator | None = None,
     *,
     store_full: bool = False,
 ) -> RunDirectory:
@@ -82,16 +87,19 @@ def execute(
 
     The traces of the ``failures`` most likely dangerous rollouts are recorded
     as the run goes (``out/failures.parquet``), for its report (none: no
-    traces are recorded). ``store_full``: keep every column of the samples
-    (else the learned drivers' ``xi`` is drawn again when read). A few
-    rollouts are replayed first: an objective that is not repeatable stops the
-    run (an external AV that ignores its seeds).
+    traces are recorded). ``evaluator``: where the rollouts are simulated
+    (default: in this process); worker processes record no traces (the
+    report simulates the failures it shows again). ``store_full``: keep every
+    column of the samples (else the learned drivers' ``xi`` is drawn again
+    when read). A few rollouts are replayed first, in this process: an
+    objective that is not repeatable stops the run (an external AV that
+    ignores its seeds).
     """
     base = base_distribution(objective.simulator.spec)
     run_dir = samples_directory(out, objective.simulator.spec, store_full=store_full)
     definition = objective.definition()
     plain = objective
-    if failures:
+    if failures and evaluator is None:
         recorder = FailureRecorder(
             out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
         )
@@ -104,6 +112,7 @@ def execute(
             run_settings,
             context={"scenario": spec_json, "defines_p": definition},
             monitor=monitor,
+            evaluator=evaluator,
             provenance=stamp(definition, objective.computed_with()),
             mechanisms=MECHANISMS,
             replay_check=plain,
@@ -253,12 +262,14 @@ def compare_runs(
     reference_n: int,
     failures: int,
     device: str,
+    backend: tuple[Backend, int | None, str | None] = (Backend.local, None, None),
 ) -> Path:
     """A method, naive MC at its budget and a naive reference into ``out``; report.
 
     The tested method's run goes to ``out/<method>``, naive Monte Carlo with
     the same number of rollouts to ``out/naive`` and the reference (if
-    ``reference_n``) to ``out/reference``.
+    ``reference_n``) to ``out/reference``. ``backend``: ``--backend``,
+    ``--workers`` and ``--address`` (:mod:`avrisk.cli.backends`).
     """
     spec = load_spec(scenario)
     objective = SimulationObjective(spec, device=device, allow_import=True)
@@ -286,10 +297,11 @@ def compare_runs(
                 settings("naive", n_final=reference_n, seed=tested.seed + 2, **shared),
             )
         )
-    runs = [
-        (label, execute(label, path, objective, spec_json, s, failures))
-        for label, path, s in plan
-    ]
+    with open_evaluator(objective, *backend) as evaluator:
+        runs = [
+            (label, execute(label, path, objective, spec_json, s, failures, evaluator))
+            for label, path, s in plan
+        ]
     print_summary(runs)
     reference = runs[2][1] if reference_n else None
     if reference is not None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import platform
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -31,7 +31,7 @@ from avrisk.rare import (
     get_estimator,
     run_estimator,
 )
-from avrisk.rare.evaluation import Evaluator
+from avrisk.rare.evaluation import EvalResult, EvalTask, Evaluator, LocalEvaluator
 from avrisk.rare.problem import threshold_list
 from avrisk.rare.stopping import StoppingRule
 
@@ -157,7 +157,7 @@ class SilentMonitor:
 
 @dataclass
 class _Clock:
-    """Wall time spent inside ``f`` and rollouts evaluated in this session."""
+    """Wall time spent evaluating ``f`` and rollouts evaluated in this session."""
 
     seconds: float = 0.0
     rollouts: int = 0
@@ -196,6 +196,9 @@ def run_estimation(
         Progress display.
     evaluator : Evaluator, optional
         Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
+        Worker processes (:mod:`avrisk.rare.parallel`) build their own ``f``:
+        this one is then not called. The summary's ``timing`` counts the time
+        the run waits for results, on any evaluator.
     provenance : dict, optional
         The run's provenance stamp (:mod:`avrisk.pipeline.provenance`),
         recorded in the summary.
@@ -227,9 +230,8 @@ def run_estimation(
     try:
         if replay_check is not None:
             check_repeatable(run_dir, base, replay_check, settings.seed)
-        estimate = _estimate(
-            run_dir, base, _timed(f, clock), settings, monitor, evaluator
-        )
+        timed = _TimedEvaluator(evaluator or LocalEvaluator(), clock)
+        estimate = _estimate(run_dir, base, f, settings, monitor, timed)
     except BaseException:
         if created and not run_dir.has_recorded_chunks():
             run_dir.discard()  # nothing worth keeping: leave no half-made directory
@@ -250,7 +252,7 @@ def _estimate(
     f: Callable[..., Any],
     s: RunSettings,
     monitor: RunMonitor,
-    evaluator: Evaluator | None,
+    evaluator: Evaluator,
 ) -> Estimate:
     def on_batch(batch: StageBatch) -> None:
         run_dir.record(batch)
@@ -304,18 +306,35 @@ def _mechanisms(
     }
 
 
-def _timed(f: Callable[..., Any], clock: _Clock) -> Callable[..., Any]:
-    """``f`` with its wall time and rows counted (keeps ``needs_seeds``)."""
+class _TimedEvaluator:
+    """An evaluator's results, timed and counted into ``clock``.
 
-    def timed(x: np.ndarray, **kwargs: Any) -> Any:
-        t0 = time.perf_counter()
-        out = f(x, **kwargs)
-        clock.seconds += time.perf_counter() - t0
-        clock.rollouts += len(x)
-        return out
+    The time is what the run waits for results (in this process or from
+    workers), so rollouts per second is the run's throughput on any backend.
+    """
 
-    timed.needs_seeds = getattr(f, "needs_seeds", False)  # type: ignore[attr-defined]
-    return timed
+    def __init__(self, inner: Evaluator, clock: _Clock) -> None:
+        self.inner = inner
+        self.clock = clock
+
+    def evaluate(
+        self, problem: RareEventProblem, tasks: Iterable[EvalTask]
+    ) -> Iterator[EvalResult]:
+        """The inner evaluator's results, one by one."""
+        results = iter(self.inner.evaluate(problem, tasks))
+        try:
+            while True:
+                t0 = time.perf_counter()
+                result = next(results, None)
+                self.clock.seconds += time.perf_counter() - t0
+                if result is None:
+                    return
+                self.clock.rollouts += len(result.values)
+                yield result
+        finally:
+            close = getattr(results, "close", None)
+            if close is not None:
+                close()
 
 
 def _summary(

@@ -120,38 +120,49 @@ class RareEventProblem:
         InvalidOutputError
             If ``f`` returns the wrong shape, or NaN for a sample not marked failed.
         """
-        needs_seeds = bool(getattr(self.f, "needs_seeds", False))
-        step = self.batch_size or max(1, len(x))
-        parts: list[FloatArray] = []
-        extras: dict[str, list[np.ndarray]] = {}
-        for start in range(0, len(x), step):
-            chunk = x[start : start + step]
-            if needs_seeds:
-                out = self.f(chunk, seeds=seeds[start : start + step])
-            else:
-                out = self.f(chunk)
-            if isinstance(out, Mapping):
-                for name, column in out.items():
-                    if name != "f":
-                        extras.setdefault(name, []).append(
-                            _column(column, len(chunk), name)
-                        )
-                out = out["f"]
-            parts.append(_column(out, len(chunk), "f", dtype=np.float64))
-        values = np.concatenate(parts) if parts else np.empty(0)
-        columns = {k: np.concatenate(v) for k, v in extras.items()}
-        nan = np.isnan(values)
-        if STATUS in columns:  # a failed sample may have no value
-            nan &= np.asarray(columns[STATUS]) == 0
-        bad = np.flatnonzero(nan)
-        if bad.size:
-            raise InvalidOutputError(
-                f"f returned NaN for {bad.size} of {values.size} samples "
-                f"(first at row {bad[0]}: x = {x[bad[0]].tolist()[:8]}...); "
-                f"a sample whose evaluation failed must say so in a "
-                f"{STATUS!r} output (non-zero)"
-            )
-        return values, columns
+        return evaluate_batched(self.f, x, seeds, self.batch_size)
+
+
+def evaluate_batched(
+    f: BatchFunction, x: FloatArray, seeds: np.ndarray, batch_size: int | None
+) -> tuple[FloatArray, dict[str, np.ndarray]]:
+    """``f`` on every row of ``x`` (shape (n, D)), ``batch_size`` rows per call.
+
+    What :meth:`RareEventProblem.evaluate` does, for a worker that holds its
+    own ``f`` (:mod:`avrisk.rare.parallel`) and not the problem.
+    """
+    needs_seeds = bool(getattr(f, "needs_seeds", False))
+    step = batch_size or max(1, len(x))
+    parts: list[FloatArray] = []
+    extras: dict[str, list[np.ndarray]] = {}
+    for start in range(0, len(x), step):
+        chunk = x[start : start + step]
+        if needs_seeds:
+            out = f(chunk, seeds=seeds[start : start + step])
+        else:
+            out = f(chunk)
+        if isinstance(out, Mapping):
+            for name, column in out.items():
+                if name != "f":
+                    extras.setdefault(name, []).append(
+                        _column(column, len(chunk), name)
+                    )
+            out = out["f"]
+        parts.append(_column(out, len(chunk), "f", dtype=np.float64))
+    values = np.concatenate(parts) if parts else np.empty(0)
+    columns = {k: np.concatenate(v) for k, v in extras.items()}
+    nan = np.isnan(values)
+    if STATUS in columns:  # a failed sample may have no value
+        nan &= np.asarray(columns[STATUS]) == 0
+    bad = np.flatnonzero(nan)
+    if bad.size:
+        raise InvalidOutputError(
+            f"f returned NaN for {bad.size} of {values.size} samples "
+            f"(first at row {bad[0]}: x = {x[bad[0]].tolist()[:8]}...); "
+            f"a sample whose evaluation failed must say so in a "
+            f"{STATUS!r} output (non-zero)"
+        )
+    return values, columns
 
 
 def _column(out: Any, n: int, name: str, dtype: Any = None) -> np.ndarray:

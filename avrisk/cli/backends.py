@@ -1,0 +1,97 @@
+"""``--workers``, ``--backend`` and ``--address``: where the rollouts are simulated.
+
+By default in this process. ``--workers N`` spawns N local worker processes;
+``--backend ray`` sends the chunks to a Ray cluster (``--address``, or a
+local one). Every worker builds the simulator from the run's resolved
+scenario, sent as data (:class:`avrisk.assembly.ObjectiveFactory`); the
+estimate is the same bit for bit on every backend.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from enum import StrEnum
+from typing import Annotated
+
+import typer
+
+from avrisk.assembly import ObjectiveFactory, SimulationObjective
+from avrisk.cli.common import CliError
+from avrisk.rare.evaluation import Evaluator
+from avrisk.rare.parallel import ProcessPoolEvaluator
+from avrisk.rare.ray_evaluator import RayEvaluator
+
+
+class Backend(StrEnum):
+    """Where worker processes run."""
+
+    local = "local"
+    ray = "ray"
+
+
+Workers = Annotated[
+    int | None,
+    typer.Option(
+        min=1,
+        help="Simulate in this many worker processes (one CPU each) [default: in "
+        "this process; with --backend ray: the cluster's CPUs].",
+    ),
+]
+BackendOption = Annotated[
+    Backend,
+    typer.Option(
+        help="Where the workers run: local (this machine) or ray (a Ray cluster; "
+        "pip install 'avrisk[ray]').",
+    ),
+]
+Address = Annotated[
+    str | None,
+    typer.Option(
+        help="Ray cluster to join, HOST:PORT or auto (with --backend ray) "
+        "[default: start a local one].",
+    ),
+]
+
+
+@contextmanager
+def open_evaluator(
+    objective: SimulationObjective,
+    backend: Backend,
+    workers: int | None,
+    address: str | None,
+) -> Iterator[Evaluator | None]:
+    """The evaluator the options ask for (None: this process), closed after.
+
+    The workers rebuild ``objective`` (whose scenario came from the command
+    line, so they may import the components it names).
+    """
+    if address is not None and backend != Backend.ray:
+        raise CliError("--address joins a Ray cluster: add --backend ray")
+    if backend == Backend.local and workers is None:
+        yield None
+        return
+    factory = ObjectiveFactory.of(objective, allow_import=True)
+    evaluator: ProcessPoolEvaluator | RayEvaluator
+    if backend == Backend.local:
+        evaluator = ProcessPoolEvaluator(factory, workers or 1)
+    else:
+        evaluator = _ray_evaluator(factory, workers, address, objective.device)
+    with evaluator:
+        yield evaluator
+
+
+def _ray_evaluator(
+    factory: ObjectiveFactory, workers: int | None, address: str | None, device: str
+) -> RayEvaluator:
+    try:
+        return RayEvaluator(
+            factory,
+            workers,
+            address=address,
+            num_gpus=1 if device.startswith("cuda") else 0,
+        )
+    except ImportError as err:
+        raise CliError(str(err)) from None
+    except ConnectionError as err:
+        raise CliError(f"cannot join the Ray cluster at {address}: {err}") from None

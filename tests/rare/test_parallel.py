@@ -1,0 +1,121 @@
+"""Worker processes: the local result bit for bit, and a dead worker is an error."""
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from avrisk.rare import cross_entropy, naive_mc
+from avrisk.rare.parallel import EVALUATED_BY, ProcessPoolEvaluator, WorkerError
+from avrisk.testing import gaussian_linear_problem
+
+PROBLEM = gaussian_linear_problem(3, p=1e-4)
+
+
+@dataclass(frozen=True)
+class LinearFactory:
+    """Builds PROBLEM.f in a worker; with ``die_once``, the first worker to be
+    called exits (as if killed) and leaves that file behind."""
+
+    die_once: str | None = None
+
+    def __call__(self):
+        f = gaussian_linear_problem(3, p=1e-4).f
+        if self.die_once is None:
+            return f
+
+        def dying(x):
+            marker = Path(self.die_once)
+            if not marker.exists():
+                marker.write_text(str(os.getpid()))
+                os._exit(9)
+            return f(x)
+
+        return dying
+
+
+@pytest.fixture(scope="module")
+def pool():
+    with ProcessPoolEvaluator(LinearFactory(), workers=2) as pool:
+        yield pool
+
+
+def without_time(result):
+    return result.to_dict() | {"wall_time_s": 0}
+
+
+def ce(evaluator=None):
+    return cross_entropy(
+        PROBLEM.f,
+        PROBLEM.base,
+        PROBLEM.gamma,
+        rho=0.1,
+        n_per_iter=20_000,  # three chunks per iteration
+        n_iter=2,
+        n_final=20_000,
+        seed=5,
+        evaluator=evaluator,
+    )
+
+
+def test_worker_processes_give_the_local_result_bit_for_bit(pool):
+    assert without_time(ce(pool)) == without_time(ce())
+
+
+def test_every_sample_says_which_worker_process_evaluated_it(pool):
+    batches = []
+    naive_mc(
+        PROBLEM.f,
+        PROBLEM.base,
+        0.0,
+        20_000,
+        on_batch=batches.append,
+        evaluator=pool,
+    )
+    labels = {str(b.extras[EVALUATED_BY][0]) for b in batches}
+    assert all(label.startswith("processes ") for label in labels)
+    assert all(f"pid {os.getpid()}" not in label for label in labels)
+    assert all(len(set(b.extras[EVALUATED_BY])) == 1 for b in batches)
+
+
+def test_a_dead_worker_is_an_error_naming_its_chunk_and_the_run_resumes(pool, tmp_path):
+    recorded = {}
+
+    def run(evaluator):
+        return naive_mc(
+            PROBLEM.f,
+            PROBLEM.base,
+            PROBLEM.gamma,
+            40_000,
+            seed=3,
+            on_batch=lambda b: recorded.setdefault(b.chunk, b),
+            cache=lambda stage, chunk: recorded.get(chunk),
+            evaluator=evaluator,
+        )
+
+    dying = LinearFactory(die_once=str(tmp_path / "died"))
+    with ProcessPoolEvaluator(dying, workers=2) as doomed:
+        with pytest.raises(WorkerError, match=r"chunk \d of stage 0 .* rerun to res"):
+            run(doomed)
+    assert len(recorded) < 5
+    resumed = run(pool)
+    local = naive_mc(PROBLEM.f, PROBLEM.base, PROBLEM.gamma, 40_000, seed=3)
+    assert without_time(resumed) == without_time(local)
+
+
+def test_workers_must_be_a_positive_integer():
+    with pytest.raises(ValueError, match="workers must be an integer >= 1; got 0"):
+        ProcessPoolEvaluator(LinearFactory(), workers=0)
+
+
+@dataclass(frozen=True)
+class BrokenFactory:
+    def __call__(self):
+        raise ValueError("no component named 'nope'")
+
+
+def test_a_factory_that_fails_in_the_workers_raises_its_own_error():
+    with ProcessPoolEvaluator(BrokenFactory(), workers=1) as pool:
+        with pytest.raises(ValueError, match="no component named 'nope'"):
+            naive_mc(PROBLEM.f, PROBLEM.base, 0.0, 100, evaluator=pool)
