@@ -22,7 +22,7 @@ import typer
 import yaml
 
 from avrisk.assembly import ScenarioSimulator, SimulationObjective, param_layout
-from avrisk.cli.common import CliError, user_errors
+from avrisk.cli.common import CliError, Device, user_errors
 from avrisk.cli.workflow import (
     EXPECTED,
     compare_runs,
@@ -118,7 +118,6 @@ MaxTime = Annotated[
     ),
 ]
 Failures = Annotated[int, typer.Option(min=0, help="Most likely failures to animate.")]
-Device = Annotated[str, typer.Option(help="Torch device of the simulator.")]
 
 
 def _thresholds(text: str) -> tuple[float, ...]:
