@@ -136,8 +136,9 @@ def ray_box_distance(
     tx2 = (hl - ox) * ix
     ty1 = (-hw - oy) * iy
     ty2 = (hw - oy) * iy
-    t_enter = torch.maximum(torch.minimum(tx1, tx2), torch.minimum(ty1, ty2)).clamp_min(
-        0.0
+    # relu(x) is clamp_min(x, 0) to the bit (NaN and -0.0 included), and faster.
+    t_enter = torch.relu(
+        torch.maximum(torch.minimum(tx1, tx2), torch.minimum(ty1, ty2))
     )
     t_exit = torch.minimum(torch.maximum(tx1, tx2), torch.maximum(ty1, ty2))
     if max_range < math.inf:
@@ -206,7 +207,7 @@ def step(x: Tensor) -> Tensor:
         ``abs`` (compiled code may ignore the sign of zero, so no result here
         depends on it).
     """
-    return torch.clamp_min(torch.sign(x), 0.0)
+    return torch.relu(torch.sign(x))
 
 
 def min_argmin(d: Tensor, dim: int) -> tuple[Tensor, Tensor]:
