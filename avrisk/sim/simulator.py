@@ -62,10 +62,11 @@ Speed
 ``highway_default`` (six vehicles, learned drivers and ego with 20-beam lidar,
 box TTC, dt 0.1 s), one CPU thread, on a shared two-core machine (BENCHMARKS.md,
 "Simulator throughput", has the figures and commands): eager about 900 tensor
-operations per step whatever the batch; ``compile=True`` (or
-``AVRISK_COMPILE=1``) about three times the eager throughput at batch 1024,
-bit-identical, after a compilation of minutes per new batch size (cached on
-disk across runs).
+operations per step at small batches (the ray casting repeats per batch slice
+at large ones); ``compile=True`` (or ``AVRISK_COMPILE=1``) about three times
+the eager throughput at batch 1024, bit-identical, after a compilation of
+minutes per new batch size (cached on disk across runs, but tracing still
+takes about a minute per process).
 """
 
 from __future__ import annotations
