@@ -678,8 +678,9 @@ class Simulator:
             measure=self.measure.init(ttc),
             alive=~crash,
             crash=crash,
-            offroad=geo.offroad[:, 0],
-            reversing=geo.reversing[:, 0],
+            # contiguous, as step returns them: a compiled step guards on strides
+            offroad=geo.offroad[:, 0].contiguous(),
+            reversing=geo.reversing[:, 0].contiguous(),
             steps=torch.zeros_like(seeds),
             status=torch.full_like(crash, int(Status.OK), dtype=torch.int8),
             partner=partner,

@@ -56,6 +56,18 @@ def test_a_step_dispatches_a_bounded_number_of_ops_whatever_the_batch(scenario):
     assert counts[0] <= 1.15 * OPS_PER_STEP[scenario]
 
 
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_the_carry_keeps_its_layout_so_one_compiled_graph_serves_every_step(scenario):
+    carry, step = started(scenario, 16)
+    with torch.no_grad():
+        carries = [carry, *unroll(step, carry, 2)]
+
+    def layout(c):
+        return [(t.shape, t.stride(), t.dtype) for t in leaves(c)]
+
+    assert layout(carries[0]) == layout(carries[1]) == layout(carries[2])
+
+
 def test_the_step_is_the_loop_of_run():
     spec = load_spec("highway_default")
     carry, step = started("highway_default", 16, horizon=spec.simulation.dt * 5)
