@@ -65,8 +65,8 @@ box TTC, dt 0.1 s), one CPU thread, on a shared two-core machine (BENCHMARKS.md,
 operations per step at small batches (the ray casting repeats per batch slice
 at large ones); ``compile=True`` (or ``AVRISK_COMPILE=1``) about three times
 the eager throughput at batch 1024, bit-identical, after a compilation of
-minutes per new batch size (cached on disk across runs, but tracing still
-takes about a minute per process).
+about a minute per new batch size (more on a loaded machine; cached on disk
+across runs, though tracing and loading still take about 10 s per process).
 """
 
 from __future__ import annotations
@@ -369,7 +369,7 @@ class Simulator:
         Run each step through ``torch.compile(fullgraph=True)`` (inductor;
         needs a C++ compiler): one graph per step, actors included, about
         three times faster than eager at large batches, after a one-off
-        compilation of minutes per new batch size (the first size gets
+        compilation of about a minute per new batch size (the first size gets
         fixed-shape kernels, later sizes share one dynamic-shape set;
         compiled code is cached on disk across runs). Results are the same as
         in eager mode, bit for bit. None reads the environment variable
