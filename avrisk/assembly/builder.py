@@ -27,6 +27,8 @@ e.g. ``lidar_imitation``), which controls slot 0.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -49,8 +51,11 @@ from avrisk.scenario.components import IDM_MOBIL, LEARNED, DriverSpec
 from avrisk.scenario.spec import ScenarioSpec
 from avrisk.sim.interfaces import Actor, SafetyMeasure
 from avrisk.sim.road import Road
-from avrisk.sim.simulator import RolloutResult, SimConfig, Simulator
+from avrisk.sim.simulator import RolloutCarry, RolloutResult, SimConfig, Simulator
 from avrisk.sim.state import VehicleState
+
+#: ``step(carry, t) -> (carry, ttc)``, see :meth:`ScenarioSimulator.start`.
+Step = Callable[[RolloutCarry, "int | torch.Tensor"], tuple[RolloutCarry, torch.Tensor]]
 
 _IDM_FIELDS = (
     "desired_speed",
@@ -364,6 +369,43 @@ class ScenarioSimulator:
             bool, ``steps`` (B,) int64, ``status``/``contact`` (B,) int8,
             ``collision_with`` (B,) int64, ``trace`` or None.
         """
+        state, actors, blocks, seeds_t = self._prepare(x, seeds)
+        return self.simulator.run(
+            state, actors, seeds_t, params=blocks, record_trace=record_trace
+        )
+
+    def start(self, x: ArrayLike, seeds: ArrayLike) -> tuple[RolloutCarry, Step]:
+        """The state at ``t = 0`` and the simulation step, for stepping by hand.
+
+        For compiling or differentiating a rollout (:meth:`Simulator.step`):
+        ``carry, step = sim.start(x, seeds)``, then ``carry, ttc = step(carry,
+        t)`` for ``t = 0 .. T-1``; ``torch.compile(step, fullgraph=True)``
+        compiles. Gradients are on unless the caller switches them off.
+
+        Parameters
+        ----------
+        x : array_like of shape (B, D)
+        seeds : array_like of int, shape (B,)
+
+        Returns
+        -------
+        carry : RolloutCarry
+            At ``t = 0``.
+        step : callable
+            ``step(carry, t) -> (carry, ttc)``: :meth:`Simulator.step` with
+            this batch's seeds, actors and masks bound.
+        """
+        state, actors, blocks, seeds_t = self._prepare(x, seeds)
+        sim = self.simulator
+        masks = sim.controlled(actors, state.n_vehicles)
+        carry, _ = sim.start(state, actors, seeds_t, blocks)
+        step = partial(sim.step, seeds=seeds_t, actors=tuple(actors), masks=masks)
+        return carry, step
+
+    def _prepare(
+        self, x: ArrayLike, seeds: ArrayLike
+    ) -> tuple[VehicleState, list[Actor], list[torch.Tensor | None], torch.Tensor]:
+        """Initial state, actors, their parameter blocks and seeds of a batch."""
         params = ScenarioParams.from_flat(np.asarray(x, dtype=np.float64), self.layout)
         seeds_t = torch.as_tensor(np.array(seeds, dtype=np.int64), device=self.device)
         if seeds_t.shape != (params.batch_size,):
@@ -373,9 +415,7 @@ class ScenarioSimulator:
             )
         state = initial_state(params, self.spec, device=self.device, dtype=self.dtype)
         actors, blocks = self.actors(params)
-        return self.simulator.run(
-            state, actors, seeds_t, params=blocks, record_trace=record_trace
-        )
+        return state, actors, blocks, seeds_t
 
     def actors(
         self, params: ScenarioParams

@@ -5,7 +5,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -45,3 +45,60 @@ def user_errors(*expected: type[Exception]) -> Iterator[None]:
             f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True
         )
         raise typer.Exit(code=2) from None
+
+
+def resolve_device(name: str) -> str:
+    """The torch device a ``--device`` value names, checked to be usable here.
+
+    Parameters
+    ----------
+    name : str
+        ``auto`` (``cuda`` when ``torch.cuda.is_available()``, else ``cpu``),
+        or a torch device such as ``cpu``, ``cuda`` or ``cuda:1``.
+
+    Returns
+    -------
+    str
+        The device, e.g. ``"cpu"``.
+
+    Raises
+    ------
+    CliError
+        For a name torch does not know or a device this machine lacks.
+    """
+    import torch
+
+    if name.strip().lower() == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    try:
+        device = torch.device(name)
+    except (RuntimeError, ValueError):
+        raise CliError(
+            f"--device {name!r} is not a torch device; use auto, cpu or cuda"
+        ) from None
+    try:
+        torch.empty(0, device=device)
+    except (RuntimeError, AssertionError, AttributeError) as exc:
+        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else "unusable"
+        raise CliError(
+            f"--device {name}: not available on this machine ({reason}); use "
+            "--device cpu or --device auto"
+        ) from None
+    return str(device)
+
+
+def _device_option(name: str) -> str:
+    """``--device`` callback: the resolved device, or one red line and exit 2."""
+    with user_errors():
+        return resolve_device(name)
+
+
+#: The ``--device`` option of the commands that simulate.
+Device = Annotated[
+    str,
+    typer.Option(
+        callback=_device_option,
+        help="Torch device of the simulator: auto (cuda when available), cpu, "
+        "cuda or cuda:N.",
+    ),
+]

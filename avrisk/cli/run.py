@@ -23,7 +23,7 @@ import yaml
 
 from avrisk.assembly import ScenarioSimulator, SimulationObjective
 from avrisk.cli.backends import Address, Backend, BackendOption, Workers, open_evaluator
-from avrisk.cli.common import CliError, user_errors
+from avrisk.cli.common import CliError, Device, user_errors
 from avrisk.cli.workflow import (
     EXPECTED,
     compare_runs,
@@ -119,7 +119,6 @@ MaxTime = Annotated[
     ),
 ]
 Failures = Annotated[int, typer.Option(min=0, help="Most likely failures to animate.")]
-Device = Annotated[str, typer.Option(help="Torch device of the simulator.")]
 
 
 def _thresholds(text: str) -> tuple[float, ...]:

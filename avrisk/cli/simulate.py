@@ -45,7 +45,7 @@ from avrisk.assembly import (
     base_distribution,
     param_layout,
 )
-from avrisk.cli.common import CliError, err_console, out_console, user_errors
+from avrisk.cli.common import CliError, Device, err_console, out_console, user_errors
 from avrisk.pipeline.files import write_parquet_atomic
 from avrisk.pipeline.regenerate import META_KEY, RegenerationError
 from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE, RunDirectory, samples_table
@@ -226,9 +226,7 @@ def simulate(
     batch_size: Annotated[
         int, typer.Option("--batch-size", min=1, help="Rollouts simulated together.")
     ] = 1024,
-    device: Annotated[
-        str, typer.Option(help="Torch device, e.g. cpu or cuda.")
-    ] = "cpu",
+    device: Device = "cpu",
     threads: Annotated[
         int | None, typer.Option(min=1, help="CPU threads for torch (default: all).")
     ] = None,

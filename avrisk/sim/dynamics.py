@@ -95,6 +95,7 @@ def bicycle_step(
     steer: Tensor,
     dt: float,
     limits: BicycleLimits = BicycleLimits(),
+    heading_cos_sin: tuple[Tensor, Tensor] | None = None,
 ) -> VehicleState:
     """Advance every vehicle by one time step.
 
@@ -110,6 +111,9 @@ def bicycle_step(
         Time step [s].
     limits : BicycleLimits
         Physical limits and wheelbase.
+    heading_cos_sin : tuple of Tensor of shape (B, A), optional
+        ``state.cos_sin`` when the caller already has it (the simulator
+        does); computed here otherwise.
 
     Returns
     -------
@@ -131,7 +135,7 @@ def bicycle_step(
     dpsi = speed_mean * sin_beta / l_r * dt
 
     half = 0.5 * dpsi
-    sin_h, cos_h = sincos(state.heading)
+    cos_h, sin_h = state.cos_sin if heading_cos_sin is None else heading_cos_sin
     sin_m, cos_m = sincos(half)
     # Direction of travel heading + beta + dpsi/2, by rotation composition.
     cos_hb = cos_h * cos_beta - sin_h * sin_beta

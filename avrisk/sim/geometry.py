@@ -24,6 +24,8 @@ from torch import Tensor
 __all__ = [
     "box_corners",
     "boxes_overlap",
+    "capped_reciprocal",
+    "hit_or_inf",
     "min_argmin",
     "ray_box_distance",
     "step",
@@ -128,21 +130,67 @@ def ray_box_distance(
     ``|(t_enter + (1 - h)) / h|``: exactly ``t_enter`` on a hit, ``+inf`` on a
     miss, whatever the sign of the zero.
     """
-    big = torch.finfo(ux.dtype).max
-    ix = torch.clamp(torch.reciprocal(ux), -big, big)
-    iy = torch.clamp(torch.reciprocal(uy), -big, big)
+    ix = capped_reciprocal(ux)
+    iy = capped_reciprocal(uy)
     tx1 = (-hl - ox) * ix
     tx2 = (hl - ox) * ix
     ty1 = (-hw - oy) * iy
     ty2 = (hw - oy) * iy
-    t_enter = torch.maximum(torch.minimum(tx1, tx2), torch.minimum(ty1, ty2)).clamp_min(
-        0.0
+    # relu(x) is clamp_min(x, 0) to the bit (NaN and -0.0 included), and faster.
+    t_enter = torch.relu(
+        torch.maximum(torch.minimum(tx1, tx2), torch.minimum(ty1, ty2))
     )
     t_exit = torch.minimum(torch.maximum(tx1, tx2), torch.maximum(ty1, ty2))
     if max_range < math.inf:
         t_exit = t_exit.clamp_max(max_range)
-    h = step(t_exit - t_enter)
-    return torch.abs((t_enter + (1.0 - h)) / h)
+    return hit_or_inf(t_enter, step(t_exit - t_enter))
+
+
+def capped_reciprocal(x: Tensor) -> Tensor:
+    """``1 / x`` clipped to the finite floats: ``x = +-0`` gives ``+-max``.
+
+    Parameters
+    ----------
+    x : Tensor of shape (...)
+
+    Returns
+    -------
+    Tensor of shape (...)
+        The same values with or without autograd. Under autograd (``x``
+        requires a gradient) the zeros are masked before the division, so
+        that the backward pass has no ``0 * inf`` (NaN); the gradient is 0
+        where ``x`` is 0.
+    """
+    big = torch.finfo(x.dtype).max
+    if x.requires_grad:
+        zero = x == 0
+        safe = torch.where(zero, 1.0, x)
+        capped = torch.clamp(torch.reciprocal(safe), -big, big)
+        return torch.where(zero, torch.copysign(torch.full_like(x, big), x), capped)
+    return torch.clamp(torch.reciprocal(x), -big, big)
+
+
+def hit_or_inf(t: Tensor, h: Tensor) -> Tensor:
+    """``|t|`` where ``h`` is 1, ``inf`` where it is 0 (a miss), branch-free.
+
+    Parameters
+    ----------
+    t : Tensor of shape (...)
+        Finite or ``inf``.
+    h : Tensor of shape (...)
+        ``1.0`` or a zero, as :func:`step` gives.
+
+    Returns
+    -------
+    Tensor of shape (...)
+        ``|(t + (1 - h)) / h|``: exactly ``|t|`` on a hit, ``+inf`` on a miss,
+        whatever the sign of the zero. Under autograd the same values come
+        from a ``where``, whose backward pass has no ``0 * inf`` (NaN) on the
+        misses.
+    """
+    if t.requires_grad:
+        return torch.where(h > 0, torch.abs(t), math.inf)
+    return torch.abs((t + (1.0 - h)) / h)
 
 
 def step(x: Tensor) -> Tensor:
@@ -159,7 +207,7 @@ def step(x: Tensor) -> Tensor:
         ``abs`` (compiled code may ignore the sign of zero, so no result here
         depends on it).
     """
-    return torch.clamp_min(torch.sign(x), 0.0)
+    return torch.relu(torch.sign(x))
 
 
 def min_argmin(d: Tensor, dim: int) -> tuple[Tensor, Tensor]:

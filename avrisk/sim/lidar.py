@@ -22,7 +22,14 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from avrisk.sim.geometry import min_argmin, ray_box_distance, step, to_local
+from avrisk.sim.geometry import (
+    capped_reciprocal,
+    hit_or_inf,
+    min_argmin,
+    ray_box_distance,
+    step,
+    to_local,
+)
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
 from avrisk.tensors.mathops import sincos
@@ -209,9 +216,8 @@ def lidar_scan(
     y = state.y.unsqueeze(-1)  # (..., A, 1)
     # Road edges, the lines y = 0 and y = W: distance to the nearest one ahead
     # along each beam (branch-free, see ray_box_distance for why).
-    big = torch.finfo(y.dtype).max
     beam_sin_world = sin.unsqueeze(-1) * beam_cos + cos.unsqueeze(-1) * beam_sin
-    inv = torch.clamp(torch.reciprocal(beam_sin_world), -big, big)
+    inv = capped_reciprocal(beam_sin_world)
     wall = torch.minimum(_ahead(-y * inv), _ahead((road.width - y) * inv))
     wall = torch.clamp_max(wall, max_range)  # (..., A, R)
     if n == 1:
@@ -260,5 +266,4 @@ def lidar_scan(
 
 def _ahead(t: Tensor) -> Tensor:
     """``t`` where ``t > 0``, else ``inf`` (branch-free; ``t`` finite or inf)."""
-    h = step(t)
-    return torch.abs((torch.abs(t) + (1.0 - h)) / h)
+    return hit_or_inf(t, step(t))

@@ -106,8 +106,10 @@ class Observation:
         The vehicle moves against the road direction now.
     seeds : Tensor of int64, shape (B,)
         Per-rollout seeds, for counter-based noise (:mod:`avrisk.tensors.noise`).
-    step : int
+    step : int or Tensor of int64, shape ()
         Index ``t`` of this step; the action applies from ``t`` to ``t + 1``.
+        A Python int in eager mode; a 0-d tensor under ``torch.compile`` (one
+        graph for every step).
     dt : float
         Time step [s].
     """
@@ -119,10 +121,10 @@ class Observation:
     offroad: Tensor  # [B, A] bool
     reversing: Tensor  # [B, A] bool
     seeds: Tensor  # [B] int64
-    step: int
+    step: int | Tensor
     dt: float
 
     @property
-    def time(self) -> float:
+    def time(self) -> float | Tensor:
         """Simulated time of this step [s]."""
         return self.step * self.dt

@@ -22,26 +22,51 @@ Collisions between two environment vehicles do not stop a rollout (they show
 in the observations' ``collided`` flag). Road departure and reversing are
 recorded for the ego (the vehicle under test) and do not stop the rollout.
 
+The step
+--------
+:meth:`Simulator.step` is one step as a pure function of tensors: carry
+(:class:`RolloutCarry`: state, the actors' states, the measure's carry, the
+flags) and step index in, the next carry and the step's TTC out, with no host
+synchronisation and no Python loop over vehicles or rollouts. :meth:`run`
+loops over it (:meth:`start`, ``step`` ``T`` times) and stops early once every
+rollout has stopped: one host synchronisation per step, outside the step.
+``compile=True`` runs the step through ``torch.compile(fullgraph=True)``: the
+actors (driver network, IDM+MOBIL, the ego), lidar, features, collision and
+TTC become one graph. The step also runs under autograd (gradients reach the
+initial state and the actors' floating parameters, e.g. the drivers' ``xi``);
+:meth:`run` switches gradients off.
+
 Reproducibility
 ---------------
 A rollout's result depends only on its own initial state, actor parameters
-and seed. Every operation is elementwise along the batch dimension or reduces
-over vehicles and rays within one rollout (``min``/``max``, which are exact),
-and every floating-point operation is one that IEEE 754 rounds correctly (``+
-- * /``, a correctly rounded square root, and trigonometry built from those in
-:mod:`avrisk.tensors.mathops`); the actors' noise is counter-based
-(:mod:`avrisk.tensors.noise`). So results are bit-identical alone, in any
-batch, in any order, in eager mode and under ``torch.compile``, and should be
-on any device (float32; the tests check all but the device). The loop ends
-early once every rollout of the batch has stopped; eager ray casting goes
-through large batches in slices; neither changes any result.
+and seed. Every operation of the simulator is elementwise along the batch
+dimension or reduces over vehicles and rays within one rollout (``min``/``max``,
+which are exact), and every floating-point operation is one that IEEE 754
+rounds correctly (``+ - * /``, a correctly rounded square root, and
+trigonometry built from those in :mod:`avrisk.tensors.mathops`); the actors'
+noise is counter-based (:mod:`avrisk.tensors.noise`). The one exception is the
+learned drivers' matrix products, where BLAS picks its kernel by the number of
+rows: :func:`avrisk.agents.drivers.network.row_linear` pads the rows to a
+multiple of 16 so that every row takes the same kernel, and the per-rollout
+last layer is a batched product per rollout (``bmm``). So results are
+bit-identical alone, in any batch, in any order, in eager mode and under
+``torch.compile`` (inductor calls the same BLAS for the products; the tests
+check both bundled scenarios), on one machine, in float32. On another device
+(a GPU) or another BLAS the matrix products may round differently in the last
+bit; elementwise work is the same. The loop ends early once every rollout of
+the batch has stopped; eager ray casting goes through large batches in slices;
+neither changes any result.
 
 Speed
 -----
-One CPU thread, six vehicles with 20-beam lidar each, 360 TTC rays, dt 0.1 s:
-eager mode does about 35,000 scenario-steps per second at batch 1024 (20,000 at
-64); ``compile=True`` (or ``AVRISK_COMPILE=1``) about 110,000 at 1024 (100,000
-at 64), after a compilation of 10-60 s per new batch size.
+``highway_default`` (six vehicles, learned drivers and ego with 20-beam lidar,
+box TTC, dt 0.1 s), one CPU thread, on a shared two-core machine (BENCHMARKS.md,
+"Simulator throughput", has the figures and commands): eager about 900 tensor
+operations per step at small batches (the ray casting repeats per batch slice
+at large ones); ``compile=True`` (or ``AVRISK_COMPILE=1``) about three times
+the eager throughput at batch 1024, bit-identical, after a compilation of
+about a minute per new batch size (more on a loaded machine; cached on disk
+across runs, though tracing and loading still take about 10 s per process).
 """
 
 from __future__ import annotations
@@ -67,6 +92,7 @@ from avrisk.tensors.noise import normal
 
 __all__ = [
     "COMPILE_ENV",
+    "RolloutCarry",
     "RolloutResult",
     "SimConfig",
     "Simulator",
@@ -221,11 +247,13 @@ class RolloutResult:
 
 
 # Eager ray casting works through the batch in slices of about this many
-# ray-box tests: the temporaries (64k floats, 256 KiB) then stay in the CPU
-# cache and below glibc's mmap threshold, instead of being mapped, page-faulted
-# and zeroed afresh by every operation, which makes it 3-4x faster at large
-# batches. Results are the same: every operation is elementwise along the batch.
-_EAGER_CHUNK_TESTS = 1 << 16
+# ray-box tests: the temporaries (128k floats, 512 KiB) then stay in the CPU's
+# L2 cache and below glibc's mmap threshold, instead of being mapped,
+# page-faulted and zeroed afresh by every operation, which makes it 3-4x faster
+# at large batches (2**17 scans 12% faster than 2**16, 2**18 50% slower, on an
+# AMD EPYC with 512 KiB of L2 per core). Results are the same: every operation
+# is elementwise along the batch.
+_EAGER_CHUNK_TESTS = 1 << 17
 
 
 def _in_chunks(fn: Any, tests_per_rollout: Any) -> Any:
@@ -233,6 +261,8 @@ def _in_chunks(fn: Any, tests_per_rollout: Any) -> Any:
 
     def chunked(state: VehicleState, cos: Tensor, sin: Tensor) -> Any:
         n = state.batch_size
+        if torch.compiler.is_compiling():  # fused kernels stream; no slices
+            return fn(state, cos, sin)
         step = max(1, _EAGER_CHUNK_TESTS // max(1, tests_per_rollout(state.n_vehicles)))
         if n <= step:
             return fn(state, cos, sin)
@@ -256,6 +286,50 @@ class _Geometry(NamedTuple):
     offroad: Tensor  # [B, A] bool
     reversing: Tensor  # [B, A] bool
     lane: LaneFeatures
+
+
+class RolloutCarry(NamedTuple):
+    """What a batch of rollouts carries from one step to the next.
+
+    The input and output of :meth:`Simulator.step`: tensors (and the actors'
+    states) only, so that the step is a pure function.
+
+    Attributes
+    ----------
+    state : VehicleState
+        Fields of shape (B, A), frozen where the rollout stopped.
+    geo : tuple of Tensor
+        What ``state`` implies short of ray casting (headings' cosines and
+        sines (B, A), pairwise overlap (B, A, A), road departure and reversing
+        flags (B, A), lane features (B, A)).
+    actors : tuple
+        Each actor's state, in the order of the actors.
+    measure : Tensor of shape (B,)
+        The safety measure's carry.
+    alive : Tensor of bool, shape (B,)
+        Still simulated (no crash, no actor failure).
+    crash, offroad, reversing : Tensor of bool, shape (B,)
+        As in :class:`RolloutResult`, so far.
+    steps : Tensor of int64, shape (B,)
+        Steps simulated so far.
+    status : Tensor of int8, shape (B,)
+    partner : Tensor of int64, shape (B,)
+        ``collision_with`` so far (-1: none).
+    contact : Tensor of int8, shape (B,)
+    """
+
+    state: VehicleState
+    geo: _Geometry
+    actors: tuple[Any, ...]
+    measure: Tensor  # [B]
+    alive: Tensor  # [B] bool
+    crash: Tensor  # [B] bool
+    offroad: Tensor  # [B] bool
+    reversing: Tensor  # [B] bool
+    steps: Tensor  # [B] int64
+    status: Tensor  # [B] int8
+    partner: Tensor  # [B] int64
+    contact: Tensor  # [B] int8
 
 
 def compile_requested(compile: bool | None) -> bool:
@@ -292,12 +366,13 @@ class Simulator:
         Floating type of the simulation (float32 is the fast default; float64
         for checks).
     compile : bool or None, default=None
-        Run each step through ``torch.compile`` (inductor; needs a C++
-        compiler): about three times faster at large batches, after a one-off
+        Run each step through ``torch.compile(fullgraph=True)`` (inductor;
+        needs a C++ compiler): one graph per step, actors included, about
+        three times faster than eager at large batches, after a one-off
         compilation of about a minute per new batch size (the first size gets
-        fixed-shape kernels, later sizes share one dynamic-shape set; compiled
-        code is cached on disk across runs). Results are the same as in eager
-        mode, bit for bit. None reads the environment variable
+        fixed-shape kernels, later sizes share one dynamic-shape set;
+        compiled code is cached on disk across runs). Results are the same as
+        in eager mode, bit for bit. None reads the environment variable
         ``AVRISK_COMPILE`` (``1`` to compile), so that a command line or a
         benchmark can switch it on without code changes; default off.
 
@@ -354,19 +429,14 @@ class Simulator:
             else None
         )
         self.compile = compile_requested(compile)
-        self._compiled_acts: dict[type, Any] = {}
-        self._move = self._move_impl
         per_pair, n_beams = measure.tests_per_pair, config.n_lidar_beams
         self._ttc = _in_chunks(measure.instant, lambda a: (a - 1) * per_pair)
         self._scan = _in_chunks(self._scan_impl, lambda a: a * (a - 1) * n_beams)
-        if self.compile:
-            # Three graphs per step plus one per actor class (see _actor_act),
-            # each small enough for inductor to compile in seconds.
-            # dynamic=None: static shapes first, one dynamic-B graph after a
-            # batch-size change.
-            self._move = torch.compile(self._move_impl)
-            self._ttc = torch.compile(measure.instant)
-            self._scan = torch.compile(self._scan_impl)
+        # The whole step, actors included, as one graph (see step); dynamic=None:
+        # static shapes first, one dynamic-B graph after a batch-size change.
+        self._step = (
+            torch.compile(self.step, fullgraph=True) if self.compile else self.step
+        )
 
     # ------------------------------------------------------------------ public
     def run(
@@ -415,7 +485,7 @@ class Simulator:
                 f"{seeds.dtype} of shape {tuple(seeds.shape)}"
             )
         actors = list(actors)
-        masks = self._controlled(actors, n)
+        masks = self.controlled(actors, n)
         if params is None:
             params = [None] * len(actors)
         if len(params) != len(actors):
@@ -454,8 +524,26 @@ class Simulator:
     def _prepare_state(self, state: VehicleState) -> VehicleState:
         return state.to(self.device, self.dtype).validate()
 
-    def _controlled(self, actors: list[Actor], n_vehicles: int) -> list[Tensor]:
-        """Every actor's ``controlled`` mask on the device, checked."""
+    def controlled(self, actors: Sequence[Actor], n_vehicles: int) -> list[Tensor]:
+        """Every actor's ``controlled`` mask on the device, checked.
+
+        Parameters
+        ----------
+        actors : sequence of Actor
+        n_vehicles : int
+            ``A``.
+
+        Returns
+        -------
+        list of Tensor of bool, shape (A,)
+            The masks :meth:`step` takes.
+
+        Raises
+        ------
+        ValueError
+            For no actor, a mask that is not a bool tensor of shape (A,), or a
+            vehicle that no actor controls.
+        """
         if not actors:
             raise ValueError("give at least one actor")
         masks = []
@@ -488,14 +576,6 @@ class Simulator:
             lane=lane_features(state, self.road),
         )
 
-    def _move_impl(
-        self, state: VehicleState, accel: Tensor, steer: Tensor, alive: Tensor
-    ) -> tuple[VehicleState, _Geometry]:
-        """Advance the rollouts still ``alive`` by one step, and their geometry."""
-        moved = bicycle_step(state, accel, steer, self.config.dt, self.limits)
-        state = moved.where(alive, state)
-        return state, self._geometry(state)
-
     def _scan_impl(self, state: VehicleState, cos: Tensor, sin: Tensor) -> LidarScan:
         assert self._beams is not None
         return lidar_scan(
@@ -511,7 +591,7 @@ class Simulator:
         geo: _Geometry,
         lidar: LidarScan | None,
         seeds: Tensor,
-        step: int,
+        step: int | Tensor,
     ) -> Observation:
         return Observation(
             state=state,
@@ -525,16 +605,6 @@ class Simulator:
             dt=self.config.dt,
         )
 
-    def _actor_act(self, actor: Actor) -> Any:
-        """``actor.act``, compiled if the simulator compiles (one graph per class)."""
-        if not self.compile:
-            return actor.act
-        cls = type(actor)
-        if cls not in self._compiled_acts:
-            self._compiled_acts[cls] = torch.compile(cls.act)
-        compiled = self._compiled_acts[cls]
-        return lambda obs, state, noise: compiled(actor, obs, state, noise)
-
     def _noise(self, request: NoiseRequest | None, obs: Observation) -> Tensor | None:
         """The step's standard-normal noise for one actor, (B, *shape), or None."""
         if request is None:
@@ -545,18 +615,19 @@ class Simulator:
     def _act(
         self,
         obs: Observation,
-        actors: list[Actor],
-        acts: list[Any],
-        masks: list[Tensor],
-        states: list[Any],
-    ) -> tuple[Tensor, Tensor]:
+        actors: Sequence[Actor],
+        masks: Sequence[Tensor],
+        states: Sequence[Any],
+    ) -> tuple[Tensor, Tensor, tuple[Any, ...]]:
         """Every vehicle's (accel, steer), (B, A), from its controlling actor.
 
-        Updates ``states`` in place.
+        Returns the actions and the actors' next states.
         """
         accel = steer = None
-        for k, (actor, act, mask) in enumerate(zip(actors, acts, masks, strict=True)):
-            action, states[k] = act(obs, states[k], self._noise(actor.noise, obs))
+        new_states = []
+        for actor, mask, memory in zip(actors, masks, states, strict=True):
+            action, memory = actor.act(obs, memory, self._noise(actor.noise, obs))
+            new_states.append(memory)
             mine = action.accel.to(self.dtype), action.steer.to(self.dtype)
             if accel is None or steer is None:
                 accel, steer = mine
@@ -564,7 +635,128 @@ class Simulator:
                 accel = torch.where(mask, mine[0], accel)
                 steer = torch.where(mask, mine[1], steer)
         assert accel is not None and steer is not None
-        return accel, steer
+        return accel, steer, tuple(new_states)
+
+    def start(
+        self,
+        state: VehicleState,
+        actors: Sequence[Actor],
+        seeds: Tensor,
+        params: Sequence[Tensor | None],
+    ) -> tuple[RolloutCarry, Tensor]:
+        """The carry at ``t = 0``: the state evaluated, the actors initialised.
+
+        Parameters
+        ----------
+        state : VehicleState
+            Fields of shape (B, A) on the simulator's device and dtype.
+        actors : sequence of Actor
+        seeds : Tensor of int64, shape (B,)
+        params : sequence of (Tensor of shape (B, P) or None)
+            One per actor, passed to its ``init``.
+
+        Returns
+        -------
+        carry : RolloutCarry
+        ttc : Tensor of shape (B,)
+            The measure's instantaneous value at ``t = 0`` [s].
+        """
+        geo = self._geometry(state)
+        ttc = self._ttc(state, geo.cos, geo.sin)
+        ego_overlap = geo.overlap[:, 0, :]
+        crash = ego_overlap.any(dim=-1)
+        partner = torch.where(crash, ego_overlap.to(torch.int8).argmax(dim=-1), -1)
+        hit_how = contact(
+            state, geo.cos, geo.sin, partner.clamp_min(0), self.road.lane_width
+        )
+        lidar = self._lidar(state, geo) if _reads_lidar(actors) else None
+        obs = self._observation(state, geo, lidar, seeds, 0)
+        carry = RolloutCarry(
+            state=state,
+            geo=geo,
+            actors=tuple(a.init(obs, p) for a, p in zip(actors, params, strict=True)),
+            measure=self.measure.init(ttc),
+            alive=~crash,
+            crash=crash,
+            # contiguous, as step returns them: a compiled step guards on strides
+            offroad=geo.offroad[:, 0].contiguous(),
+            reversing=geo.reversing[:, 0].contiguous(),
+            steps=torch.zeros_like(seeds),
+            status=torch.full_like(crash, int(Status.OK), dtype=torch.int8),
+            partner=partner,
+            contact=torch.where(crash, hit_how, int(Contact.NONE)),
+        )
+        return carry, ttc
+
+    def step(
+        self,
+        carry: RolloutCarry,
+        t: int | Tensor,
+        seeds: Tensor,
+        actors: Sequence[Actor],
+        masks: Sequence[Tensor],
+    ) -> tuple[RolloutCarry, Tensor]:
+        """One simulation step, from time ``t dt`` to ``(t + 1) dt``: a pure function.
+
+        Observe the carried state, act, move the rollouts still alive, evaluate
+        the new state. No host synchronisation and no Python loop over vehicles
+        or rollouts: it runs under ``torch.compile(fullgraph=True)`` (with
+        ``t`` a tensor, so that one graph serves every step) and under
+        autograd (gradients flow to the initial state and the actors'
+        floating parameters; :meth:`run` switches them off).
+
+        Parameters
+        ----------
+        carry : RolloutCarry
+            At time ``t`` (from :meth:`start` or the previous step).
+        t : int or Tensor of int64, shape ()
+            Index of the step's start time; the actors see it as ``obs.step``.
+        seeds : Tensor of int64, shape (B,)
+        actors : sequence of Actor
+        masks : sequence of Tensor of bool, shape (A,)
+            Each actor's ``controlled`` mask on the device (checked by
+            :meth:`run`).
+
+        Returns
+        -------
+        carry : RolloutCarry
+            At time ``t + 1``.
+        ttc : Tensor of shape (B,)
+            The measure's instantaneous value at ``t + 1`` [s].
+        """
+        state, geo, alive = carry.state, carry.geo, carry.alive
+        lidar = self._lidar(state, geo) if _reads_lidar(actors) else None
+        obs = self._observation(state, geo, lidar, seeds, t)
+        accel, steer, memory = self._act(obs, actors, masks, carry.actors)
+        acted = torch.isfinite(accel).all(dim=-1) & torch.isfinite(steer).all(-1)
+        status = torch.where(alive & ~acted, int(Status.ACTOR_FAILED), carry.status)
+        alive = alive & acted
+        dt, limits = self.config.dt, self.limits
+        moved = bicycle_step(state, accel, steer, dt, limits, (geo.cos, geo.sin))
+        state = moved.where(alive, state)
+        geo = self._geometry(state)
+        ttc = self._ttc(state, geo.cos, geo.sin)
+        ego_overlap = geo.overlap[:, 0, :]
+        hit = alive & ego_overlap.any(dim=-1)
+        partner = torch.where(
+            hit, ego_overlap.to(torch.int8).argmax(dim=-1), carry.partner
+        )
+        lane_width = self.road.lane_width
+        hit_how = contact(state, geo.cos, geo.sin, partner.clamp_min(0), lane_width)
+        return RolloutCarry(
+            state=state,
+            geo=geo,
+            actors=memory,
+            measure=self.measure.update(carry.measure, ttc, alive),
+            alive=alive & ~hit,
+            crash=carry.crash | hit,
+            offroad=carry.offroad | (alive & geo.offroad[:, 0]),
+            reversing=carry.reversing | (alive & geo.reversing[:, 0]),
+            steps=torch.where(alive, t + 1, carry.steps),
+            status=status,
+            partner=partner,
+            contact=torch.where(hit, hit_how, carry.contact),
+        ), torch.where(alive, ttc, math.inf)
 
     def _run(
         self,
@@ -576,100 +768,49 @@ class Simulator:
         record_trace: bool,
     ) -> RolloutResult:
         n_steps = self.config.n_steps
-        measure = self.measure
-        lane_width = self.road.lane_width
-        geo = self._geometry(state)
-        ttc = self._ttc(state, geo.cos, geo.sin)
-        ego_overlap = geo.overlap[:, 0, :]
-        crash = ego_overlap.any(dim=-1)
-        partner = torch.where(crash, ego_overlap.to(torch.int8).argmax(dim=-1), -1)
-        hit_how = contact(state, geo.cos, geo.sin, partner.clamp_min(0), lane_width)
-        how = torch.where(crash, hit_how, int(Contact.NONE))
-        status = torch.full_like(crash, int(Status.OK), dtype=torch.int8)
-        carry = measure.init(ttc)
-        off = geo.offroad[:, 0]
-        rev = geo.reversing[:, 0]
-        steps = torch.zeros_like(seeds)
-        alive = ~crash
-
-        # Scan lidar only if some actor reads it (results are the same).
-        lidar_read = any(reads_lidar(actor) for actor in actors)
-
-        def lidar(state: VehicleState, geo: _Geometry) -> LidarScan | None:
-            return self._lidar(state, geo) if lidar_read else None
-
-        obs = self._observation(state, geo, lidar(state, geo), seeds, 0)
-        acts = [self._actor_act(actor) for actor in actors]
-        states = [actor.init(obs, p) for actor, p in zip(actors, params, strict=True)]
+        carry, ttc = self.start(state, actors, seeds, params)
+        step = self._step
         frames: list[tuple[Tensor, ...]] = []
         if record_trace:
-            frames.append(self._frame(state, torch.ones_like(alive), ttc))
-
-        for k in range(1, n_steps + 1):
-            if not bool(alive.any()):
+            frames.append(_frame(carry.state, torch.ones_like(carry.alive), ttc))
+        for t in range(n_steps):
+            # The one host synchronisation per step: stop once all have stopped.
+            if not bool(carry.alive.any()):
                 break
-            accel, steer = self._act(obs, actors, acts, masks, states)
-            acted = torch.isfinite(accel).all(dim=-1) & torch.isfinite(steer).all(-1)
-            failed = alive & ~acted
-            status = torch.where(failed, int(Status.ACTOR_FAILED), status)
-            alive = alive & acted
-            state, geo = self._move(state, accel, steer, alive)
-            ttc = self._ttc(state, geo.cos, geo.sin)
-            carry = measure.update(carry, ttc, alive)
-            ego_overlap = geo.overlap[:, 0, :]
-            hit = alive & ego_overlap.any(dim=-1)
-            partner = torch.where(
-                hit, ego_overlap.to(torch.int8).argmax(dim=-1), partner
-            )
-            hit_how = contact(state, geo.cos, geo.sin, partner.clamp_min(0), lane_width)
-            how = torch.where(hit, hit_how, how)
-            crash = crash | hit
-            off = off | (alive & geo.offroad[:, 0])
-            rev = rev | (alive & geo.reversing[:, 0])
-            steps = torch.where(alive, k, steps)
+            alive = carry.alive
+            index = torch.tensor(t, device=self.device) if self.compile else t
+            carry, ttc = step(carry, index, seeds, actors, masks)
             if record_trace:
-                frames.append(self._frame(state, alive, ttc))
-            alive = alive & ~hit
-            if k < n_steps:
-                obs = self._observation(state, geo, lidar(state, geo), seeds, k)
-
-        trace = None
-        if record_trace:
-            while len(frames) < n_steps + 1:  # everyone stopped early
-                x, y, heading, speed, live, t = frames[-1]
-                frames.append(
-                    (
-                        x,
-                        y,
-                        heading,
-                        speed,
-                        torch.zeros_like(live),
-                        torch.full_like(t, math.inf),
-                    )
-                )
-            trace = Trace(
-                *(torch.stack(parts, dim=1) for parts in zip(*frames, strict=True))
-            )
-        f = measure.finalize(carry)
+                frames.append(_frame(carry.state, alive & (carry.steps == t + 1), ttc))
+        trace = _trace(frames, n_steps) if record_trace else None
+        f = self.measure.finalize(carry.measure)
         return RolloutResult(
-            f=torch.where(status == int(Status.OK), f, math.nan),
-            crash=crash,
-            offroad=off,
-            reversing=rev,
-            steps=steps,
-            status=status,
-            collision_with=partner,
-            contact=how,
+            f=torch.where(carry.status == int(Status.OK), f, math.nan),
+            crash=carry.crash,
+            offroad=carry.offroad,
+            reversing=carry.reversing,
+            steps=carry.steps,
+            status=carry.status,
+            collision_with=carry.partner,
+            contact=carry.contact,
             trace=trace,
         )
 
-    @staticmethod
-    def _frame(state: VehicleState, alive: Tensor, ttc: Tensor) -> tuple[Tensor, ...]:
-        return (
-            state.x,
-            state.y,
-            state.heading,
-            state.speed,
-            alive,
-            torch.where(alive, ttc, math.inf),
-        )
+
+def _reads_lidar(actors: Sequence[Actor]) -> bool:
+    """Whether some actor reads the lidar (else it is not scanned; same results)."""
+    return any(reads_lidar(actor) for actor in actors)
+
+
+def _frame(state: VehicleState, alive: Tensor, ttc: Tensor) -> tuple[Tensor, ...]:
+    """One frame of a :class:`Trace` (``ttc`` already ``inf`` where not alive)."""
+    return (state.x, state.y, state.heading, state.speed, alive, ttc)
+
+
+def _trace(frames: list[tuple[Tensor, ...]], n_steps: int) -> Trace:
+    """The recorded frames stacked, padded to ``T + 1`` if all stopped early."""
+    while len(frames) < n_steps + 1:  # everyone stopped early
+        x, y, heading, speed, live, t = frames[-1]
+        dead = torch.zeros_like(live)
+        frames.append((x, y, heading, speed, dead, torch.full_like(t, math.inf)))
+    return Trace(*(torch.stack(parts, dim=1) for parts in zip(*frames, strict=True)))

@@ -94,9 +94,10 @@ def atan(x: Tensor) -> Tensor:
     ax = torch.abs(x)
     big = ax > _TAN_3PI_8
     mid = ax > _TAN_PI_8
-    # Only the selected branch is used; the others may hold inf, never NaN
-    # that leaks (where() does not propagate the unselected operand).
-    xr = torch.where(big, -1.0 / ax, torch.where(mid, (ax - 1.0) / (ax + 1.0), ax))
+    # Only the selected branch is used; -1 / ax divides by a masked ax so that
+    # no branch holds inf (whose gradient would be NaN under autograd).
+    inv = -1.0 / torch.where(big, ax, 1.0)
+    xr = torch.where(big, inv, torch.where(mid, (ax - 1.0) / (ax + 1.0), ax))
     y0 = torch.where(big, math.pi / 2, torch.where(mid, math.pi / 4, 0.0))
     z = xr * xr
     y = (((_A1 * z + _A2) * z + _A3) * z + _A4) * z * xr + xr

@@ -64,7 +64,7 @@ def _mix(z: Tensor) -> Tensor:
 
 
 def random_bits(
-    seeds: Tensor, step: int, stream: int, shape: tuple[int, ...] = ()
+    seeds: Tensor, step: int | Tensor, stream: int, shape: tuple[int, ...] = ()
 ) -> Tensor:
     """64 random bits per element, a pure function of its coordinates.
 
@@ -72,8 +72,8 @@ def random_bits(
     ----------
     seeds : Tensor of int64, shape (B,)
         One seed per rollout.
-    step : int
-        Time step index (``>= 0``).
+    step : int or Tensor of int64, shape ()
+        Time step index (``>= 0``); a 0-d tensor gives the same numbers.
     stream : int
         Independent stream within a step (``>= 0``).
     shape : tuple of int, default=()
@@ -84,7 +84,12 @@ def random_bits(
     Tensor of int64, shape (B, *shape)
     """
     key = _mix(seeds.to(torch.int64) * _GAMMA + _GAMMA)
-    key = _mix(key ^ _signed(step * _STEP_KEY + stream * _STREAM_KEY))
+    salt: int | Tensor
+    if isinstance(step, Tensor):  # int64 products wrap as _signed does
+        salt = step.to(torch.int64) * _STEP_KEY + _signed(stream * _STREAM_KEY)
+    else:
+        salt = _signed(step * _STEP_KEY + stream * _STREAM_KEY)
+    key = _mix(key ^ salt)
     n = math.prod(shape)
     index = torch.arange(1, n + 1, dtype=torch.int64, device=seeds.device).reshape(
         shape
@@ -94,7 +99,7 @@ def random_bits(
 
 def uniform(
     seeds: Tensor,
-    step: int,
+    step: int | Tensor,
     stream: int,
     shape: tuple[int, ...] = (),
     *,
@@ -119,7 +124,7 @@ def uniform(
 
 def normal(
     seeds: Tensor,
-    step: int,
+    step: int | Tensor,
     stream: int,
     shape: tuple[int, ...] = (),
     *,

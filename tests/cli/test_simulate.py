@@ -222,3 +222,33 @@ def test_a_run_leaves_xi_out_and_replay_draws_it_again(
     )
     assert result.exit_code == 0, result.output
     assert gif.is_file() and "warning" not in result.output
+
+
+@pytest.mark.parametrize("command", ["simulate", "run"])
+def test_a_device_that_is_not_there_is_one_line_of_error(command, tmp_path):
+    import torch
+
+    bad = ["foo"] + ([] if torch.cuda.is_available() else ["cuda"])
+    for device in bad:
+        out = tmp_path / ("x.parquet" if command == "simulate" else "run")
+        result = runner.invoke(
+            app, [command, "highway_idm", "--device", device, "--out", str(out)]
+        )
+        assert result.exit_code == 2, result.output
+        lines = result.output.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: --device")
+        assert "Traceback" not in result.output and not out.exists()
+
+
+def test_device_auto_picks_cuda_when_present_and_is_recorded(short_scenario, tmp_path):
+    import json
+
+    import torch
+
+    out = tmp_path / "rollouts.parquet"
+    result = _simulate(
+        str(short_scenario), "--n", "2", "--device", "auto", "--out", str(out)
+    )
+    assert result.exit_code == 0, result.output
+    meta = json.loads(pq.read_schema(out).metadata[simulate_mod.META_RUN])
+    assert meta["device"] == ("cuda" if torch.cuda.is_available() else "cpu")

@@ -51,6 +51,7 @@ from avrisk.agents.drivers.xi import XI_DIM
 from avrisk.agents.policy import ego_only, register_policy
 from avrisk.sim.interfaces import Action, NoiseRequest
 from avrisk.sim.observation import Observation
+from avrisk.tensors.mathops import sqrt
 
 __all__ = [
     "DRIVER_NOISE_STREAM",
@@ -122,7 +123,9 @@ def reproducible_exp(x: Tensor) -> Tensor:
     return y * two_k
 
 
-def ar1_noise(previous: Tensor | None, z: Tensor, rho: Tensor) -> Tensor:
+def ar1_noise(
+    previous: Tensor | None, z: Tensor, rho: Tensor, start: bool | Tensor = False
+) -> Tensor:
     """Standardised action noise, autocorrelated over steps.
 
     Parameters
@@ -133,16 +136,20 @@ def ar1_noise(previous: Tensor | None, z: Tensor, rho: Tensor) -> Tensor:
         This step's standard-normal draw (the simulator's, counter-based).
     rho : Tensor of shape (2,)
         Autocorrelation per action in ``[0, 1)``.
+    start : bool or Tensor of bool, shape (), default=False
+        Start the process here (``z`` itself) whatever ``previous`` holds; a
+        tensor keeps the choice on the device (the simulator's compiled step).
 
     Returns
     -------
     Tensor of shape (B, ..., 2)
         Marginally standard normal at every step, in the dtype of ``z``.
     """
-    if previous is None:
+    if previous is None or start is True:
         return z
     rho = rho.to(z.dtype)
-    return rho * previous + torch.sqrt(1.0 - rho * rho) * z
+    mixed = rho * previous + sqrt(1.0 - rho * rho) * z
+    return torch.where(start, z, mixed) if isinstance(start, Tensor) else mixed
 
 
 def sample_actions(
@@ -205,16 +212,28 @@ def _as_xi(net: DriverNet, xi: Tensor | None) -> Tensor:
 
 
 def _initial_state(
-    name: str, net: DriverNet, default_xi: Tensor, params: Tensor | None, batch: int
+    name: str,
+    net: DriverNet,
+    default_xi: Tensor,
+    params: Tensor | None,
+    batch: int,
+    noise: NoiseRequest | None,
 ) -> LearnedState:
-    """The state at ``t = 0``: per-rollout ``xi`` from ``params``, else the default."""
+    """The state at ``t = 0``: per-rollout ``xi`` from ``params``, else the default.
+
+    ``eps`` is zero-filled when the actor samples (``noise``), so that its
+    state has the same structure at every step (one compiled graph).
+    """
     xi = default_xi if params is None else _as_xi(net, params)
     if xi.dim() == 2 and xi.shape[0] != batch:
         raise ValueError(
             f"{name} got xi for {xi.shape[0]} rollouts and a batch of {batch}; "
             f"pass xi of shape ({batch}, {XI_DIM})"
         )
-    return LearnedState(xi=xi, eps=None)
+    eps = None
+    if noise is not None:
+        eps = xi.new_zeros((batch, *noise.shape), dtype=noise.dtype)
+    return LearnedState(xi=xi, eps=eps)
 
 
 def _no_reverse(accel: Tensor, speed: Tensor, dt: float) -> Tensor:
@@ -282,13 +301,12 @@ class LearnedDriver:
             If ``xi`` has the wrong shape or another batch size than ``obs``.
         """
         return _initial_state(
-            "LearnedDriver", self.net, self.xi, params, obs.state.batch_size
+            "LearnedDriver", self.net, self.xi, params, obs.state.batch_size, self.noise
         )
 
     def distribution(self, obs: Observation, xi: Tensor) -> ActionDistribution:
         """Every vehicle's action distribution, fields of shape (B, A)."""
-        with torch.no_grad():
-            return self.net(features_from_observation(obs), xi)
+        return self.net(features_from_observation(obs), xi)
 
     def act(
         self, obs: Observation, state: LearnedState, noise: Tensor | None
@@ -297,7 +315,8 @@ class LearnedDriver:
         dist = self.distribution(obs, state.xi)
         eps = None
         if noise is not None:
-            eps = ar1_noise(state.eps, noise, self.net.noise_correlation)
+            rho = self.net.noise_correlation
+            eps = ar1_noise(state.eps, noise, rho, start=obs.step == 0)
         accel, steer = sample_actions(dist, eps, self.net.noise_scale)
         dtype = obs.state.x.dtype
         accel, steer = accel.to(dtype), steer.to(dtype)
@@ -350,7 +369,12 @@ class LearnedEgoPolicy:
     def init(self, obs: Observation, params: Tensor | None) -> LearnedState:
         """See :meth:`LearnedDriver.init`."""
         return _initial_state(
-            "LearnedEgoPolicy", self.net, self.xi, params, obs.state.batch_size
+            "LearnedEgoPolicy",
+            self.net,
+            self.xi,
+            params,
+            obs.state.batch_size,
+            self.noise,
         )
 
     def act(
@@ -358,11 +382,11 @@ class LearnedEgoPolicy:
     ) -> tuple[Action, LearnedState]:
         """The ego's action in every column, fields of shape (B, A)."""
         feats = features_from_observation(obs)[:, :1]  # (B, 1, F)
-        with torch.no_grad():
-            dist = self.net(feats, state.xi)[:, 0]
+        dist = self.net(feats, state.xi)[:, 0]
         eps = None
         if noise is not None:
-            eps = ar1_noise(state.eps, noise, self.net.noise_correlation)
+            rho = self.net.noise_correlation
+            eps = ar1_noise(state.eps, noise, rho, start=obs.step == 0)
         accel, steer = sample_actions(dist, eps, self.net.noise_scale)
         dtype = obs.state.x.dtype
         accel, steer = accel.to(dtype), steer.to(dtype)

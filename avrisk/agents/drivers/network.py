@@ -236,6 +236,21 @@ class DriverNet(nn.Module):
         self.fc1 = nn.Linear(N_FEATURES, HIDDEN_SIZES[0])
         self.fc2 = nn.Linear(HIDDEN_SIZES[0], HIDDEN_SIZES[1])
         self.last = nn.Linear(N_HIDDEN_LAST, N_OUTPUTS)
+        # 2 log(action_scale), a constant of every step: computed once here and
+        # again whenever the buffers change (load_state_dict, to()).
+        self.register_buffer("log_action_var", 2.0 * log(act), persistent=False)
+        self.register_load_state_dict_post_hook(
+            lambda module, _keys: module._refresh_log_action_var()
+        )
+
+    def _refresh_log_action_var(self) -> None:
+        with torch.no_grad():
+            self.log_action_var = 2.0 * log(self.action_scale)
+
+    def _apply(self, fn: Any, recurse: bool = True) -> DriverNet:
+        out = super()._apply(fn, recurse)
+        self._refresh_log_action_var()  # in the new dtype, as before the move
+        return out
 
     # ---------------------------------------------------------------- layers
     @property
@@ -301,7 +316,10 @@ class DriverNet(nn.Module):
             Fields of shape (...).
         """
         s = self.action_scale.to(raw.dtype)
-        log_var = torch.clamp(raw[..., 2:], LOG_VAR_MIN, LOG_VAR_MAX) + 2.0 * log(s)
+        offset = self.log_action_var
+        if offset.dtype != raw.dtype:
+            offset = 2.0 * log(s)
+        log_var = torch.clamp(raw[..., 2:], LOG_VAR_MIN, LOG_VAR_MAX) + offset
         return ActionDistribution(
             accel_mean=raw[..., 0] * s[0],
             steer_mean=raw[..., 1] * s[1],
