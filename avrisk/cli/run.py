@@ -15,6 +15,7 @@ chosen estimator does not have is refused by name.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -123,11 +124,22 @@ Device = Annotated[str, typer.Option(help="Torch device of the simulator.")]
 
 def _thresholds(text: str) -> tuple[float, ...]:
     try:
-        return tuple(float(t) for t in text.split(",") if t.strip())
+        values = tuple(float(t) for t in text.split(",") if t.strip())
     except ValueError:
+        values = (math.nan,)
+    if not all(map(math.isfinite, values)):
         raise CliError(
-            f"--gamma-test must be numbers separated by commas; got {text!r}"
-        ) from None
+            f"--gamma-test must be finite numbers [s] separated by commas; got "
+            f"{text!r}"
+        )
+    return values
+
+
+def _threshold(gamma: float) -> float:
+    """``--gamma``, refused before any work unless a finite number."""
+    if not math.isfinite(gamma):
+        raise CliError(f"--gamma must be a finite number [s]; got {gamma}")
+    return gamma
 
 
 def estimator_options(
@@ -186,7 +198,7 @@ def _run_settings(
     """Run settings from a command's options; ``flags``: the estimator flags."""
     return settings(
         method,
-        gamma=gamma,
+        gamma=_threshold(gamma),
         gamma_test=_thresholds(gamma_test),
         seed=seed,
         batch_size=batch_size,

@@ -8,6 +8,7 @@
       checkpoint.json  the estimator's state and steps after its latest step
       samples.parquet  every rollout of every stage, once the run is complete
       summary.json     estimates, intervals, ESS, timing, versions (SUMMARY_SCHEMA)
+      .lock            held by the process running in DIR (avrisk.pipeline.lock)
 
 Every file is written to a temporary name and renamed into place, so a run
 killed at any moment (even ``kill -9``) leaves only whole files. Rerunning the
@@ -37,6 +38,7 @@ SUMMARY_FILE = "summary.json"
 SAMPLES_FILE = "samples.parquet"
 CHECKPOINT_FILE = "checkpoint.json"
 CHUNKS_DIR = "chunks"
+LOCK_FILE = ".lock"
 
 #: Columns of the samples table besides the scenario parameters and extras.
 BOOKKEEPING = ("phase", "stage", "iteration", "chunk", "sample_id", "seed")
@@ -132,7 +134,9 @@ class RunDirectory:
                     "or delete this one"
                 )
             return
-        if self.path.exists() and any(self.path.iterdir()):
+        if self.path.exists() and any(
+            p.name != LOCK_FILE for p in self.path.iterdir()
+        ):
             raise RunDirectoryError(
                 f"{self.path} exists and is not an avrisk run directory "
                 f"(no {CONFIG_FILE}); choose an empty or new directory"
