@@ -14,7 +14,6 @@ chosen estimator does not have is refused by name.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Annotated, Any
@@ -23,7 +22,8 @@ import typer
 import yaml
 
 from avrisk.assembly import ScenarioSimulator, SimulationObjective, param_layout
-from avrisk.cli.common import CliError, user_errors
+from avrisk.cli.common import CliError, check_output_folder, user_errors
+from avrisk.cli.readback import check_recorded, check_samples, read_config
 from avrisk.cli.workflow import (
     EXPECTED,
     compare_runs,
@@ -36,6 +36,7 @@ from avrisk.cli.workflow import (
     write_run_report,
 )
 from avrisk.pipeline import RunSettings
+from avrisk.pipeline.store import SAMPLES_FILE
 from avrisk.rare import estimator_names
 from avrisk.rare.estimator import estimator_class
 from avrisk.scenario import load_spec, spec_from_dict
@@ -129,8 +130,7 @@ def _thresholds(text: str) -> tuple[float, ...]:
         values = (math.nan,)
     if not all(map(math.isfinite, values)):
         raise CliError(
-            f"--gamma-test must be finite numbers [s] separated by commas; got "
-            f"{text!r}"
+            f"--gamma-test must be finite numbers [s] separated by commas; got {text!r}"
         )
     return values
 
@@ -236,6 +236,7 @@ def run(
     planned size or at the first stopping rule given, and says which.
     """
     with user_errors(*EXPECTED):
+        check_output_folder(out)
         spec = load_spec(scenario)
         run_settings = _run_settings(
             method,
@@ -298,6 +299,7 @@ def compare(
     variance ratios per threshold.
     """
     with user_errors(*EXPECTED):
+        check_output_folder(out)
         tested = _run_settings(
             method,
             gamma,
@@ -345,7 +347,9 @@ def report(
         if not single and not parts:
             raise CliError(f"{run_dir} holds no avrisk run (no config.json)")
         dirs = [("run", run_dir)] if single else parts
-        config = json.loads((dirs[0][1] / "config.json").read_text())
+        for _, path in dirs:
+            check_recorded(path)
+        config = read_config(dirs[0][1])
         spec = spec_from_dict(config["scenario"], source=f"{dirs[0][1]}/config.json")
         simulator = None
         if scenario is not None:
@@ -366,6 +370,7 @@ def report(
                 raise CliError(
                     f"{path} is not finished; rerun its command to resume it"
                 )
+            check_samples(directory.path / SAMPLES_FILE, layout.columns)
             label = method_label(directory.config()["settings"]["method"])
             runs.append((label if single else f"{label} ({name})", directory))
         reference = dict(parts).get("reference")

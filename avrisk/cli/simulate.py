@@ -26,7 +26,6 @@ from typing import Annotated
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 import typer
 from rich.progress import (
     BarColumn,
@@ -45,7 +44,21 @@ from avrisk.assembly import (
     base_distribution,
     param_layout,
 )
-from avrisk.cli.common import CliError, err_console, out_console, user_errors
+from avrisk.cli.common import (
+    CliError,
+    check_output_file,
+    err_console,
+    out_console,
+    user_errors,
+)
+from avrisk.cli.readback import (
+    check_columns,
+    check_rows,
+    parse_json,
+    read_config,
+    read_schema,
+    read_table,
+)
 from avrisk.pipeline.store import (
     CONFIG_FILE,
     SAMPLES_FILE,
@@ -168,13 +181,13 @@ def spec_from_parquet(path: Path) -> ScenarioSpec:
     CliError
         If neither holds a (valid) scenario.
     """
-    meta = pq.read_schema(path).metadata or {}
+    meta = read_schema(path).metadata or {}
     if META_SCENARIO in meta:
-        stored = json.loads(meta[META_SCENARIO])
+        stored = parse_json(meta[META_SCENARIO], f"{path} (its stored scenario)")
         return spec_from_dict(stored, source=f"{path} (stored)")
     config = path.parent / CONFIG_FILE
     if config.is_file():
-        stored = json.loads(config.read_text()).get("scenario")
+        stored = read_config(path.parent)["scenario"]
         return spec_from_dict(stored, source=str(config))
     raise CliError(
         f"{path} carries no scenario (neither written by 'avrisk simulate' nor in "
@@ -188,12 +201,7 @@ def _check_out_path(out: Path, suffixes: Sequence[str]) -> None:
         raise CliError(
             f"--out {out}: expected a file ending in {' or '.join(suffixes)}"
         )
-    if not out.parent.is_dir():
-        raise CliError(
-            f"--out {out}: folder {out.parent} does not exist; create it first"
-        )
-    if out.is_dir():
-        raise CliError(f"--out {out}: is a folder; give a file name")
+    check_output_file(out)
 
 
 def _summary_table(table: pa.Table, wall_s: float) -> Table:
@@ -323,27 +331,27 @@ def replay(
         if not file.is_file():
             raise CliError(f"{file}: no such file")
         _check_out_path(out, (".gif",))
-        try:
-            table = pq.read_table(file)
-        except (pa.ArrowInvalid, OSError) as exc:
-            raise CliError(f"{file}: not a readable Parquet file: {exc}") from None
+        table = read_table(file)
         spec = load_spec(scenario) if scenario else spec_from_parquet(file)
         layout = param_layout(spec)
         if (rows is None) == (worst is None):
             raise CliError("give exactly one of --rows i,j,... or --worst K")
-        if rows is not None:
-            picked = _parse_rows(rows, table.num_rows)
-        else:
-            order = np.argsort(table.column("f").to_numpy(), kind="stable")
-            picked = [int(i) for i in order[:worst]]
         missing = [c for c in (*layout.columns, "seed") if c not in table.column_names]
         if missing:
             raise CliError(
                 f"{file}: lacks column(s) {missing[:4]} needed to replay scenario "
                 f"{spec.name!r}"
             )
+        with_f = ("f",) if "f" in table.column_names or worst is not None else ()
+        check_columns(table.schema, file, (*layout.columns, *with_f), ("seed",))
+        if rows is not None:
+            picked = _parse_rows(rows, table.num_rows)
+        else:
+            order = np.argsort(table.column("f").to_numpy(), kind="stable")
+            picked = [int(i) for i in order[:worst]]
         sub = table.take(picked)
         x = np.stack([sub.column(c).to_numpy() for c in layout.columns], axis=1)
+        check_rows(spec, layout.columns, x, picked, file)
         seeds = sub.column("seed").to_numpy()
         sim = ScenarioSimulator(spec, allow_import=scenario is not None)
         result, traces = resimulate(sim, x, seeds, [f"row {r}" for r in picked])

@@ -24,8 +24,9 @@ from avrisk.assembly import (
     param_layout,
     read_failure_traces,
 )
-from avrisk.cli.common import CliError, err_console, out_console
+from avrisk.cli.common import CliError, err_console, out_console, write_failures
 from avrisk.cli.progress import RichRunMonitor
+from avrisk.cli.readback import check_recorded
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
 from avrisk.pipeline.provenance import (
     ProvenanceMismatchError,
@@ -78,6 +79,7 @@ def execute(
     as the run goes (``out/failures.parquet``), for its report (none: no
     traces are recorded).
     """
+    check_recorded(out)  # a damaged config or summary: one line, not a traceback
     run_dir = samples_directory(out, objective.layout)
     base = base_distribution(objective.simulator.spec)
     definition = objective.definition()
@@ -86,7 +88,11 @@ def execute(
             out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
         )
         objective = objective.recording(recorder)
-    with RichRunMonitor(err_console, label) as monitor:
+    resume = (
+        "what was recorded is kept: free space (or fix the folder) and rerun the "
+        "same command to resume"
+    )
+    with write_failures(out, resume), RichRunMonitor(err_console, label) as monitor:
         run_estimation(
             run_dir,
             base,
@@ -203,17 +209,19 @@ def write_run_report(
             return animate_samples(simulator, [row], path)
         return None
 
-    path = write_report(
-        out,
-        runs,
-        title=f"avrisk: {spec.name}",
-        subtitle=spec.description or "",
-        reference=reference,
-        failures_from=failures_from,
-        n_failures=failures,
-        param_names=param_layout(spec).columns,
-        animate=animate,
-    )
+    then = f"the run itself is complete: free space, then 'avrisk report {out}'"
+    with write_failures(out, then):
+        path = write_report(
+            out,
+            runs,
+            title=f"avrisk: {spec.name}",
+            subtitle=spec.description or "",
+            reference=reference,
+            failures_from=failures_from,
+            n_failures=failures,
+            param_names=param_layout(spec).columns,
+            animate=animate,
+        )
     err_console.print(f"report: {path}")
     return path
 

@@ -32,11 +32,12 @@ def run_lock(directory: Path) -> Iterator[None]:
         if directory.exists() and not directory.is_dir():
             raise RunDirectoryError(f"{directory} is a file, not a run directory")
         directory.mkdir(parents=True, exist_ok=True)
-        fd = os.open(directory / LOCK_FILE, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC)
+        fd = os.open(
+            directory / LOCK_FILE, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644
+        )
     except OSError as exc:
         raise RunDirectoryError(
-            f"{directory}: cannot be used as a run directory: "
-            f"{exc.strerror or exc}"
+            f"{directory}: cannot be used as a run directory: {exc.strerror or exc}"
         ) from None
     try:
         try:

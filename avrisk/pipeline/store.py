@@ -18,6 +18,7 @@ same command replays the recorded chunks (bit-identical numbers, see
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -134,9 +135,7 @@ class RunDirectory:
                     "or delete this one"
                 )
             return
-        if self.path.exists() and any(
-            p.name != LOCK_FILE for p in self.path.iterdir()
-        ):
+        if self.path.exists() and any(p.name != LOCK_FILE for p in self.path.iterdir()):
             raise RunDirectoryError(
                 f"{self.path} exists and is not an avrisk run directory "
                 f"(no {CONFIG_FILE}); choose an empty or new directory"
@@ -258,11 +257,15 @@ class RunDirectory:
                 if writer is None:
                     writer = pq.ParquetWriter(tmp, schema)
                 writer.write_table(_conformed(table, schema))
-        finally:
             if writer is not None:
                 writer.close()
-        if writer is not None:
-            os.replace(tmp, target)
+                os.replace(tmp, target)
+        except BaseException:
+            if writer is not None:
+                with contextlib.suppress(Exception):
+                    writer.close()
+            tmp.unlink(missing_ok=True)  # a full disk leaves no stray temporary
+            raise
         summary = {"schema": SUMMARY_SCHEMA, **summary}
         write_json(self.path / SUMMARY_FILE, summary)
         shutil.rmtree(self.path / CHUNKS_DIR, ignore_errors=True)

@@ -51,8 +51,7 @@ class SpecModel(BaseModel):
 
 
 def _number_kind(annotation: Any) -> str | None:
-    """``"number"`` for an int or float field (optional or not), ``"numbers"``
-    for a tuple of them, else None."""
+    """``"number"``: an int or float field; ``"numbers"``: a tuple of them."""
     args = typing.get_args(annotation)
     if typing.get_origin(annotation) in (typing.Union, types.UnionType):
         kinds = {_number_kind(a) for a in args if a is not type(None)}

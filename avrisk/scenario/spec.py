@@ -143,9 +143,7 @@ class ScenarioSpec(SpecModel):
     """
 
     name: str = Field(description="Short identifier of the scenario.")
-    description: str = Field(
-        "", max_length=10_000, description="Free text for people."
-    )
+    description: str = Field("", max_length=10_000, description="Free text for people.")
     road: RoadSpec = Field(RoadSpec(), description="Road geometry.")
     initial_conditions: InitialConditionsSpec = Field(
         InitialConditionsSpec(),
