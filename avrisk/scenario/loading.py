@@ -147,6 +147,20 @@ class _SpecLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
+def _construct_int(loader: yaml.SafeLoader, node: Any) -> Any:
+    """YAML's int, refusing one too long to convert (Python's digit limit)."""
+    try:
+        return yaml.SafeLoader.construct_yaml_int(loader, node)
+    except ValueError:
+        raise _RefusedYAML(
+            f"line {node.start_mark.line + 1}: an integer of {len(node.value):,} "
+            "characters; is this the right file?"
+        ) from None
+
+
+_SpecLoader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+
+
 def _children(node: Any) -> list[Any]:
     if isinstance(node, yaml.SequenceNode):
         return list(node.value)
