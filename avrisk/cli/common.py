@@ -119,21 +119,19 @@ def _check_writable(folder: Path, path: Path, flag: str) -> None:
         ) from None
 
 
-#: Error numbers of a write that failed for want of room or permission.
-_WRITE_ERRORS = {
-    errno.ENOSPC,
-    errno.EDQUOT,
-    errno.EFBIG,
-    errno.EROFS,
-    errno.EACCES,
-    errno.EPERM,
-    errno.EIO,
-}
+#: Error numbers of a write that failed for want of room, anywhere.
+_NO_ROOM = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS}
+#: Error numbers of a write refused, when the file is one of ours.
+_REFUSED = {errno.EACCES, errno.EPERM, errno.EIO}
 
 
-def is_write_failure(exc: OSError) -> bool:
-    """Whether ``exc`` is a failed write (a full disk, a read-only folder ...)."""
-    return exc.errno in _WRITE_ERRORS or "No space left" in str(exc)
+def is_write_failure(exc: OSError, where: Path) -> bool:
+    """Whether ``exc`` is a failed write under ``where`` (a full disk ...)."""
+    if exc.errno in _NO_ROOM or "No space left" in str(exc):
+        return True
+    if exc.errno in _REFUSED and exc.filename:
+        return Path(str(exc.filename)).resolve().is_relative_to(where.resolve())
+    return False
 
 
 @contextmanager
@@ -146,7 +144,7 @@ def write_failures(where: Path, then: str) -> Iterator[None]:
     try:
         yield
     except OSError as exc:
-        if not is_write_failure(exc):
+        if not is_write_failure(exc, where):
             raise
         reason = exc.strerror or str(exc).splitlines()[0]
         file = f" ({exc.filename})" if exc.filename else ""

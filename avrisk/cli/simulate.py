@@ -50,6 +50,7 @@ from avrisk.cli.common import (
     err_console,
     out_console,
     user_errors,
+    write_failures,
 )
 from avrisk.cli.readback import (
     check_columns,
@@ -331,6 +332,8 @@ def replay(
         if not file.is_file():
             raise CliError(f"{file}: no such file")
         _check_out_path(out, (".gif",))
+        if frame_png is not None:
+            check_output_file(frame_png, "--frame-png")
         table = read_table(file)
         spec = load_spec(scenario) if scenario else spec_from_parquet(file)
         layout = param_layout(spec)
@@ -364,17 +367,23 @@ def replay(
                     f"(stored {stored.tolist()}, now {again.tolist()}); was the "
                     "simulator or scenario changed?"
                 )
-        animate_rollouts(
-            traces, spec.road, spec.simulation.dt, out, fps=fps, view_length=view_length
-        )
-        if frame_png is not None:
-            save_frame_png(
+        with write_failures(out.parent, "free space and rerun the command"):
+            animate_rollouts(
                 traces,
                 spec.road,
                 spec.simulation.dt,
-                frame_png,
+                out,
+                fps=fps,
                 view_length=view_length,
             )
+            if frame_png is not None:
+                save_frame_png(
+                    traces,
+                    spec.road,
+                    spec.simulation.dt,
+                    frame_png,
+                    view_length=view_length,
+                )
     for r, tr in zip(picked, traces, strict=True):
         out_console.print(
             f"row {r}: min TTC {tr.min_ttc:.3g} s"

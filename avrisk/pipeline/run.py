@@ -219,18 +219,25 @@ def run_estimation(
     """
     created = not run_dir.path.exists()
     with run_lock(run_dir.path):
-        return _run_locked(
-            run_dir,
-            created,
-            base,
-            f,
-            settings,
-            context=context,
-            monitor=monitor,
-            evaluator=evaluator,
-            provenance=provenance,
-            mechanisms=mechanisms,
-        )
+        try:
+            return _run_locked(
+                run_dir,
+                created,
+                base,
+                f,
+                settings,
+                context=context,
+                monitor=monitor,
+                evaluator=evaluator,
+                provenance=provenance,
+                mechanisms=mechanisms,
+            )
+        except BaseException:
+            # Even a failure to write config.json (a full disk) leaves nothing
+            # that would make the next run refuse the directory.
+            if created and not run_dir.has_recorded_chunks():
+                run_dir.discard()
+            raise
 
 
 def _run_locked(

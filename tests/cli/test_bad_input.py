@@ -269,6 +269,26 @@ def test_a_disk_full_while_recording_a_chunk_leaves_a_resumable_run(
     _same_estimate(out, clean_estimate)
 
 
+@pytest.mark.parametrize("name", ["config.json", "checkpoint.json"])
+def test_a_disk_full_before_any_chunk_leaves_no_directory(
+    short_scenario, tmp_path, monkeypatch, name
+):
+    out = tmp_path / "run"
+    real = Path.write_bytes
+
+    def fills_up(self, data):
+        if self.name.startswith(f".{name}.tmp-"):
+            raise _full_disk(self)
+        return real(self, data)
+
+    monkeypatch.setattr(Path, "write_bytes", fills_up)
+    one_error(
+        invoke("run", short_scenario, "--out", out, *SMALL), "No space left on device"
+    )
+    # The first chunk is recorded before the first checkpoint: that run resumes.
+    assert not out.exists() if name == "config.json" else _stray_temporaries(out) == []
+
+
 def test_a_disk_full_while_gathering_the_samples_leaves_a_resumable_run(
     short_scenario, tmp_path, monkeypatch, clean_estimate
 ):
