@@ -26,6 +26,7 @@ from avrisk.cli.common import CliError, check_output_folder, user_errors
 from avrisk.cli.readback import check_recorded, check_samples, read_config
 from avrisk.cli.workflow import (
     EXPECTED,
+    check_thresholds,
     compare_runs,
     comparison_parts,
     execute,
@@ -258,6 +259,7 @@ def run(
             max_rollouts=max_rollouts,
             max_seconds=max_time,
         )
+        check_thresholds(spec, run_settings)
         objective = SimulationObjective(spec, device=device, allow_import=True)
         label = method_label(method)
         run_dir = execute(

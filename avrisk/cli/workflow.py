@@ -65,6 +65,28 @@ def settings(method: str, **kwargs: Any) -> RunSettings:
         raise CliError(str(err).strip('"')) from None
 
 
+#: Registered safety measures that are never negative (a time to collision).
+NON_NEGATIVE_MEASURES = ("min_ttc", "min_box_ttc")
+
+
+def check_thresholds(spec: ScenarioSpec, run_settings: RunSettings) -> None:
+    """Refuse a negative threshold on a measure that is never negative.
+
+    ``P(min TTC <= gamma)`` is 0 for every ``gamma < 0``: such a run would
+    spend its rollouts to report a certain zero. A measure of the user's own
+    may be negative, and is not checked.
+    """
+    if spec.safety.measure not in NON_NEGATIVE_MEASURES:
+        return
+    negative = [g for g in (run_settings.gamma, *run_settings.gamma_test) if g < 0]
+    if negative:
+        raise CliError(
+            f"threshold {negative[0]:g} s is negative, but {spec.safety.measure} "
+            "(a time to collision) never is: P(min TTC <= gamma) would be 0; "
+            "give --gamma and --gamma-test >= 0"
+        )
+
+
 def execute(
     label: str,
     out: Path,
@@ -241,6 +263,7 @@ def compare_runs(
     ``reference_n``) to ``out/reference``.
     """
     spec = load_spec(scenario)
+    check_thresholds(spec, tested)
     objective = SimulationObjective(spec, device=device, allow_import=True)
     spec_json = spec.model_dump(mode="json")
     shared = dict(

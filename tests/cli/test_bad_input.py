@@ -101,6 +101,19 @@ def test_a_non_finite_threshold_is_refused_before_any_work(
     assert not out.exists()
 
 
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--gamma", "-0.1"), ("--gamma-test", "0.1,-1")]
+)
+def test_a_negative_threshold_on_a_time_to_collision_is_refused(
+    tmp_path, command, flag, value
+):
+    out = tmp_path / "out"
+    result = invoke(*COMMANDS[command], "--out", out, flag, value)
+    one_error(result, "is negative", "min_box_ttc")
+    assert not out.exists()
+
+
 @pytest.mark.parametrize(
     "kwargs",
     [{"gamma": float("nan")}, {"gamma": np.inf}, {"gamma_test": [0.1, np.nan]}],
