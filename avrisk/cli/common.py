@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import errno
+import tempfile
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Annotated, Any
 
 import typer
@@ -42,7 +45,9 @@ def user_errors(*expected: type[Exception]) -> Iterator[None]:
             yield
     except (CliError, *expected) as exc:
         err_console.print(
-            f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True
+            f"[bold red]error:[/] {escape(_clipped(str(exc)))}",
+            highlight=False,
+            soft_wrap=True,
         )
         raise typer.Exit(code=2) from None
 
@@ -102,3 +107,102 @@ Device = Annotated[
         "cuda or cuda:N.",
     ),
 ]
+
+
+#: Longest line of an error message printed; a longer one (a huge value echoed
+#: back) is cut, saying by how much.
+MAX_MESSAGE_LINE = 500
+
+
+def _clipped(message: str) -> str:
+    return "\n".join(
+        line
+        if len(line) <= MAX_MESSAGE_LINE
+        else f"{line[:MAX_MESSAGE_LINE]}... ({len(line) - MAX_MESSAGE_LINE:,} "
+        "more characters)"
+        for line in message.splitlines()
+    )
+
+
+def check_output_folder(path: Path, flag: str = "--out") -> None:
+    """Refuse, before any work, a folder to write in that cannot be written.
+
+    ``path`` (a run directory, made if missing) must not be a file nor lie
+    under one, and its nearest existing folder must take a scratch file (a
+    read-only file system or a folder without write permission does not).
+
+    Raises
+    ------
+    CliError
+    """
+    if path.exists() and not path.is_dir():
+        raise CliError(f"{flag} {path}: is a file; give a folder (new or a run's)")
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise CliError(
+            f"{flag} {path}: {existing} is a file, so no folder can be made there"
+        )
+    _check_writable(existing, path, flag)
+
+
+def check_output_file(path: Path, flag: str = "--out") -> None:
+    """Refuse, before any work, a file to write that cannot be written.
+
+    Raises
+    ------
+    CliError
+        If ``path`` is a folder, its folder does not exist (or is a file) or
+        cannot be written in.
+    """
+    if path.is_dir():
+        raise CliError(f"{flag} {path}: is a folder; give a file name")
+    if not path.parent.is_dir():
+        raise CliError(
+            f"{flag} {path}: folder {path.parent} does not exist; create it first"
+        )
+    _check_writable(path.parent, path, flag)
+
+
+def _check_writable(folder: Path, path: Path, flag: str) -> None:
+    """Write a scratch file in ``folder``: the only sure test (root, read-only FS)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise CliError(
+            f"{flag} {path}: cannot write in {folder}: {exc.strerror or exc}"
+        ) from None
+
+
+#: Error numbers of a write that failed for want of room, anywhere.
+_NO_ROOM = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS}
+#: Error numbers of a write refused, when the file is one of ours.
+_REFUSED = {errno.EACCES, errno.EPERM, errno.EIO}
+
+
+def is_write_failure(exc: OSError, where: Path) -> bool:
+    """Whether ``exc`` is a failed write under ``where`` (a full disk ...)."""
+    if exc.errno in _NO_ROOM or "No space left" in str(exc):
+        return True
+    if exc.errno in _REFUSED and exc.filename:
+        return Path(str(exc.filename)).resolve().is_relative_to(where.resolve())
+    return False
+
+
+@contextmanager
+def write_failures(where: Path, then: str) -> Iterator[None]:
+    """Turn a failed write under ``where`` into one CliError line ending ``then``.
+
+    Only write failures (:func:`is_write_failure`): a full disk, a read-only
+    file system, a permission or quota; other OSErrors propagate.
+    """
+    try:
+        yield
+    except OSError as exc:
+        if not is_write_failure(exc, where):
+            raise
+        reason = exc.strerror or str(exc).splitlines()[0]
+        file = f" ({exc.filename})" if exc.filename else ""
+        raise CliError(f"{where}: cannot write{file}: {reason}; {then}") from None

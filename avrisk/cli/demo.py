@@ -18,7 +18,12 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from avrisk.cli.common import out_console, user_errors
+from avrisk.cli.common import (
+    check_output_file,
+    check_output_folder,
+    out_console,
+    user_errors,
+)
 from avrisk.cli.progress import RichRunMonitor
 from avrisk.cli.workflow import EXPECTED, compare_runs, settings
 from avrisk.rare import CrossEntropy, Estimate, cross_entropy, naive_mc
@@ -75,6 +80,11 @@ def demo(
     bundled highway_default scenario (the lidar imitation ego in learned
     traffic), with its report under --scenario-out.
     """
+    with user_errors():
+        if out is not None:
+            check_output_file(out)
+        if rollouts:
+            check_output_folder(scenario_out, "--scenario-out")
     console = out_console
     problems = [beta_sum_problem(6, p=1e-5), gaussian_linear_problem(100, p=1e-6)]
     n_iter, n_per_iter = 8, max(100, budget // 25)

@@ -14,18 +14,20 @@ chosen estimator does not have is refused by name.
 
 from __future__ import annotations
 
-import json
+import math
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 import yaml
 
-from avrisk.assembly import ScenarioSimulator, SimulationObjective
+from avrisk.assembly import ScenarioSimulator, SimulationObjective, param_layout
 from avrisk.cli.backends import Address, Backend, BackendOption, Workers, open_evaluator
-from avrisk.cli.common import CliError, Device, user_errors
+from avrisk.cli.common import CliError, Device, check_output_folder, user_errors
+from avrisk.cli.readback import check_recorded, check_samples, read_config
 from avrisk.cli.workflow import (
     EXPECTED,
+    check_thresholds,
     compare_runs,
     comparison_parts,
     execute,
@@ -36,6 +38,7 @@ from avrisk.cli.workflow import (
     write_run_report,
 )
 from avrisk.pipeline import RunSettings
+from avrisk.pipeline.store import SAMPLES_FILE
 from avrisk.rare import estimator_names
 from avrisk.rare.estimator import estimator_class
 from avrisk.scenario import load_spec, spec_from_dict
@@ -123,11 +126,21 @@ Failures = Annotated[int, typer.Option(min=0, help="Most likely failures to anim
 
 def _thresholds(text: str) -> tuple[float, ...]:
     try:
-        return tuple(float(t) for t in text.split(",") if t.strip())
+        values = tuple(float(t) for t in text.split(",") if t.strip())
     except ValueError:
+        values = (math.nan,)
+    if not all(map(math.isfinite, values)):
         raise CliError(
-            f"--gamma-test must be numbers separated by commas; got {text!r}"
-        ) from None
+            f"--gamma-test must be finite numbers [s] separated by commas; got {text!r}"
+        )
+    return values
+
+
+def _threshold(gamma: float) -> float:
+    """``--gamma``, refused before any work unless a finite number."""
+    if not math.isfinite(gamma):
+        raise CliError(f"--gamma must be a finite number [s]; got {gamma}")
+    return gamma
 
 
 def estimator_options(
@@ -186,7 +199,7 @@ def _run_settings(
     """Run settings from a command's options; ``flags``: the estimator flags."""
     return settings(
         method,
-        gamma=gamma,
+        gamma=_threshold(gamma),
         gamma_test=_thresholds(gamma_test),
         seed=seed,
         batch_size=batch_size,
@@ -234,6 +247,7 @@ def run(
     planned size or at the first stopping rule given, and says which.
     """
     with user_errors(*EXPECTED):
+        check_output_folder(out)
         spec = load_spec(scenario)
         run_settings = _run_settings(
             method,
@@ -255,6 +269,7 @@ def run(
             max_rollouts=max_rollouts,
             max_seconds=max_time,
         )
+        check_thresholds(spec, run_settings)
         objective = SimulationObjective(spec, device=device, allow_import=True)
         label = method_label(method)
         with open_evaluator(objective, backend, workers, address) as evaluator:
@@ -307,6 +322,7 @@ def compare(
     variance ratios per threshold.
     """
     with user_errors(*EXPECTED):
+        check_output_folder(out)
         tested = _run_settings(
             method,
             gamma,
@@ -362,7 +378,9 @@ def report(
         if not single and not parts:
             raise CliError(f"{run_dir} holds no avrisk run (no config.json)")
         dirs = [("run", run_dir)] if single else parts
-        config = json.loads((dirs[0][1] / "config.json").read_text())
+        for _, path in dirs:
+            check_recorded(path)
+        config = read_config(dirs[0][1])
         spec = spec_from_dict(config["scenario"], source=f"{dirs[0][1]}/config.json")
         simulator = None
         if scenario is not None:
@@ -375,6 +393,7 @@ def report(
             simulator = ScenarioSimulator(given, device=device, allow_import=True)
         elif not spec.import_paths():
             simulator = ScenarioSimulator(spec, device=device)
+        layout = param_layout(spec)
         runs = []
         for name, path in dirs:
             directory = samples_directory(path, spec)
@@ -382,6 +401,7 @@ def report(
                 raise CliError(
                     f"{path} is not finished; rerun its command to resume it"
                 )
+            check_samples(directory.path / SAMPLES_FILE, layout.columns)
             label = method_label(directory.config()["settings"]["method"])
             runs.append((label if single else f"{label} ({name})", directory))
         reference = dict(parts).get("reference")

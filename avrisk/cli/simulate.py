@@ -26,7 +26,6 @@ from typing import Annotated
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 import typer
 from rich.progress import (
     BarColumn,
@@ -45,9 +44,26 @@ from avrisk.assembly import (
     base_distribution,
     param_layout,
 )
-from avrisk.cli.common import CliError, Device, err_console, out_console, user_errors
+from avrisk.cli.common import (
+    CliError,
+    Device,
+    check_output_file,
+    err_console,
+    out_console,
+    user_errors,
+    write_failures,
+)
+from avrisk.cli.readback import (
+    check_columns,
+    check_rows,
+    parse_json,
+    read_config,
+    read_schema,
+    read_table,
+    stored_params,
+)
 from avrisk.pipeline.files import write_parquet_atomic
-from avrisk.pipeline.regenerate import META_KEY, RegenerationError
+from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE, RunDirectory, samples_table
 from avrisk.rare import RareEventProblem, StageBatch, run_stage
 from avrisk.rare.problem import FINAL_STAGE
@@ -165,13 +181,13 @@ def spec_from_parquet(path: Path) -> ScenarioSpec:
     CliError
         If neither holds a (valid) scenario.
     """
-    meta = pq.read_schema(path).metadata or {}
+    meta = read_schema(path).metadata or {}
     if META_SCENARIO in meta:
-        stored = json.loads(meta[META_SCENARIO])
+        stored = parse_json(meta[META_SCENARIO], f"{path} (its stored scenario)")
         return spec_from_dict(stored, source=f"{path} (stored)")
     config = path.parent / CONFIG_FILE
     if config.is_file():
-        stored = json.loads(config.read_text()).get("scenario")
+        stored = read_config(path.parent)["scenario"]
         return spec_from_dict(stored, source=str(config))
     raise CliError(
         f"{path} carries no scenario (neither written by 'avrisk simulate' nor in "
@@ -185,12 +201,7 @@ def _check_out_path(out: Path, suffixes: Sequence[str]) -> None:
         raise CliError(
             f"--out {out}: expected a file ending in {' or '.join(suffixes)}"
         )
-    if not out.parent.is_dir():
-        raise CliError(
-            f"--out {out}: folder {out.parent} does not exist; create it first"
-        )
-    if out.is_dir():
-        raise CliError(f"--out {out}: is a folder; give a file name")
+    check_output_file(out)
 
 
 def _summary_table(table: pa.Table, wall_s: float) -> Table:
@@ -318,21 +329,23 @@ def replay(
         if not file.is_file():
             raise CliError(f"{file}: no such file")
         _check_out_path(out, (".gif",))
-        try:
-            table = pq.read_table(file)
-        except (pa.ArrowInvalid, OSError) as exc:
-            raise CliError(f"{file}: not a readable Parquet file: {exc}") from None
+        if frame_png is not None:
+            check_output_file(frame_png, "--frame-png")
+        table = read_table(file)
         spec = load_spec(scenario) if scenario else spec_from_parquet(file)
         layout = param_layout(spec)
         if (rows is None) == (worst is None):
             raise CliError("give exactly one of --rows i,j,... or --worst K")
+        stored = stored_params(table.schema, layout.columns)
+        with_f = ("f",) if "f" in table.column_names or worst is not None else ()
+        check_columns(table.schema, file, (*stored, *with_f), ("seed",))
         if rows is not None:
             picked = _parse_rows(rows, table.num_rows)
         else:
             order = np.argsort(table.column("f").to_numpy(), kind="stable")
             picked = [int(i) for i in order[:worst]]
         sub = table.take(picked)
-        if META_KEY in (table.schema.metadata or {}):  # a run's, xi left out
+        if len(stored) < len(layout.columns):  # a run's table, xi left out
             base = base_distribution(spec)
             run_dir = RunDirectory(file.parent, layout.columns, base=base)
             sub = run_dir.samples(rows=picked)
@@ -343,6 +356,7 @@ def replay(
                 f"{spec.name!r}"
             )
         x = np.stack([sub.column(c).to_numpy() for c in layout.columns], axis=1)
+        check_rows(spec, layout.columns, x, picked, file)
         seeds = sub.column("seed").to_numpy()
         sim = ScenarioSimulator(spec, allow_import=scenario is not None)
         result, traces = resimulate(sim, x, seeds, [f"row {r}" for r in picked])
@@ -355,17 +369,23 @@ def replay(
                     f"(stored {stored.tolist()}, now {again.tolist()}); was the "
                     "simulator or scenario changed?"
                 )
-        animate_rollouts(
-            traces, spec.road, spec.simulation.dt, out, fps=fps, view_length=view_length
-        )
-        if frame_png is not None:
-            save_frame_png(
+        with write_failures(out.parent, "free space and rerun the command"):
+            animate_rollouts(
                 traces,
                 spec.road,
                 spec.simulation.dt,
-                frame_png,
+                out,
+                fps=fps,
                 view_length=view_length,
             )
+            if frame_png is not None:
+                save_frame_png(
+                    traces,
+                    spec.road,
+                    spec.simulation.dt,
+                    frame_png,
+                    view_length=view_length,
+                )
     for r, tr in zip(picked, traces, strict=True):
         out_console.print(
             f"row {r}: min TTC {tr.min_ttc:.3g} s"

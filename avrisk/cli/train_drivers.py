@@ -20,11 +20,13 @@ from __future__ import annotations
 
 import os
 import tempfile
+import zlib
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
+import pyarrow as pa
 import typer
 from rich.console import Console
 from rich.markup import escape
@@ -123,13 +125,34 @@ def training_progress(console: Console) -> Iterator[Callable[[TrainEvent], None]
 
 
 def _data_folder(data_dir: Path | None) -> Path:
-    """The NGSIM folder to train on, checked to hold the files training reads."""
+    """The NGSIM folder to train on, checked to hold the files training reads.
+
+    Each file is read once here, before minutes of training: a garbage
+    Parquet or gzip file, or one with missing or mistyped columns, is one
+    CliError naming the file.
+    """
+    from avrisk.learning.ngsim import load_i80_lateral, load_i80_pairs
+
     try:
-        for names in (I80_PAIRS, I80_LATERAL):
-            ngsim_file(names, data_dir)
+        files = [ngsim_file(names, data_dir) for names in (I80_PAIRS, I80_LATERAL)]
     except FileNotFoundError as exc:
         raise CliError(f"{exc} (--data-dir)") from None
+    for path, load in zip(files, (load_i80_pairs, load_i80_lateral), strict=True):
+        try:
+            load(path)
+        except (pa.ArrowException, OSError, EOFError, zlib.error) as exc:
+            raise CliError(_unreadable(path, exc, "not readable")) from None
+        except (ValueError, KeyError, TypeError, IndexError) as exc:
+            raise CliError(_unreadable(path, exc, "not NGSIM data")) from None
     return ngsim_dir(data_dir)
+
+
+def _unreadable(path: Path, exc: BaseException, what: str) -> str:
+    reason = str(exc).replace(f"{path} ", "").splitlines()[0] if str(exc) else ""
+    reason = reason or type(exc).__name__
+    if len(reason) > 200:
+        reason = reason[:200] + "..."
+    return f"--data-dir: {path}: {what} ({reason}); see SOURCE.md for its format"
 
 
 def _check_writable(out: Path) -> None:

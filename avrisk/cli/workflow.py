@@ -25,8 +25,9 @@ from avrisk.assembly import (
     read_failure_traces,
 )
 from avrisk.cli.backends import Backend, open_evaluator
-from avrisk.cli.common import CliError, err_console, out_console
+from avrisk.cli.common import CliError, err_console, out_console, write_failures
 from avrisk.cli.progress import RichRunMonitor
+from avrisk.cli.readback import check_recorded
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
 from avrisk.pipeline.provenance import (
     ProvenanceMismatchError,
@@ -72,6 +73,28 @@ def settings(method: str, **kwargs: Any) -> RunSettings:
         raise CliError(str(err).strip('"')) from None
 
 
+#: Registered safety measures that are never negative (a time to collision).
+NON_NEGATIVE_MEASURES = ("min_ttc", "min_box_ttc")
+
+
+def check_thresholds(spec: ScenarioSpec, run_settings: RunSettings) -> None:
+    """Refuse a negative threshold on a measure that is never negative.
+
+    ``P(min TTC <= gamma)`` is 0 for every ``gamma < 0``: such a run would
+    spend its rollouts to report a certain zero. A measure of the user's own
+    may be negative, and is not checked.
+    """
+    if spec.safety.measure not in NON_NEGATIVE_MEASURES:
+        return
+    negative = [g for g in (run_settings.gamma, *run_settings.gamma_test) if g < 0]
+    if negative:
+        raise CliError(
+            f"threshold {negative[0]:g} s is negative, but {spec.safety.measure} "
+            "(a time to collision) never is: P(min TTC <= gamma) would be 0; "
+            "give --gamma and --gamma-test >= 0"
+        )
+
+
 def execute(
     label: str,
     out: Path,
@@ -95,6 +118,7 @@ def execute(
     objective that is not repeatable stops the run (an external AV that
     ignores its seeds).
     """
+    check_recorded(out)  # a damaged config or summary: one line, not a traceback
     base = base_distribution(objective.simulator.spec)
     run_dir = samples_directory(out, objective.simulator.spec, store_full=store_full)
     definition = objective.definition()
@@ -104,7 +128,11 @@ def execute(
             out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
         )
         objective = objective.recording(recorder)
-    with RichRunMonitor(err_console, label) as monitor:
+    resume = (
+        "what was recorded is kept: free space (or fix the folder) and rerun the "
+        "same command to resume"
+    )
+    with write_failures(out, resume), RichRunMonitor(err_console, label) as monitor:
         run_estimation(
             run_dir,
             base,
@@ -240,17 +268,19 @@ def write_run_report(
             return animate_samples(simulator, [row], path)
         return None
 
-    path = write_report(
-        out,
-        runs,
-        title=f"avrisk: {spec.name}",
-        subtitle=spec.description or "",
-        reference=reference,
-        failures_from=failures_from,
-        n_failures=failures,
-        param_names=param_layout(spec).columns,
-        animate=animate,
-    )
+    then = f"the run itself is complete: free space, then 'avrisk report {out}'"
+    with write_failures(out, then):
+        path = write_report(
+            out,
+            runs,
+            title=f"avrisk: {spec.name}",
+            subtitle=spec.description or "",
+            reference=reference,
+            failures_from=failures_from,
+            n_failures=failures,
+            param_names=param_layout(spec).columns,
+            animate=animate,
+        )
     err_console.print(f"report: {path}")
     return path
 
@@ -272,6 +302,7 @@ def compare_runs(
     ``--workers`` and ``--address`` (:mod:`avrisk.cli.backends`).
     """
     spec = load_spec(scenario)
+    check_thresholds(spec, tested)
     objective = SimulationObjective(spec, device=device, allow_import=True)
     spec_json = spec.model_dump(mode="json")
     shared = dict(

@@ -17,6 +17,7 @@ from typing import Any, Protocol
 import numpy as np
 
 import avrisk
+from avrisk.pipeline.lock import run_lock
 from avrisk.pipeline.mechanisms import decompose
 from avrisk.pipeline.repeatability import check_repeatable
 from avrisk.pipeline.store import RunDirectory
@@ -92,6 +93,9 @@ class RunSettings:
         self.method = method
         self.gamma = float(gamma)
         self.gamma_test = tuple(float(g) for g in threshold_list(gamma_test))
+        for name, value in (("gamma", self.gamma), ("gamma_test", self.gamma_test)):
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"{name} must be finite numbers; got {value}")
         self.seed = seed
         self.batch_size = batch_size
         self.estimator: Estimator[Any, Any] = get_estimator(method, **options)
@@ -215,10 +219,54 @@ def run_estimation(
     -------
     dict
         The summary written to ``summary.json``.
+
+    Raises
+    ------
+    RunDirectoryError
+        If another process is running in ``run_dir`` (:func:`run_lock`), or it
+        holds a different run.
     """
+    created = not run_dir.path.exists()
+    with run_lock(run_dir.path):
+        try:
+            return _run_locked(
+                run_dir,
+                created,
+                base,
+                f,
+                settings,
+                context=context,
+                monitor=monitor,
+                evaluator=evaluator,
+                provenance=provenance,
+                mechanisms=mechanisms,
+                replay_check=replay_check,
+            )
+        except BaseException:
+            # Even a failure to write config.json (a full disk) leaves nothing
+            # that would make the next run refuse the directory.
+            if created and not run_dir.has_recorded_chunks():
+                run_dir.discard()
+            raise
+
+
+def _run_locked(
+    run_dir: RunDirectory,
+    created: bool,
+    base: ExponentialFamily,
+    f: Callable[..., Any],
+    settings: RunSettings,
+    *,
+    context: dict[str, Any] | None = None,
+    monitor: RunMonitor | None = None,
+    evaluator: Evaluator | None = None,
+    provenance: dict[str, Any] | None = None,
+    mechanisms: tuple[str, Mapping[int, str]] | None = None,
+    replay_check: Callable[..., Any] | None = None,
+) -> dict[str, Any]:
+    """:func:`run_estimation` in its locked directory (``created`` by this run)."""
     monitor = monitor or SilentMonitor()
     config = {"settings": settings.to_dict(), **(context or {})}
-    created = not run_dir.path.exists()
     run_dir.claim(config)
     if run_dir.is_complete:
         if not run_dir.has_failed_samples():

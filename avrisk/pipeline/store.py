@@ -9,6 +9,7 @@
       proposals.json   each stage's proposal, to draw its large blocks again
       samples.parquet  every rollout of every stage, once the run is complete
       summary.json     estimates, intervals, ESS, timing, versions (SUMMARY_SCHEMA)
+      .lock            held by the process running in DIR (avrisk.pipeline.lock)
 
 Every file is written to a temporary name and renamed into place, so a run
 killed at any moment (even ``kill -9``) leaves only whole files. Rerunning the
@@ -23,6 +24,7 @@ and draws them again, checked, when they are read
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -52,6 +54,7 @@ SUMMARY_FILE = "summary.json"
 SAMPLES_FILE = "samples.parquet"
 CHECKPOINT_FILE = "checkpoint.json"
 CHUNKS_DIR = "chunks"
+LOCK_FILE = ".lock"
 
 #: Columns of the samples table besides the scenario parameters and extras.
 BOOKKEEPING = ("phase", "stage", "iteration", "chunk", "sample_id", "seed")
@@ -134,7 +137,7 @@ class RunDirectory:
                     "or delete this one"
                 )
             return
-        if self.path.exists() and any(self.path.iterdir()):
+        if self.path.exists() and any(p.name != LOCK_FILE for p in self.path.iterdir()):
             raise RunDirectoryError(
                 f"{self.path} exists and is not an avrisk run directory "
                 f"(no {CONFIG_FILE}); choose an empty or new directory"
@@ -300,11 +303,15 @@ class RunDirectory:
                 if writer is None:
                     writer = pq.ParquetWriter(tmp, schema)
                 writer.write_table(_conformed(table, schema))
-        finally:
             if writer is not None:
                 writer.close()
-        if writer is not None:
-            os.replace(tmp, target)
+                os.replace(tmp, target)
+        except BaseException:
+            if writer is not None:
+                with contextlib.suppress(Exception):
+                    writer.close()
+            tmp.unlink(missing_ok=True)  # a full disk leaves no stray temporary
+            raise
         summary = {"schema": SUMMARY_SCHEMA, **summary}
         write_json(self.path / SUMMARY_FILE, summary)
         shutil.rmtree(self.path / CHUNKS_DIR, ignore_errors=True)

@@ -18,7 +18,7 @@ import jinja2
 import numpy as np
 import pyarrow.compute as pc
 
-from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
+from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory, write_atomic
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
@@ -235,7 +235,7 @@ def write_report(
         f"generated {dt.datetime.now().isoformat(timespec='seconds')}",
     )
     path = out_dir / "report.html"
-    path.write_text(html)
+    write_atomic(path, html)  # a full disk leaves no half-written report
     return path
 
 

@@ -41,7 +41,7 @@ def format_validation_error(exc: ValidationError, source: str) -> str:
     """
     lines = [f"{source}: invalid scenario:"]
     for err in exc.errors(include_url=False):
-        loc = ".".join(str(p) for p in err["loc"])
+        loc = ".".join(clip(str(p), 40) for p in err["loc"])
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = _unknown_field_message(err["loc"])
@@ -50,13 +50,31 @@ def format_validation_error(exc: ValidationError, source: str) -> str:
         got = err.get("input")
         show_got = err["type"] not in {"missing", "value_error", "assertion_error"}
         if show_got and not isinstance(got, Mapping | list):
-            msg = f"{msg} (got {got!r})"
+            msg = f"{msg} (got {clip(repr(got), 60)})"
         if not loc:
             # Cross-field problems name their own fields, one per line.
             lines.extend(f"  {line}" for line in msg.splitlines())
         else:
             lines.append(f"  {loc}: {msg}")
-    return "\n".join(lines)
+    return "\n".join(clip(line, MAX_LINE) for line in lines)
+
+
+#: Longest line of an error message; a longer one (a huge value echoed back)
+#: is cut, saying by how much.
+MAX_LINE = 300
+
+
+def clip(text: str, limit: int = MAX_LINE) -> str:
+    """``text`` cut to about ``limit`` characters, saying how many were left out.
+
+    Examples
+    --------
+    >>> clip("a" * 1000, 20)
+    'aaaaaaaaaaaaaaaaaaaa... (980 more characters)'
+    """
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text) - limit:,} more characters)"
 
 
 def _unknown_field_message(loc: tuple[int | str, ...]) -> str:

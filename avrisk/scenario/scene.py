@@ -8,9 +8,18 @@ the initial conditions relative to each slot (paper, Sec. 5: ``S, T, W, V``);
 from __future__ import annotations
 
 import math
-from typing import Annotated
+import types
+import typing
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 #: Names of the per-vehicle initial-condition coordinates, in the order they
 #: appear in a flat sample ``X`` (see :mod:`avrisk.scenario.params`).
@@ -18,9 +27,46 @@ VEHICLE_FIELDS: tuple[str, ...] = ("s", "t", "heading", "speed")
 
 
 class SpecModel(BaseModel):
-    """Base of the scenario spec's models: frozen, unknown keys rejected."""
+    """Base of the scenario spec's models: frozen, unknown keys rejected.
+
+    A number field takes no boolean (YAML's ``yes``, ``on``, ``true``, which
+    Pydantic would read as 1); text that reads as a number stays accepted
+    (YAML reads ``1e-3``, without a dot, as text).
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _numbers_are_numbers(cls, value: Any, info: ValidationInfo) -> Any:
+        if info.field_name is None:
+            return value
+        kind = _number_kind(cls.model_fields[info.field_name].annotation)
+        if kind == "number":
+            _check_number(value)
+        elif kind == "numbers" and isinstance(value, list | tuple):
+            for item in value:
+                _check_number(item)
+        return value
+
+
+def _number_kind(annotation: Any) -> str | None:
+    """``"number"``: an int or float field; ``"numbers"``: a tuple of them."""
+    args = typing.get_args(annotation)
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        kinds = {_number_kind(a) for a in args if a is not type(None)}
+        return kinds.pop() if len(kinds) == 1 else None
+    if annotation in (int, float):
+        return "number"
+    if typing.get_origin(annotation) is tuple and args:
+        if all(a in (int, float, Ellipsis) for a in args):
+            return "numbers"
+    return None
+
+
+def _check_number(value: Any) -> None:
+    if isinstance(value, bool):
+        raise ValueError(f"must be a number, not a boolean ({str(value).lower()})")
 
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]

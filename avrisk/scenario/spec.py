@@ -48,6 +48,7 @@ and the value given. This module holds the whole scenario
 from __future__ import annotations
 
 import re
+import warnings
 from typing import Any
 
 import yaml
@@ -78,6 +79,13 @@ from avrisk.scenario.scene import (
 #: What a scenario's name (and a bundled scenario's file name) may be.
 SCENARIO_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_\-]*$")
 
+#: Time steps per rollout (``horizon / dt``) above which a scenario is refused,
+#: and above which it is accepted with a warning. The bundled ones take 100.
+MAX_STEPS = 100_000
+WARN_STEPS = 10_000
+#: Time steps per rollout of the bundled scenarios (10 s at 0.1 s), for costs.
+_BUNDLED_STEPS = 100
+
 
 class SimulationSpec(SpecModel):
     """Time discretisation and driver sensing."""
@@ -94,6 +102,21 @@ class SimulationSpec(SpecModel):
     @model_validator(mode="after")
     def _horizon_is_whole_steps(self) -> SimulationSpec:
         steps = self.horizon / self.dt
+        if not steps <= MAX_STEPS:
+            raise ValueError(
+                f"horizon / dt = {self.horizon:g} s / {self.dt:g} s = "
+                f"{steps:,.0f} time steps per rollout, more than the {MAX_STEPS:,} "
+                f"allowed: each rollout would cost about {steps / _BUNDLED_STEPS:,.0f} "
+                f"times one of the bundled scenarios ({_BUNDLED_STEPS} steps); use a "
+                "larger dt or a shorter horizon"
+            )
+        if steps > WARN_STEPS:
+            warnings.warn(
+                f"horizon / dt = {steps:,.0f} time steps per rollout: each rollout "
+                f"costs about {steps / _BUNDLED_STEPS:,.0f} times one of the bundled "
+                f"scenarios ({_BUNDLED_STEPS} steps)",
+                stacklevel=2,
+            )
         if steps < 1 or abs(steps - round(steps)) > 1e-6 * max(1.0, steps):
             raise ValueError(
                 f"horizon ({self.horizon} s) must be a whole number (>= 1) of time "
@@ -120,7 +143,7 @@ class ScenarioSpec(SpecModel):
     """
 
     name: str = Field(description="Short identifier of the scenario.")
-    description: str = Field("", description="Free text for people.")
+    description: str = Field("", max_length=10_000, description="Free text for people.")
     road: RoadSpec = Field(RoadSpec(), description="Road geometry.")
     initial_conditions: InitialConditionsSpec = Field(
         InitialConditionsSpec(),

@@ -111,7 +111,7 @@ def test_a_failing_run_leaves_no_output_file(short_scenario, tmp_path, monkeypat
     def boom(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(simulate_mod.pq, "write_table", boom)
+    monkeypatch.setattr(pq, "write_table", boom)
     out = tmp_path / "x.parquet"
     result = _simulate(str(short_scenario), "--n", "2", "--out", str(out))
     assert result.exit_code != 0

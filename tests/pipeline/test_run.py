@@ -51,6 +51,7 @@ def test_a_run_leaves_config_samples_checkpoint_and_a_versioned_summary(tmp_path
     summary = run(tmp_path / "run")
     files = sorted(p.name for p in (tmp_path / "run").iterdir())
     assert files == [
+        ".lock",
         "checkpoint.json",
         "config.json",
         "samples.parquet",
