@@ -18,7 +18,8 @@ import jinja2
 import numpy as np
 import pyarrow.compute as pc
 
-from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory, write_atomic
+from avrisk.pipeline.files import write_atomic
+from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K

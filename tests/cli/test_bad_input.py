@@ -352,7 +352,7 @@ def test_a_disk_full_while_writing_the_report_says_the_run_is_complete(
 
 
 def test_write_atomic_leaves_no_temporary_when_the_disk_fills(tmp_path, monkeypatch):
-    from avrisk.pipeline.store import write_atomic
+    from avrisk.pipeline.files import write_atomic
 
     real = Path.write_bytes
 

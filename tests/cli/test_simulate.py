@@ -222,6 +222,8 @@ def test_a_run_leaves_xi_out_and_replay_draws_it_again(
     )
     assert result.exit_code == 0, result.output
     assert gif.is_file() and "warning" not in result.output
+    result = runner.invoke(app, ["report", str(tmp_path / "compact")])
+    assert result.exit_code == 0, result.output  # left-out xi is not "missing"
 
 
 @pytest.mark.parametrize("command", ["simulate", "run"])
