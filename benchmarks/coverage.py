@@ -70,6 +70,16 @@ def _seeds(text: str) -> list[int]:
     return list(range(int(first), int(last or first) + 1))
 
 
+def _assignment(text: str) -> tuple[str, Any]:
+    """``NAME=VALUE`` of ``--set``, the value read as YAML (a number, a word)."""
+    import yaml
+
+    name, sep, value = text.partition("=")
+    if not sep:
+        raise SystemExit(f"--set takes NAME=VALUE; got {text!r}")
+    return name.strip(), yaml.safe_load(value)
+
+
 def _done_seeds(out: Path, preset: str) -> set[int]:
     if not out.exists():
         return set()
@@ -101,8 +111,11 @@ def run(args: argparse.Namespace) -> None:
     objective = SimulationObjective(spec)
     base = base_distribution(spec)
     method, settings = PRESETS[args.preset]
+    overrides = dict(_assignment(text) for text in args.set)
+    settings = {**settings, **overrides}
+    preset = args.preset + "".join(f" {k}={v}" for k, v in overrides.items())
     gamma_test = tuple(float(g) for g in args.gamma_test.split(","))
-    done = _done_seeds(args.out, args.preset)
+    done = _done_seeds(args.out, preset)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     commit = _commit()
     for seed in _seeds(args.seeds):
@@ -122,7 +135,7 @@ def run(args: argparse.Namespace) -> None:
             )
         seconds = time.perf_counter() - start
         record = {
-            "preset": args.preset,
+            "preset": preset,
             "method": method,
             "settings": settings,
             "scenario": args.scenario,
@@ -137,7 +150,7 @@ def run(args: argparse.Namespace) -> None:
         with args.out.open("a") as stream:
             stream.write(json.dumps(record) + "\n")
         print(
-            f"{args.scenario} {args.preset} seed {seed}: p={estimate.p:.3g} "
+            f"{args.scenario} {preset} seed {seed}: p={estimate.p:.3g} "
             f"+-{estimate.stderr:.2g} n={estimate.n_evals:,} ({seconds:.0f} s)",
             file=sys.stderr,
             flush=True,
@@ -265,6 +278,12 @@ def main(argv: list[str] | None = None) -> None:
     runner = commands.add_parser("run", help="Run one preset for many seeds.")
     runner.add_argument("scenario")
     runner.add_argument("--preset", choices=sorted(PRESETS), required=True)
+    runner.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        help="NAME=VALUE: a setting of the preset changed (named in the results).",
+    )
     runner.add_argument("--seeds", default="0-19", help="FIRST-LAST, inclusive.")
     runner.add_argument("--gamma", type=float, default=0.1)
     runner.add_argument("--gamma-test", default="0.3,0.5")

@@ -8,6 +8,7 @@ the reference controller with one fault (:data:`FAULTS`) in the run's second bat
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import sys
 import threading
@@ -97,12 +98,29 @@ def serve_until(server: EgoServer, socket, stop: threading.Event) -> None:
     socket.close(linger=0)
 
 
+def _bind(socket: zmq.Socket, address: str, wait_s: float = 5.0) -> None:
+    """Bind, waiting while a socket just closed at ``address`` still holds it.
+
+    ZeroMQ closes sockets in its I/O thread, after ``close`` returns, so a
+    server restarted at once at the same address may find it still in use.
+    """
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            socket.bind(address)
+            return
+        except zmq.ZMQError as err:
+            if err.errno != errno.EADDRINUSE or time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+
+
 @contextlib.contextmanager
 def in_thread(server: EgoServer, address: str):
     """Serve ``server`` at ``address`` in a thread while the block runs."""
     socket = zmq.Context.instance().socket(zmq.REP)
     socket.setsockopt(zmq.LINGER, 0)
-    socket.bind(address)
+    _bind(socket, address)
     stop = threading.Event()
     thread = threading.Thread(target=serve_until, args=(server, socket, stop))
     thread.start()
