@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 
-from avrisk.agents.external.protocol import PROTOCOL_VERSION, pack_array
 from avrisk.sim.observation import Observation
 
 __all__ = ["ACTION_SPACE", "OBSERVATION_UNITS", "hello_message", "observation_arrays"]
@@ -93,6 +92,10 @@ def hello_message(arrays: dict[str, np.ndarray], dt: float) -> dict[str, Any]:
     dt : float
         Time step [s].
     """
+    # Deferred: the protocol needs msgpack (the `external` extra); the
+    # observation's fields above do not (the Gymnasium environment uses them).
+    from avrisk.agents.external.protocol import PROTOCOL_VERSION, pack_array
+
     observation = {
         name: {
             "dtype": pack_array(a[:0])["dtype"],

@@ -1,0 +1,42 @@
+"""Gymnasium environments over the simulator (the ``gymnasium`` extra).
+
+Importing this package registers ``avrisk/Highway-v0``::
+
+    import gymnasium
+    import avrisk.gym  # noqa: F401  (registers the id)
+
+    env = gymnasium.make("avrisk/Highway-v0", scenario="highway_idm")
+    envs = gymnasium.make_vec("avrisk/Highway-v0", num_envs=64)  # one batch
+
+(``gymnasium.make("avrisk.gym:avrisk/Highway-v0")`` imports it itself.) See
+:mod:`avrisk.gym.env` for the spaces, reward and ``info``.
+"""
+
+import gymnasium
+
+from avrisk.gym.env import (
+    OBSERVATION_FIELDS,
+    HeldAction,
+    HighwayEnv,
+    HighwayVectorEnv,
+    observation_fields,
+)
+
+__all__ = [
+    "ENV_ID",
+    "OBSERVATION_FIELDS",
+    "HeldAction",
+    "HighwayEnv",
+    "HighwayVectorEnv",
+    "observation_fields",
+]
+
+#: The registered environment id.
+ENV_ID = "avrisk/Highway-v0"
+
+if ENV_ID not in gymnasium.registry:
+    gymnasium.register(
+        id=ENV_ID,
+        entry_point="avrisk.gym.env:HighwayEnv",
+        vector_entry_point="avrisk.gym.env:HighwayVectorEnv",
+    )
