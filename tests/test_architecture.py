@@ -47,6 +47,8 @@ ALLOWED = {
     "pipeline": {"rare", "registry", "fingerprint"},
     "report": {"pipeline", "rare", "assembly", "scenario"},
     "testing": {"rare"},
+    # the Gymnasium environment: a scenario built and stepped by hand
+    "gym": {"assembly", "agents", "scenario", "sim"},
 }
 
 
