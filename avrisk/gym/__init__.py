@@ -19,6 +19,7 @@ from avrisk.gym.env import (
     HeldAction,
     HighwayEnv,
     HighwayVectorEnv,
+    flat_observation,
     observation_fields,
 )
 
@@ -28,6 +29,7 @@ __all__ = [
     "HeldAction",
     "HighwayEnv",
     "HighwayVectorEnv",
+    "flat_observation",
     "observation_fields",
 ]
 

@@ -65,6 +65,7 @@ __all__ = [
     "HeldAction",
     "HighwayEnv",
     "HighwayVectorEnv",
+    "flat_observation",
     "observation_fields",
 ]
 
@@ -86,6 +87,18 @@ def observation_fields(n_lidar_beams: int) -> dict[str, int]:
     if n_lidar_beams > 0:
         fields.update(lidar_range=n_lidar_beams, lidar_range_rate=n_lidar_beams)
     return fields
+
+
+def flat_observation(obs: Observation, n_lidar_beams: int) -> np.ndarray:
+    """The ego's flat observation of a batch, (B, n) float32, as the env gives it.
+
+    For running a policy trained in the environment as an ego policy
+    (``avrisk run``): its ``act`` reads ``flat_observation(obs, R)``.
+    """
+    arrays = observation_arrays(obs)
+    b = obs.state.x.shape[0]
+    parts = [arrays[name].reshape(b, -1) for name in observation_fields(n_lidar_beams)]
+    return np.concatenate(parts, axis=1).astype(np.float32)
 
 
 class HeldAction:
@@ -175,9 +188,7 @@ class _Batch:
         obs = self.sim.simulator.observe(
             self.carry.state, torch.as_tensor(self.seeds), self.t
         )
-        arrays = observation_arrays(obs)
-        parts = [arrays[name].reshape(len(self.seeds), -1) for name in self.fields]
-        return np.concatenate(parts, axis=1).astype(np.float32)
+        return flat_observation(obs, self.sim.config.n_lidar_beams)
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, ...]:
         """One step; observations, rewards, terminated, truncated, info arrays."""
