@@ -1,10 +1,12 @@
 """Run directories: an estimator run against a black box, recorded and resumable."""
 
+from avrisk.pipeline.manifest import RecordIntegrityWarning
 from avrisk.pipeline.run import RunMonitor, RunSettings, SilentMonitor, run_estimation
 from avrisk.pipeline.store import SUMMARY_SCHEMA, RunDirectory, RunDirectoryError
 
 __all__ = [
     "SUMMARY_SCHEMA",
+    "RecordIntegrityWarning",
     "RunDirectory",
     "RunDirectoryError",
     "RunMonitor",

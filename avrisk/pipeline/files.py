@@ -25,15 +25,23 @@ def write_atomic(path: Path, data: bytes | str) -> None:
         raise
 
 
-def write_parquet_atomic(table: pa.Table, path: Path) -> None:
-    """Write ``table`` as Parquet to ``path``, atomically (see :func:`write_atomic`)."""
+def parquet_bytes(table: pa.Table) -> bytes:
+    """``table`` as the bytes of a Parquet file."""
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink)
-    write_atomic(path, sink.getvalue().to_pybytes())
+    return sink.getvalue().to_pybytes()
+
+
+def write_parquet_atomic(table: pa.Table, path: Path) -> None:
+    """Write ``table`` as Parquet to ``path``, atomically (see :func:`write_atomic`)."""
+    write_atomic(path, parquet_bytes(table))
+
+
+def json_text(obj: Any) -> str:
+    """``obj`` as the indented JSON text :func:`write_json` writes."""
+    return json.dumps(obj, indent=2, sort_keys=False, allow_nan=False) + "\n"
 
 
 def write_json(path: Path, obj: Any) -> None:
     """Write ``obj`` as indented JSON, atomically."""
-    write_atomic(
-        path, json.dumps(obj, indent=2, sort_keys=False, allow_nan=False) + "\n"
-    )
+    write_atomic(path, json_text(obj))

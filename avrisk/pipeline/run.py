@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import platform
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -18,6 +19,7 @@ import numpy as np
 
 import avrisk
 from avrisk.pipeline.lock import run_lock
+from avrisk.pipeline.manifest import RecordIntegrityWarning
 from avrisk.pipeline.mechanisms import decompose
 from avrisk.pipeline.repeatability import check_repeatable
 from avrisk.pipeline.store import RunDirectory
@@ -269,9 +271,16 @@ def _run_locked(
     config = {"settings": settings.to_dict(), **(context or {})}
     run_dir.claim(config)
     if run_dir.is_complete:
-        if not run_dir.has_failed_samples():
+        problem = run_dir.record_problem()
+        if problem is not None:  # a changed summary or table: never printed
+            warnings.warn(
+                f"{problem}: recomputing", RecordIntegrityWarning, stacklevel=3
+            )
+            run_dir.recompute()
+        elif not run_dir.has_failed_samples():
             return run_dir.summary()
-        run_dir.reopen()
+        else:
+            run_dir.reopen()
     clock = _Clock()
     start = time.perf_counter()
     monitor.start(settings.total_rollouts, settings.estimator.describe())

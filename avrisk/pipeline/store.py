@@ -9,6 +9,7 @@
       proposals.json   each stage's proposal, to draw its large blocks again
       samples.parquet  every rollout of every stage, once the run is complete
       summary.json     estimates, intervals, ESS, timing, versions (SUMMARY_SCHEMA)
+      manifest.json    each record's SHA-256 (avrisk.pipeline.manifest)
       .lock            held by the process running in DIR (avrisk.pipeline.lock)
 
 Every file is written to a temporary name and renamed into place, so a run
@@ -20,6 +21,13 @@ Given the run's base distribution, a run directory leaves the columns of its
 large blocks (a learned driver's 404-d ``xi``) out of the chunks it drew fresh
 and draws them again, checked, when they are read
 (:mod:`avrisk.pipeline.regenerate`); ``store_full`` keeps every column.
+
+Every chunk, the samples table and the summary are checked against the
+digests of ``manifest.json`` when read (:mod:`avrisk.pipeline.manifest`): a
+damaged or swapped chunk is named and evaluated again, a damaged summary or
+samples table is named and refused. A digest is no defence against a forger
+who rewrites the manifest too; it defends against damage and accidental
+swaps. Directories made before the manifest existed are read unverified.
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ import json
 import os
 import re
 import shutil
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -37,7 +46,19 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from avrisk.pipeline.files import write_json, write_parquet_atomic
+from avrisk.pipeline.files import (
+    json_text,
+    parquet_bytes,
+    write_atomic,
+    write_json,
+)
+from avrisk.pipeline.manifest import (
+    MANIFEST_FILE,
+    Manifest,
+    RecordIntegrityWarning,
+    digest,
+    file_digest,
+)
 from avrisk.pipeline.regenerate import (
     META_KEY,
     PROPOSALS_FILE,
@@ -109,6 +130,9 @@ class RunDirectory:
         self._regenerator = (
             None if base is None else Regenerator(self.path, base, self.param_names)
         )
+        self._manifest = Manifest(self.path)
+        self._warned_unverified = False
+        self._verified: dict[str, tuple[int, int]] = {}
 
     # -- lifecycle -----------------------------------------------------------------
 
@@ -137,12 +161,14 @@ class RunDirectory:
                     "or delete this one"
                 )
             return
-        if self.path.exists() and any(p.name != LOCK_FILE for p in self.path.iterdir()):
+        ours = (LOCK_FILE, MANIFEST_FILE)
+        if self.path.exists() and any(p.name not in ours for p in self.path.iterdir()):
             raise RunDirectoryError(
                 f"{self.path} exists and is not an avrisk run directory "
                 f"(no {CONFIG_FILE}); choose an empty or new directory"
             )
         (self.path / CHUNKS_DIR).mkdir(parents=True, exist_ok=True)
+        self._manifest.create()  # before config.json: a new run is always verified
         write_json(config_path, config)
 
     @property
@@ -169,6 +195,7 @@ class RunDirectory:
         failed rollouts again and finishes anew.
         """
         path = self.path / SAMPLES_FILE
+        self._check_final(SAMPLES_FILE)
         table = pq.read_table(path)
         _, left_out = _table_meta(table.schema)
         keys = np.column_stack([table["stage"].to_numpy(), table["chunk"].to_numpy()])
@@ -178,8 +205,10 @@ class RunDirectory:
             meta = left_out.get((int(stage), int(chunk)))
             if meta is not None:
                 rows = _leaving_out(rows, meta)
-            write_parquet_atomic(rows, self._chunk_path(int(stage), int(chunk)))
-        (self.path / SUMMARY_FILE).unlink()
+            self._write_chunk(rows, int(stage), int(chunk))
+        (self.path / SUMMARY_FILE).unlink()  # first: the run is no longer complete
+        if self._manifest.exists:
+            self._manifest.set_entries(samples=None, summary=None)
         path.unlink()
 
     def discard(self) -> None:
@@ -193,7 +222,11 @@ class RunDirectory:
 
         Columns a chunk lacks (recorded by an older avrisk) are null there.
         """
-        files = sorted((self.path / CHUNKS_DIR).glob(f"stage{FINAL_STAGE:04d}-*"))
+        files = [
+            p
+            for p in self._chunk_files()
+            if p.name.startswith(f"stage{FINAL_STAGE:04d}-")
+        ]
         tables = []
         for path in files:
             table = self._read_chunk(path, columns)
@@ -211,21 +244,57 @@ class RunDirectory:
         return self.path / CHUNKS_DIR / f"stage{stage:04d}-chunk{chunk:06d}.parquet"
 
     def record(self, batch: StageBatch) -> None:
-        """Store one evaluated chunk (atomically), large blocks left out if it can."""
-        path = self._chunk_path(batch.stage, batch.chunk)
+        """Store one evaluated chunk (atomically), large blocks left out if it can.
+
+        The chunk is written first, then its manifest entry: a chunk that a
+        kill left unlisted is evaluated again (see :meth:`cached`).
+        """
         table = samples_table(batch, self.param_names, self.units)
         if self._regenerator is not None and not self.store_full:
             meta = self._regenerator.leave_out(batch)
             if meta is not None:
                 table = _leaving_out(table, meta)
-        write_parquet_atomic(table, path)
+        self._write_chunk(table, batch.stage, batch.chunk)
+
+    def _write_chunk(self, table: pa.Table, stage: int, chunk: int) -> None:
+        path = self._chunk_path(stage, chunk)
+        data = parquet_bytes(table)
+        write_atomic(path, data)
+        if self._manifest.exists:
+            self._manifest.add_chunk(
+                path.name, stage, chunk, table.num_rows, digest(data)
+            )
 
     def cached(self, stage: int, chunk: int) -> StageBatch | None:
-        """The recorded chunk ``(stage, chunk)``, or ``None``."""
+        """The recorded chunk ``(stage, chunk)``, or ``None`` to evaluate it.
+
+        A chunk that does not match its manifest entry (digest, rows, stage),
+        is missing though listed, or is not listed (written as a kill stopped
+        the run, or copied in) is named in a :class:`RecordIntegrityWarning`
+        and evaluated again, never replayed. Without a manifest (a directory
+        from before it existed) only its stage and chunk columns are checked.
+        """
         path = self._chunk_path(stage, chunk)
+        listed = self._manifest.exists and self._manifest.chunk(path.name) is not None
         if not path.is_file():
+            if listed:
+                warnings.warn(
+                    f"{path}: listed in {MANIFEST_FILE} but missing; evaluated again",
+                    RecordIntegrityWarning,
+                    stacklevel=2,
+                )
             return None
-        table = self._read_chunk(path)
+        data = path.read_bytes()
+        problem = self._chunk_problem(path, data, stage, chunk)
+        if problem is not None:
+            warnings.warn(
+                f"{path}: {problem}; evaluated again",
+                RecordIntegrityWarning,
+                stacklevel=2,
+            )
+            path.unlink()
+            return None
+        table = self._read_chunk(path, data=data)
         cols = {name: table.column(name).to_numpy() for name in table.column_names}
         x = np.column_stack([cols[name] for name in self.param_names])
         known = set(BOOKKEEPING + DENSITIES + tuple(self.param_names))
@@ -242,9 +311,79 @@ class RunDirectory:
             seeds=cols["seed"],
         )
 
-    def _read_chunk(self, path: Path, columns: Sequence[str] | None = None) -> pa.Table:
+    def _chunk_problem(
+        self, path: Path, data: bytes, stage: int, chunk: int
+    ) -> str | None:
+        """What is wrong with chunk file ``path`` holding ``data``, or None."""
+        entry = self._manifest.chunk(path.name) if self._manifest.exists else None
+        if self._manifest.exists:
+            if entry is None:
+                return (
+                    f"not listed in {MANIFEST_FILE} (written as the run was "
+                    "stopped, or copied in)"
+                )
+            found = digest(data)
+            if found != entry["sha256"]:
+                return (
+                    f"SHA-256 {found[:16]} ({len(data)} bytes) differs from the "
+                    f"{entry['sha256'][:16]} recorded in {MANIFEST_FILE} (changed, "
+                    "truncated or swapped)"
+                )
+        try:
+            table = pq.read_table(pa.BufferReader(data))
+        except (pa.ArrowException, OSError) as exc:
+            return f"not a readable Parquet file ({str(exc)[:80]})"
+        if entry is not None and table.num_rows != entry["rows"]:
+            return f"holds {table.num_rows} rows, {MANIFEST_FILE} {entry['rows']}"
+        for name, want in (("stage", stage), ("chunk", chunk)):
+            if name in table.column_names:
+                found_values = np.unique(table[name].to_numpy())
+                if len(found_values) and (found_values != want).any():
+                    return (
+                        f"holds rows of {name} {found_values.tolist()[:3]}, its name "
+                        f"says {want} (a chunk swapped in from elsewhere)"
+                    )
+        return None
+
+    def _chunk_files(self) -> list[Path]:
+        """The chunk files of the run, final stage last, each checked.
+
+        With a manifest, those it lists: one missing or not matching its
+        entry is a :class:`RunDirectoryError` naming it (rerunning evaluates
+        it again); files it does not list are not the run's.
+        """
+        directory = self.path / CHUNKS_DIR
+        if not self._manifest.exists:
+            files = list(directory.glob("*.parquet"))
+        else:
+            files = []
+            for name, entry in self._manifest.record()["chunks"].items():
+                path = directory / name
+                if not path.is_file():
+                    raise RunDirectoryError(
+                        f"{path}: listed in {MANIFEST_FILE} ({entry['rows']} rows) "
+                        "but missing; rerun the command to evaluate it again"
+                    )
+                problem = self._chunk_problem(
+                    path, path.read_bytes(), entry["stage"], entry["chunk"]
+                )
+                if problem is not None:
+                    path.unlink()
+                    raise RunDirectoryError(
+                        f"{path}: {problem}; removed: rerun the command to "
+                        "evaluate it again"
+                    )
+                files.append(path)
+        return sorted(files, key=lambda p: (p.name.startswith("stage0000"), p.name))
+
+    def _read_chunk(
+        self,
+        path: Path,
+        columns: Sequence[str] | None = None,
+        data: bytes | None = None,
+    ) -> pa.Table:
         """A chunk file, its left-out columns drawn again if ``columns`` wants them."""
-        table = pq.read_table(path)
+        table = pq.read_table(path if data is None else pa.BufferReader(data))
         meta = chunk_meta(table.schema)
         if meta is None:
             return table
@@ -280,10 +419,7 @@ class RunDirectory:
         (with ``store_full``, those are drawn again and stored instead). The
         summary is written last: its presence marks a complete run.
         """
-        files = sorted(
-            (self.path / CHUNKS_DIR).glob("*.parquet"),
-            key=lambda p: (p.name.startswith("stage0000"), p.name),  # final stage last
-        )
+        files = self._chunk_files()  # final stage last
         metas = {_chunk_key(p): chunk_meta(pq.read_schema(p)) for p in files}
         left_out = {k: m for k, m in metas.items() if m is not None}
         target = self.path / SAMPLES_FILE
@@ -313,7 +449,16 @@ class RunDirectory:
             tmp.unlink(missing_ok=True)  # a full disk leaves no stray temporary
             raise
         summary = {"schema": SUMMARY_SCHEMA, **summary}
-        write_json(self.path / SUMMARY_FILE, summary)
+        text = json_text(summary)
+        if self._manifest.exists:  # digests first: a summary is never unrecorded
+            rows = pq.read_metadata(target).num_rows if files else 0
+            self._manifest.set_entries(
+                samples={"rows": rows, "sha256": file_digest(target)}
+                if files
+                else None,
+                summary={"sha256": digest(text.encode())},
+            )
+        write_atomic(self.path / SUMMARY_FILE, text)
         shutil.rmtree(self.path / CHUNKS_DIR, ignore_errors=True)
 
     def _gathered_schema(self, path: Path, meta: dict[str, Any] | None) -> pa.Schema:
@@ -326,8 +471,90 @@ class RunDirectory:
         return schema
 
     def summary(self) -> dict[str, Any]:
-        """The summary of a complete run."""
-        return json.loads((self.path / SUMMARY_FILE).read_text())
+        """The summary of a complete run, checked against the manifest.
+
+        Raises
+        ------
+        RunDirectoryError
+            If it is not the summary the run wrote (its digest differs).
+        """
+        data = (self.path / SUMMARY_FILE).read_bytes()
+        self._check_final(SUMMARY_FILE, digest(data))
+        return json.loads(data)
+
+    def record_problem(self) -> str | None:
+        """Why a complete run's summary or samples table is not trusted, or None."""
+        try:
+            self._check_final(SUMMARY_FILE)
+            if (self.path / SAMPLES_FILE).is_file() or self._manifest_entry("samples"):
+                self._check_final(SAMPLES_FILE)
+        except (RunDirectoryError, OSError) as exc:
+            return str(exc)
+        return None
+
+    def recompute(self) -> None:
+        """Make a complete run whose records do not verify ready to finish anew.
+
+        With a sound samples table, its chunks are recorded again (replayed,
+        not evaluated); otherwise it is removed too and everything evaluated
+        again.
+        """
+        try:
+            self._check_final(SAMPLES_FILE)
+        except (RunDirectoryError, OSError):
+            (self.path / SUMMARY_FILE).unlink(missing_ok=True)
+            if self._manifest.exists:
+                record = self._manifest.record()
+                record["chunks"] = {}
+                self._manifest.set_entries(samples=None, summary=None)
+            (self.path / SAMPLES_FILE).unlink(missing_ok=True)
+            (self.path / CHUNKS_DIR).mkdir(exist_ok=True)
+            return
+        self.reopen()
+
+    def _manifest_entry(self, key: str) -> dict[str, Any] | None:
+        return self._manifest.entry(key) if self._manifest.exists else None
+
+    def _check_final(self, name: str, found: str | None = None) -> None:
+        """Refuse ``samples.parquet`` or ``summary.json`` unless it matches its digest.
+
+        ``found`` is its digest if already computed. Without a manifest (a
+        run directory from before it existed) warn, once, that it is read
+        unverified.
+        """
+        path = self.path / name
+        if not self._manifest.exists:
+            if not self._warned_unverified:
+                self._warned_unverified = True
+                warnings.warn(
+                    f"{self.path} has no {MANIFEST_FILE} (made by an older avrisk): "
+                    "its records are read unverified",
+                    RecordIntegrityWarning,
+                    stacklevel=3,
+                )
+            return
+        key = "summary" if name == SUMMARY_FILE else "samples"
+        entry = self._manifest.entry(key)
+        rerun = "rerun the command to recompute it"
+        if entry is None:
+            raise RunDirectoryError(
+                f"{path}: not recorded in {MANIFEST_FILE} (not written by this run); "
+                f"{rerun}"
+            )
+        if found is None:
+            stat = path.stat()
+            if self._verified.get(name) == (stat.st_size, stat.st_mtime_ns):
+                return
+            found = file_digest(path)
+        if found != entry["sha256"]:
+            raise RunDirectoryError(
+                f"{path}: SHA-256 {found[:16]} differs from the {entry['sha256'][:16]} "
+                f"recorded in {MANIFEST_FILE} when the run finished (changed since); "
+                f"{rerun}"
+            )
+        if name == SAMPLES_FILE:
+            stat = path.stat()
+            self._verified[name] = (stat.st_size, stat.st_mtime_ns)
 
     def config(self) -> dict[str, Any]:
         """The resolved configuration of the run."""
@@ -352,8 +579,11 @@ class RunDirectory:
         ------
         RegenerationError
             If a left-out block cannot be drawn again as recorded.
+        RunDirectoryError
+            If the table is not the one the run wrote (its digest differs).
         """
         path = self.path / SAMPLES_FILE
+        self._check_final(SAMPLES_FILE)
         schema = pq.read_schema(path)
         names_left_out, left_out = _table_meta(schema)
         names = (

@@ -54,6 +54,7 @@ def test_a_run_leaves_config_samples_checkpoint_and_a_versioned_summary(tmp_path
         ".lock",
         "checkpoint.json",
         "config.json",
+        "manifest.json",
         "samples.parquet",
         "summary.json",
     ]
