@@ -450,6 +450,8 @@ class RunDirectory:
             raise
         summary = {"schema": SUMMARY_SCHEMA, **summary}
         text = json_text(summary)
+        if not self._manifest.exists:  # an older run: verified from now on
+            self._manifest.create()
         if self._manifest.exists:  # digests first: a summary is never unrecorded
             rows = pq.read_metadata(target).num_rows if files else 0
             self._manifest.set_entries(
