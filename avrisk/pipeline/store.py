@@ -452,6 +452,12 @@ class RunDirectory:
         text = json_text(summary)
         if not self._manifest.exists:  # an older run: verified from now on
             self._manifest.create()
+            for path in files:
+                stage, chunk = _chunk_key(path)
+                rows = pq.read_metadata(path).num_rows
+                self._manifest.add_chunk(
+                    path.name, stage, chunk, rows, file_digest(path)
+                )
         if self._manifest.exists:  # digests first: a summary is never unrecorded
             rows = pq.read_metadata(target).num_rows if files else 0
             self._manifest.set_entries(
