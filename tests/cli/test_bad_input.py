@@ -527,6 +527,16 @@ RUN_DAMAGE = {
         ),
         "no estimate at its own threshold",
     ),
+    "summary-tampered-p": (  # well-formed, but not what the run wrote
+        lambda d: _edit_json(
+            d / "summary.json", lambda s: s["estimate"].update(p=s["estimate"]["p"] * 2)
+        ),
+        "summary.json: SHA-256",
+    ),
+    "samples-tampered-f": (
+        lambda d: _set_row(d / "samples.parquet", "f", 0, 0.123),
+        "samples.parquet: SHA-256",
+    ),
     "samples-garbage": (
         lambda d: (d / "samples.parquet").write_bytes(b"garbage" * 100),
         "not a readable Parquet file",
