@@ -589,6 +589,20 @@ def test_rerunning_run_on_a_damaged_run_is_one_line(
     one_error(invoke("run", short_scenario, "--out", run, *SMALL), needle)
 
 
+def test_rerunning_run_on_a_tampered_summary_recomputes_it(
+    finished_run, short_scenario, tmp_path
+):
+    run = tmp_path / "run"
+    shutil.copytree(finished_run, run)
+    before = json.loads((run / "summary.json").read_text())["estimate"]
+    RUN_DAMAGE["summary-tampered-p"][0](run)
+    result = invoke("run", short_scenario, "--out", run, *SMALL)
+    assert result.exit_code == 0, result.output
+    assert "summary.json: SHA-256" in result.output and "recomputing" in result.output
+    after = json.loads((run / "summary.json").read_text())["estimate"]
+    assert after["p"] == before["p"] and after["n_evals"] == before["n_evals"]
+
+
 def _meta(path: Path, key: bytes, value: bytes) -> None:
     table = pq.read_table(path)
     meta = dict(table.schema.metadata)
