@@ -58,6 +58,7 @@ class Manifest:
     def __init__(self, directory: Path) -> None:
         self.file = directory / MANIFEST_FILE
         self._record: dict[str, Any] | None = None
+        self._stamp: tuple[int, int] | None = None
 
     @property
     def exists(self) -> bool:
@@ -70,7 +71,9 @@ class Manifest:
         self._save()
 
     def record(self) -> dict[str, Any]:
-        """The manifest's content (read, and checked for shape, on first use)."""
+        """The manifest's content (read, and checked for shape, when it changed)."""
+        if self._record is not None and self._stamp != self._file_stamp():
+            self._record = None  # changed on disk since: the file is the truth
         if self._record is None:
             try:
                 record = json.loads(self.file.read_text())
@@ -91,6 +94,7 @@ class Manifest:
             if not ok:
                 raise self._error(f"not an {MANIFEST_SCHEMA} record")
             self._record = record
+            self._stamp = self._file_stamp()
         return self._record
 
     def chunk(self, name: str) -> dict[str, Any] | None:
@@ -125,6 +129,14 @@ class Manifest:
     def _save(self) -> None:
         assert self._record is not None
         write_json(self.file, self._record)
+        self._stamp = self._file_stamp()
+
+    def _file_stamp(self) -> tuple[int, int] | None:
+        try:
+            stat = self.file.stat()
+        except OSError:
+            return None
+        return stat.st_size, stat.st_mtime_ns
 
     def _error(self, what: str) -> Exception:
         from avrisk.pipeline.store import RunDirectoryError

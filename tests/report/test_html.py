@@ -1,3 +1,4 @@
+import hashlib
 import json
 import re
 
@@ -105,6 +106,15 @@ def test_comparison_ratios_are_against_naive_mc_with_ces_whole_budget(runs):
         assert row["reliable"] == (g["ess"] >= 10 and g["pareto_k"] <= 0.7)
 
 
+def _reseal(path, text):
+    """Write a made-up summary and its digest (as a run would have recorded it)."""
+    path.write_text(text)
+    manifest = path.parent / "manifest.json"
+    record = json.loads(manifest.read_text())
+    record["summary"]["sha256"] = hashlib.sha256(text.encode()).hexdigest()
+    manifest.write_text(json.dumps(record))
+
+
 def test_a_variance_ratio_from_few_effective_hits_is_marked_unreliable(runs, tmp_path):
     root, dirs = runs
     ce = dirs[0][1].summary()["estimate"]
@@ -123,10 +133,10 @@ def test_a_variance_ratio_from_few_effective_hits_is_marked_unreliable(runs, tmp
     try:
         summary = json.loads(original)
         summary["estimate"]["by_gamma"][0]["ess"] = 1.4
-        summary_path.write_text(json.dumps(summary))
+        _reseal(summary_path, json.dumps(summary))
         text = write_report(tmp_path / "shaky", dirs, title="t").read_text()
     finally:
-        summary_path.write_text(original)
+        _reseal(summary_path, original)
     assert "fewer than 10 effective CE hits, or hit weights with a heavy tail" in text
     assert text.count("</td></tr>") > 0 and "*</td></tr>" in text
 
@@ -140,10 +150,10 @@ def test_naive_runs_are_never_marked_unreliable(runs, tmp_path):
         assert summary["estimate"]["method"] == "naive_mc"
         for g in summary["estimate"]["by_gamma"]:
             g.update(n_hits=2, ess=2.0)
-        summary_path.write_text(json.dumps(summary))
+        _reseal(summary_path, json.dumps(summary))
         text = write_report(tmp_path / "naive", dirs[1:], title="t").read_text()
     finally:
-        summary_path.write_text(original)
+        _reseal(summary_path, original)
     assert "*</td></tr>" not in text
 
 
@@ -155,9 +165,9 @@ def test_a_naive_run_with_few_hits_is_told_its_relative_error(runs, tmp_path):
         summary = json.loads(original)
         for g in summary["estimate"]["by_gamma"]:
             g.update(n_hits=4, ess=4.0)
-        summary_path.write_text(json.dumps(summary))
+        _reseal(summary_path, json.dumps(summary))
         text = write_report(tmp_path / "few", dirs[1:], title="t").read_text()
     finally:
-        summary_path.write_text(original)
+        _reseal(summary_path, original)
     assert "Only 4 hits: the relative standard error is about 50%." in text
     assert "weights dominate" not in text
