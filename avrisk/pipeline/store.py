@@ -330,11 +330,14 @@ class RunDirectory:
                     "truncated or swapped)"
                 )
         try:
-            table = pq.read_table(pa.BufferReader(data))
+            parquet = pq.ParquetFile(pa.BufferReader(data))
+            names = parquet.schema_arrow.names
+            table = parquet.read(columns=[c for c in ("stage", "chunk") if c in names])
         except (pa.ArrowException, OSError) as exc:
             return f"not a readable Parquet file ({str(exc)[:80]})"
-        if entry is not None and table.num_rows != entry["rows"]:
-            return f"holds {table.num_rows} rows, {MANIFEST_FILE} {entry['rows']}"
+        rows = parquet.metadata.num_rows
+        if entry is not None and rows != entry["rows"]:
+            return f"holds {rows} rows, {MANIFEST_FILE} {entry['rows']}"
         for name, want in (("stage", stage), ("chunk", chunk)):
             if name in table.column_names:
                 found_values = np.unique(table[name].to_numpy())
