@@ -8,8 +8,10 @@ contact of the rollout (no contact: a near miss; rear-end, hit from behind, side
 failed rollouts and its wall time. Nothing but those counts is kept, so
 millions of rollouts take a few hundred kilobytes. Stop it at any moment (even
 ``kill -9``): rerunning the same command skips the chunks recorded and goes
-on. ``--shard I/K`` makes this process do chunks ``j = I mod K`` (run K of them
-side by side on K cores, each into its own lines file).
+on; raising ``--n`` extends a reference (its last, short chunk is simulated
+again in full, and the newer line counts). ``--shard I/K`` makes this process
+do chunks ``j = I mod K`` (run K of them side by side on K cores, each into its
+own lines file).
 
 ``--summarize`` merges every shard's lines into ``OUT.json``: per threshold the
 hits, ``p``, its standard error and exact (Clopper-Pearson) 95% interval, the
@@ -80,6 +82,11 @@ def read_lines(path: Path, definition: dict) -> dict[int, dict]:
     return done
 
 
+def _size(chunk: int, n: int) -> int:
+    """Rollouts of chunk ``chunk`` in a reference of ``n`` rollouts."""
+    return min(SAMPLE_CHUNK, n - chunk * SAMPLE_CHUNK)
+
+
 def simulate(args: argparse.Namespace) -> None:
     spec = load_spec(args.scenario)
     objective = SimulationObjective(spec, device=args.device, allow_import=True)
@@ -90,12 +97,13 @@ def simulate(args: argparse.Namespace) -> None:
     done = read_lines(path, definition)
     n_chunks = -(-args.n // SAMPLE_CHUNK)
     todo = [j for j in range(n_chunks) if j % args.shard[1] == args.shard[0]]
-    todo = [j for j in todo if j not in done]
+    # A chunk recorded short (the last of a smaller --n) is done again in full.
+    todo = [j for j in todo if done.get(j, {}).get("n") != _size(j, args.n)]
     print(f"{len(done)} chunks recorded, {len(todo)} to go", file=sys.stderr)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "a") as sink:
         for j in todo:
-            size = min(SAMPLE_CHUNK, args.n - j * SAMPLE_CHUNK)
+            size = _size(j, args.n)
             start = time.perf_counter()
             task = chunk_task(base, args.seed, FINAL_STAGE, j, size)
             result = evaluate_task(problem, task)
