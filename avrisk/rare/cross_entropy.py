@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any, Literal, NamedTuple
+from typing import Annotated, Any, Literal, NamedTuple
 
 import numpy as np
 from pydantic import Field
@@ -195,24 +195,55 @@ SELECTION_RULES: dict[str, Callable[[SearchLevel], tuple[float, ...]]] = {
 }
 
 
+#: The types of the settings that the variants of :class:`CESettings` give
+#: other defaults (:class:`~avrisk.rare.mixture.MixtureSettings`): their
+#: constraints, declared once.
+EliteLevel = Annotated[
+    float, Field(gt=0.0, lt=1.0, description="Elite quantile level.")
+]
+SearchIterations = Annotated[int, Field(ge=0, description="Search iterations.")]
+ShareOfP0 = Annotated[float, Field(ge=0.0, lt=1.0)]
+
+
 class CESettings(EstimatorSettings):
-    """Settings of cross-entropy importance sampling (the paper's names)."""
+    """Settings of cross-entropy importance sampling (the paper's names).
+
+    Attributes
+    ----------
+    rho : float, default=0.01
+        Quantile level defining the elite samples, in (0, 1).
+    alpha : float, default=0.8
+        Smoothing of the mean-parameter update, in (0, 1].
+    n_per_iter : int, default=5000
+        Samples per search iteration.
+    n_iter : int, default=100
+        Search iterations ``K`` (0: the final stage samples the base).
+    n_final : int, default=100000
+        Fresh samples of the chosen proposal for the estimate.
+    select : {"quantile", "variance"}, default="quantile"
+        Rule choosing the final proposal among the iterates
+        (:data:`SELECTION_RULES`); ``"quantile"`` is the paper's.
+    defensive : float, default=0.0
+        Fraction ``lam`` in [0, 1) of the final stage drawn from the base
+        instead of the chosen proposal (a defensive mixture,
+        :mod:`avrisk.rare.defensive`): every weight is then at most
+        ``1 / lam``, so a proposal that misses part of the event, or has
+        heavy-tailed weights, cannot make the estimate or its standard error
+        collapse. 0 (the paper's): the proposal alone.
+    """
 
     OMIT_IF_DEFAULT = ("defensive",)
 
-    rho: float = Field(0.01, gt=0.0, lt=1.0, description="Elite quantile level.")
+    rho: EliteLevel = 0.01
     alpha: float = Field(0.8, gt=0.0, le=1.0, description="Smoothing of the update.")
     n_per_iter: int = Field(5000, ge=1, description="Samples per search iteration.")
-    n_iter: int = Field(100, ge=0, description="Search iterations K.")
+    n_iter: SearchIterations = 100
     n_final: int = Field(100_000, ge=1, description="Samples of the final stage.")
     select: Literal["quantile", "variance"] = Field(
         "quantile", description="Rule choosing the final proposal (SELECTION_RULES)."
     )
-    defensive: float = Field(
-        0.0,
-        ge=0.0,
-        lt=1.0,
-        description="Share of the final stage drawn from P0 (weights <= 1/share).",
+    defensive: ShareOfP0 = Field(
+        0.0, description="Share of the final stage drawn from P0 (weights <= 1/share)."
     )
 
 

@@ -78,7 +78,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any, Literal, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from pydantic import Field
@@ -86,7 +86,11 @@ from scipy.special import logsumexp
 
 from avrisk.rare.cross_entropy import (
     SELECTION_RULES,
+    CESettings,
     CEState,
+    EliteLevel,
+    SearchIterations,
+    ShareOfP0,
     search_checkpoint,
     search_diagnostics,
     search_final_estimate,
@@ -95,7 +99,6 @@ from avrisk.rare.cross_entropy import (
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
-    EstimatorSettings,
     estimate_black_box,
     register_estimator,
 )
@@ -471,25 +474,37 @@ def merge_overlapping(
     return components, weights
 
 
-class MixtureSettings(EstimatorSettings):
-    """Settings of mixture cross-entropy importance sampling."""
+class MixtureSettings(CESettings):
+    """Settings of mixture cross-entropy importance sampling.
+
+    Those of :class:`~avrisk.rare.cross_entropy.CESettings`, with other
+    defaults for ``rho`` (EM needs elites for every component, hence more
+    than CE's 0.01), ``n_iter`` and ``defensive``, and two of its own.
+
+    Attributes
+    ----------
+    n_components : int, default=4
+        Components at the first iteration; they may die or merge later.
+    rho : float, default=0.1
+        Quantile level of the elite, in (0, 1).
+    n_iter : int, default=20
+        Search iterations (0: the final stage samples the base).
+    defensive : float, default=0.1
+        Weight ``lam`` of the base in every mixture, in [0, 1): every weight
+        is at most ``1 / lam``.
+    min_weight : float, default=0.02
+        Share of the elite weight below which a component dies.
+    """
+
+    OMIT_IF_DEFAULT = ()
 
     n_components: int = Field(
         4, ge=1, description="Components K at the start (they may die or merge)."
     )
-    rho: float = Field(0.1, gt=0.0, lt=1.0, description="Elite quantile level.")
-    alpha: float = Field(0.8, gt=0.0, le=1.0, description="Smoothing of the update.")
-    n_per_iter: int = Field(5000, ge=1, description="Samples per search iteration.")
-    n_iter: int = Field(20, ge=0, description="Search iterations.")
-    n_final: int = Field(100_000, ge=1, description="Samples of the final stage.")
-    select: Literal["quantile", "variance"] = Field(
-        "quantile", description="Rule choosing the final mixture (SELECTION_RULES)."
-    )
-    defensive: float = Field(
-        0.1,
-        ge=0.0,
-        lt=1.0,
-        description="Weight of P0 in every mixture (weights <= 1/defensive).",
+    rho: EliteLevel = 0.1
+    n_iter: SearchIterations = 20
+    defensive: ShareOfP0 = Field(
+        0.1, description="Weight of P0 in every mixture (weights <= 1/defensive)."
     )
     min_weight: float = Field(
         0.02,
@@ -497,6 +512,11 @@ class MixtureSettings(EstimatorSettings):
         lt=1.0,
         description="Share of the elite weight below which a component dies.",
     )
+
+    def recorded(self) -> dict[str, Any]:
+        """As CE's, ``n_components`` first (as runs have always recorded it)."""
+        out = super().recorded()
+        return {"n_components": out.pop("n_components"), **out}
 
 
 @register_estimator
