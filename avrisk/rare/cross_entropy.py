@@ -452,21 +452,16 @@ def cross_entropy(
     base: ExponentialFamily,
     gamma: float,
     *,
-    rho: float = 0.01,
-    alpha: float = 0.8,
-    n_per_iter: int = 5000,
-    n_iter: int = 100,
-    n_final: int = 100_000,
+    settings: CESettings | None = None,
     seed: int = 0,
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
-    select: str = "quantile",
-    defensive: float = 0.0,
     callback: Callable[[CEInfo, CEState], None] | None = None,
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
     stopping: StoppingRule | None = None,
+    **overrides: Any,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by cross-entropy importance sampling.
 
@@ -478,32 +473,14 @@ def cross_entropy(
         ``P0``; its search box constrains the proposals.
     gamma : float
         Threshold of the event ``f <= gamma``.
-    rho : float, default=0.01
-        Quantile level defining the elite samples, in (0, 1).
-    alpha : float, default=0.8
-        Smoothing of the mean-parameter update, in (0, 1].
-    n_per_iter : int, default=5000
-        Samples per search iteration.
-    n_iter : int, default=100
-        Search iterations ``K`` (0: the final stage samples the base).
-    n_final : int, default=100000
-        Fresh samples of the chosen proposal for the estimate.
+    settings : CESettings, optional
+        The method's settings (default: the defaults of :class:`CESettings`).
     seed : int, default=0
         Run seed; same seed, same result, whatever ``batch_size``.
     gamma_test : float or sequence of float, default=()
         Further thresholds estimated from the final samples.
     batch_size : int or None, default=None
         Largest number of rows per call of ``f``.
-    select : {"quantile", "variance"}, default="quantile"
-        Rule choosing the final proposal among the iterates
-        (:data:`SELECTION_RULES`); ``"quantile"`` is the paper's.
-    defensive : float, default=0.0
-        Fraction ``lam`` in [0, 1) of the final stage drawn from ``base``
-        instead of the chosen proposal (a defensive mixture,
-        :mod:`avrisk.rare.defensive`): every weight is then at most
-        ``1 / lam``, so a proposal that misses part of the event, or has
-        heavy-tailed weights, cannot make the estimate or its standard error
-        collapse. 0 (the paper's): the proposal alone.
     callback : callable, optional
         Called after each iteration with its :class:`CEInfo` and the new
         :class:`CEState` (progress display, checkpoints).
@@ -518,11 +495,22 @@ def cross_entropy(
     stopping : StoppingRule, optional
         Ends the final stage early (:mod:`avrisk.rare.stopping`); the result's
         ``stopped_by`` says what ended it.
+    **overrides
+        Settings of :class:`CESettings` by name (``rho``, ``alpha``,
+        ``n_per_iter``, ``n_iter``, ``n_final``, ``select``, ``defensive``),
+        in place of those of ``settings``.
 
     Returns
     -------
     Estimate
         ``n_evals = n_iter * n_per_iter + n_final``.
+
+    Raises
+    ------
+    TypeError
+        For a keyword that is neither an argument nor a setting.
+    ValueError
+        For an invalid setting (the message names it).
 
     Examples
     --------
@@ -536,17 +524,8 @@ def cross_entropy(
     >>> bool(abs(est.p / norm.sf(5.0) - 1) < 0.1)
     True
     """
-    settings = CESettings.validated(
-        rho=rho,
-        alpha=alpha,
-        n_per_iter=n_per_iter,
-        n_iter=n_iter,
-        n_final=n_final,
-        select=select,
-        defensive=defensive,
-    )
     return estimate_black_box(
-        CrossEntropy(settings),
+        CrossEntropy(CESettings.overridden(settings, "cross_entropy", **overrides)),
         f,
         base,
         gamma,

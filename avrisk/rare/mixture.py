@@ -659,15 +659,7 @@ def mixture_ce(
     base: ExponentialFamily,
     gamma: float,
     *,
-    n_components: int = 4,
-    rho: float = 0.1,
-    alpha: float = 0.8,
-    n_per_iter: int = 5000,
-    n_iter: int = 20,
-    n_final: int = 100_000,
-    defensive: float = 0.1,
-    min_weight: float = 0.02,
-    select: str = "quantile",
+    settings: MixtureSettings | None = None,
     seed: int = 0,
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
@@ -676,6 +668,7 @@ def mixture_ce(
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
     stopping: StoppingRule | None = None,
+    **overrides: Any,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by mixture cross-entropy importance sampling.
 
@@ -687,26 +680,8 @@ def mixture_ce(
         ``P0``; its structure and search box are the components'.
     gamma : float
         Threshold of the event ``f <= gamma``.
-    n_components : int, default=4
-        Components at the first iteration; they may die or merge later.
-    rho : float, default=0.1
-        Quantile level of the elite, in (0, 1); EM needs elites for every
-        component, hence more than CE's 0.01.
-    alpha : float, default=0.8
-        Smoothing of each component's update, in (0, 1].
-    n_per_iter : int, default=5000
-        Samples per search iteration.
-    n_iter : int, default=20
-        Search iterations (0: the final stage samples the base).
-    n_final : int, default=100000
-        Fresh samples of the chosen mixture for the estimate.
-    defensive : float, default=0.1
-        Weight ``lam`` of ``base`` in every mixture, in [0, 1): every weight is
-        at most ``1 / lam``.
-    min_weight : float, default=0.02
-        Share of the elite weight below which a component dies.
-    select : {"quantile", "variance"}, default="quantile"
-        Rule choosing the final mixture among the iterates (as CE's).
+    settings : MixtureSettings, optional
+        The method's settings (default: the defaults of :class:`MixtureSettings`).
     seed : int, default=0
         Run seed; same seed, same result, whatever ``batch_size``.
     gamma_test : float or sequence of float, default=()
@@ -725,12 +700,24 @@ def mixture_ce(
         Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
     stopping : StoppingRule, optional
         Ends the final stage early (:mod:`avrisk.rare.stopping`).
+    **overrides
+        Settings of :class:`MixtureSettings` by name (``n_components``,
+        ``rho``, ``alpha``, ``n_per_iter``, ``n_iter``, ``n_final``,
+        ``select``, ``defensive``, ``min_weight``), in place of those of
+        ``settings``.
 
     Returns
     -------
     Estimate
         ``proposal`` is the chosen :class:`MixtureProposal`; ``n_evals =
         n_iter * n_per_iter + n_final``.
+
+    Raises
+    ------
+    TypeError
+        For a keyword that is neither an argument nor a setting.
+    ValueError
+        For an invalid setting (the message names it).
 
     Examples
     --------
@@ -748,19 +735,10 @@ def mixture_ce(
     >>> bool(abs(est.p / (2 * norm.sf(4.0)) - 1) < 0.1)
     True
     """
-    settings = MixtureSettings.validated(
-        n_components=n_components,
-        rho=rho,
-        alpha=alpha,
-        n_per_iter=n_per_iter,
-        n_iter=n_iter,
-        n_final=n_final,
-        defensive=defensive,
-        min_weight=min_weight,
-        select=select,
-    )
     return estimate_black_box(
-        MixtureCrossEntropy(settings),
+        MixtureCrossEntropy(
+            MixtureSettings.overridden(settings, "mixture_ce", **overrides)
+        ),
         f,
         base,
         gamma,
