@@ -213,9 +213,11 @@ def run_estimation(
         decomposed by it (:mod:`avrisk.pipeline.mechanisms`) in the summary's
         ``mechanisms``, for estimators whose estimate is a final-stage mean.
     replay_check : callable, optional
-        ``f`` without side effects (no trace recording): a few rollouts are
-        replayed before the run starts or resumes, and a ``f`` that is not
-        repeatable stops it (:func:`~avrisk.pipeline.repeatability.check_repeatable`).
+        ``f`` without side effects (no trace recording), for a ``f`` that may
+        not be repeatable (an external AV): a few rollouts are replayed
+        before the run starts or resumes, and a ``f`` that is not repeatable
+        stops it (:func:`~avrisk.pipeline.repeatability.check_repeatable`).
+        None: no check (a ``f`` repeatable by construction).
 
     Returns
     -------
