@@ -498,19 +498,13 @@ def cross_entropy(
     **overrides
         Settings of :class:`CESettings` by name (``rho``, ``alpha``,
         ``n_per_iter``, ``n_iter``, ``n_final``, ``select``, ``defensive``),
-        in place of those of ``settings``.
+        in place of those of ``settings``: another name is a TypeError, an
+        invalid value a ValueError naming it.
 
     Returns
     -------
     Estimate
         ``n_evals = n_iter * n_per_iter + n_final``.
-
-    Raises
-    ------
-    TypeError
-        For a keyword that is neither an argument nor a setting.
-    ValueError
-        For an invalid setting (the message names it).
 
     Examples
     --------

@@ -704,20 +704,14 @@ def mixture_ce(
         Settings of :class:`MixtureSettings` by name (``n_components``,
         ``rho``, ``alpha``, ``n_per_iter``, ``n_iter``, ``n_final``,
         ``select``, ``defensive``, ``min_weight``), in place of those of
-        ``settings``.
+        ``settings``: another name is a TypeError, an invalid value a
+        ValueError naming it.
 
     Returns
     -------
     Estimate
         ``proposal`` is the chosen :class:`MixtureProposal`; ``n_evals =
         n_iter * n_per_iter + n_final``.
-
-    Raises
-    ------
-    TypeError
-        For a keyword that is neither an argument nor a setting.
-    ValueError
-        For an invalid setting (the message names it).
 
     Examples
     --------

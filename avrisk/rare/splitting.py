@@ -779,7 +779,8 @@ def subset_simulation(
     **overrides
         Settings of :class:`SplittingSettings` by name (``n_particles``,
         ``p0``, ``p0_max``, ``max_levels``, ``n_moves``, ``initial_beta``), in
-        place of those of ``settings``.
+        place of those of ``settings``: another name is a TypeError, an
+        invalid value a ValueError naming it.
 
     Returns
     -------
@@ -792,10 +793,6 @@ def subset_simulation(
     ------
     SplittingError
         If the levels cannot reach ``gamma`` (module docstring, *Ties*).
-    TypeError
-        For a keyword that is neither an argument nor a setting.
-    ValueError
-        For an invalid setting (the message names it).
 
     Examples
     --------

@@ -157,15 +157,7 @@ def reads_lidar(actor: Any) -> bool:
 
 
 def deterministic(actor: Any) -> bool:
-    """Whether an actor vouches for its repeatability (``deterministic``, default True).
-
-    Examples
-    --------
-    >>> class Remote:
-    ...     deterministic = False
-    >>> deterministic(Remote()), deterministic(object())
-    (False, True)
-    """
+    """Whether an actor vouches that it is repeatable (``deterministic``, or True)."""
     return bool(getattr(actor, "deterministic", True))
 
 
