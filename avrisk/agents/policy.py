@@ -39,7 +39,7 @@ from pydantic import BaseModel, ConfigDict
 from torch import Tensor
 
 from avrisk.registry import Registry
-from avrisk.sim.interfaces import Action, Actor, reads_lidar
+from avrisk.sim.interfaces import Action, Actor, deterministic, reads_lidar
 from avrisk.sim.observation import Observation
 
 __all__ = [
@@ -90,8 +90,8 @@ class EgoActor:
     Examples
     --------
     >>> ego = EgoActor(ConstantPolicy(ego_only(1), accel=1.0), 3)
-    >>> ego.controlled.tolist(), ego.noise
-    ([True, False, False], None)
+    >>> ego.controlled.tolist(), ego.noise, ego.deterministic
+    ([True, False, False], None, True)
     """
 
     noise = None
@@ -102,6 +102,7 @@ class EgoActor:
         self.policy = policy
         self.controlled = ego_only(n_vehicles, device=device)
         self.reads_lidar = reads_lidar(policy)
+        self.deterministic = deterministic(policy)
 
     def init(self, obs: Observation, params: Tensor | None) -> Any:
         """The policy's initial state (an ego policy takes no part of ``X``)."""

@@ -49,7 +49,7 @@ from avrisk.safety import get_safety_measure
 from avrisk.scenario import ParamLayout, ScenarioParams, build_base_distribution
 from avrisk.scenario.components import IDM_MOBIL, LEARNED, DriverSpec
 from avrisk.scenario.spec import ScenarioSpec
-from avrisk.sim.interfaces import Actor, SafetyMeasure
+from avrisk.sim.interfaces import Actor, SafetyMeasure, deterministic
 from avrisk.sim.road import Road
 from avrisk.sim.simulator import RolloutCarry, RolloutResult, SimConfig, Simulator
 from avrisk.sim.state import VehicleState
@@ -347,6 +347,17 @@ class ScenarioSimulator:
     def n_steps(self) -> int:
         """Time steps per full rollout ``T``."""
         return math.ceil(self.spec.simulation.horizon / self.spec.simulation.dt - 1e-9)
+
+    @property
+    def deterministic(self) -> bool:
+        """Whether every actor vouches that a rollout depends only on ``X`` and seed.
+
+        The built-in drivers do; an ego policy or driver model the scenario
+        names may not (``deterministic = False``: the external ego, see
+        :func:`avrisk.sim.interfaces.deterministic`), and its runs check it.
+        """
+        named = [*self._other_drivers, self.ego_policy]
+        return all(deterministic(actor) for actor in named if actor is not None)
 
     def rollout(
         self, x: ArrayLike, seeds: ArrayLike, *, record_trace: bool = False

@@ -134,10 +134,10 @@ def _cross_entropy(
             problem.f,
             problem.base,
             problem.gamma,
+            settings=ce_settings,
             seed=seed,
             callback=lambda info, state: monitor.status(method.progress(info)),
             on_batch=lambda batch: monitor.advance(len(batch.ids), replayed=False),
-            **ce_settings.model_dump(),
         )
 
 

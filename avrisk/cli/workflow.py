@@ -114,9 +114,10 @@ def execute(
     (default: in this process); worker processes record no traces (the
     report simulates the failures it shows again). ``store_full``: keep every
     column of the samples (else the learned drivers' ``xi`` is drawn again
-    when read). A few rollouts are replayed first, in this process: an
-    objective that is not repeatable stops the run (an external AV that
-    ignores its seeds).
+    when read). Where an actor does not vouch for its repeatability (an
+    external AV, :attr:`ScenarioSimulator.deterministic`), a few rollouts are
+    replayed first, in this process: an objective that is not repeatable
+    stops the run (an AV that ignores its seeds).
     """
     check_recorded(out)  # a damaged config or summary: one line, not a traceback
     base = base_distribution(objective.simulator.spec)
@@ -143,7 +144,7 @@ def execute(
             evaluator=evaluator,
             provenance=stamp(definition, objective.computed_with()),
             mechanisms=MECHANISMS,
-            replay_check=plain,
+            replay_check=None if plain.simulator.deterministic else plain,
         )
     return run_dir
 

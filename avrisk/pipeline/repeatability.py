@@ -1,8 +1,12 @@
 """Is ``f`` repeatable? A few rollouts replayed at a run's start and at resume.
 
 Resume, the retry of failed rollouts and the report's replays all assume that
-a rollout depends only on its ``X`` and seed. That holds for the simulator;
-an external AV may break it (a stack that draws from an unseeded generator).
+a rollout depends only on its ``X`` and seed. That holds for the simulator
+and its in-process actors, whose runs are not checked; an external AV may
+break it (a stack that draws from an unseeded generator), and so may an
+actor that says so (``deterministic = False``, :mod:`avrisk.sim.interfaces`):
+their runs are (the caller passes ``replay_check`` to
+:func:`~avrisk.pipeline.run.run_estimation`).
 :func:`check_repeatable` replays :data:`REPLAYED` rollouts: at resume, rows of
 a recorded chunk (evaluated by an earlier session, maybe by an AV process
 since restarted); at the start, fresh draws of ``P0`` evaluated twice, in

@@ -213,9 +213,11 @@ def run_estimation(
         decomposed by it (:mod:`avrisk.pipeline.mechanisms`) in the summary's
         ``mechanisms``, for estimators whose estimate is a final-stage mean.
     replay_check : callable, optional
-        ``f`` without side effects (no trace recording): a few rollouts are
-        replayed before the run starts or resumes, and a ``f`` that is not
-        repeatable stops it (:func:`~avrisk.pipeline.repeatability.check_repeatable`).
+        ``f`` without side effects (no trace recording), for a ``f`` that may
+        not be repeatable (an external AV): a few rollouts are replayed
+        before the run starts or resumes, and a ``f`` that is not repeatable
+        stops it (:func:`~avrisk.pipeline.repeatability.check_repeatable`).
+        None: no check (a ``f`` repeatable by construction).
 
     Returns
     -------
@@ -231,76 +233,52 @@ def run_estimation(
     created = not run_dir.path.exists()
     with run_lock(run_dir.path):
         try:
-            return _run_locked(
-                run_dir,
-                created,
-                base,
-                f,
-                settings,
-                context=context,
-                monitor=monitor,
-                evaluator=evaluator,
-                provenance=provenance,
-                mechanisms=mechanisms,
-                replay_check=replay_check,
-            )
+            monitor = monitor or SilentMonitor()
+            run_dir.claim({"settings": settings.to_dict(), **(context or {})})
+            if _read_back(run_dir):
+                return run_dir.summary()
+            clock = _Clock()
+            start = time.perf_counter()
+            monitor.start(settings.total_rollouts, settings.estimator.describe())
+            if replay_check is not None:
+                check_repeatable(run_dir, base, replay_check, settings.seed)
+            timed = _TimedEvaluator(evaluator or LocalEvaluator(), clock)
+            estimate = _estimate(run_dir, base, f, settings, monitor, timed)
+            summary = _summary(estimate, settings, clock, time.perf_counter() - start)
+            if provenance is not None:
+                summary["provenance"] = provenance
+            if mechanisms is not None and getattr(
+                settings.estimator, "decomposable", False
+            ):
+                summary["mechanisms"] = _mechanisms(run_dir, settings, *mechanisms)
+            run_dir.finish(summary)
+            return run_dir.summary()
         except BaseException:
-            # Even a failure to write config.json (a full disk) leaves nothing
-            # that would make the next run refuse the directory.
+            # Nothing worth keeping (even a failure to write config.json, a full
+            # disk): leave no half-made directory that the next run would refuse.
             if created and not run_dir.has_recorded_chunks():
                 run_dir.discard()
             raise
 
 
-def _run_locked(
-    run_dir: RunDirectory,
-    created: bool,
-    base: ExponentialFamily,
-    f: Callable[..., Any],
-    settings: RunSettings,
-    *,
-    context: dict[str, Any] | None = None,
-    monitor: RunMonitor | None = None,
-    evaluator: Evaluator | None = None,
-    provenance: dict[str, Any] | None = None,
-    mechanisms: tuple[str, Mapping[int, str]] | None = None,
-    replay_check: Callable[..., Any] | None = None,
-) -> dict[str, Any]:
-    """:func:`run_estimation` in its locked directory (``created`` by this run)."""
-    monitor = monitor or SilentMonitor()
-    config = {"settings": settings.to_dict(), **(context or {})}
-    run_dir.claim(config)
-    if run_dir.is_complete:
-        problem = run_dir.record_problem()
-        if problem is not None:  # a changed summary or table: never printed
-            warnings.warn(
-                f"{problem}: recomputing", RecordIntegrityWarning, stacklevel=3
-            )
-            run_dir.recompute()
-        elif not run_dir.has_failed_samples():
-            return run_dir.summary()
-        else:
-            run_dir.reopen()
-    clock = _Clock()
-    start = time.perf_counter()
-    monitor.start(settings.total_rollouts, settings.estimator.describe())
-    try:
-        if replay_check is not None:
-            check_repeatable(run_dir, base, replay_check, settings.seed)
-        timed = _TimedEvaluator(evaluator or LocalEvaluator(), clock)
-        estimate = _estimate(run_dir, base, f, settings, monitor, timed)
-    except BaseException:
-        if created and not run_dir.has_recorded_chunks():
-            run_dir.discard()  # nothing worth keeping: leave no half-made directory
-        raise
-    wall = time.perf_counter() - start
-    summary = _summary(estimate, settings, clock, wall)
-    if provenance is not None:
-        summary["provenance"] = provenance
-    if mechanisms is not None and getattr(settings.estimator, "decomposable", False):
-        summary["mechanisms"] = _mechanisms(run_dir, settings, *mechanisms)
-    run_dir.finish(summary)
-    return run_dir.summary()
+def _read_back(run_dir: RunDirectory) -> bool:
+    """Whether ``run_dir`` holds a complete run to read back as it is.
+
+    A complete run whose summary or table changed is recomputed (with a
+    warning), one with rollouts that failed to evaluate is reopened: both are
+    run again (what was recorded is replayed).
+    """
+    if not run_dir.is_complete:
+        return False
+    problem = run_dir.record_problem()
+    if problem is not None:  # a changed summary or table: never printed
+        warnings.warn(f"{problem}: recomputing", RecordIntegrityWarning, stacklevel=3)
+        run_dir.recompute()
+        return False
+    if not run_dir.has_failed_samples():
+        return True
+    run_dir.reopen()
+    return False
 
 
 def _estimate(

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any, Literal, NamedTuple
+from typing import Annotated, Any, Literal, NamedTuple
 
 import numpy as np
 from pydantic import Field
@@ -195,24 +195,55 @@ SELECTION_RULES: dict[str, Callable[[SearchLevel], tuple[float, ...]]] = {
 }
 
 
+#: The types of the settings that the variants of :class:`CESettings` give
+#: other defaults (:class:`~avrisk.rare.mixture.MixtureSettings`): their
+#: constraints, declared once.
+EliteLevel = Annotated[
+    float, Field(gt=0.0, lt=1.0, description="Elite quantile level.")
+]
+SearchIterations = Annotated[int, Field(ge=0, description="Search iterations.")]
+ShareOfP0 = Annotated[float, Field(ge=0.0, lt=1.0)]
+
+
 class CESettings(EstimatorSettings):
-    """Settings of cross-entropy importance sampling (the paper's names)."""
+    """Settings of cross-entropy importance sampling (the paper's names).
+
+    Attributes
+    ----------
+    rho : float, default=0.01
+        Quantile level defining the elite samples, in (0, 1).
+    alpha : float, default=0.8
+        Smoothing of the mean-parameter update, in (0, 1].
+    n_per_iter : int, default=5000
+        Samples per search iteration.
+    n_iter : int, default=100
+        Search iterations ``K`` (0: the final stage samples the base).
+    n_final : int, default=100000
+        Fresh samples of the chosen proposal for the estimate.
+    select : {"quantile", "variance"}, default="quantile"
+        Rule choosing the final proposal among the iterates
+        (:data:`SELECTION_RULES`); ``"quantile"`` is the paper's.
+    defensive : float, default=0.0
+        Fraction ``lam`` in [0, 1) of the final stage drawn from the base
+        instead of the chosen proposal (a defensive mixture,
+        :mod:`avrisk.rare.defensive`): every weight is then at most
+        ``1 / lam``, so a proposal that misses part of the event, or has
+        heavy-tailed weights, cannot make the estimate or its standard error
+        collapse. 0 (the paper's): the proposal alone.
+    """
 
     OMIT_IF_DEFAULT = ("defensive",)
 
-    rho: float = Field(0.01, gt=0.0, lt=1.0, description="Elite quantile level.")
+    rho: EliteLevel = 0.01
     alpha: float = Field(0.8, gt=0.0, le=1.0, description="Smoothing of the update.")
     n_per_iter: int = Field(5000, ge=1, description="Samples per search iteration.")
-    n_iter: int = Field(100, ge=0, description="Search iterations K.")
+    n_iter: SearchIterations = 100
     n_final: int = Field(100_000, ge=1, description="Samples of the final stage.")
     select: Literal["quantile", "variance"] = Field(
         "quantile", description="Rule choosing the final proposal (SELECTION_RULES)."
     )
-    defensive: float = Field(
-        0.0,
-        ge=0.0,
-        lt=1.0,
-        description="Share of the final stage drawn from P0 (weights <= 1/share).",
+    defensive: ShareOfP0 = Field(
+        0.0, description="Share of the final stage drawn from P0 (weights <= 1/share)."
     )
 
 
@@ -421,21 +452,16 @@ def cross_entropy(
     base: ExponentialFamily,
     gamma: float,
     *,
-    rho: float = 0.01,
-    alpha: float = 0.8,
-    n_per_iter: int = 5000,
-    n_iter: int = 100,
-    n_final: int = 100_000,
+    settings: CESettings | None = None,
     seed: int = 0,
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
-    select: str = "quantile",
-    defensive: float = 0.0,
     callback: Callable[[CEInfo, CEState], None] | None = None,
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
     stopping: StoppingRule | None = None,
+    **overrides: Any,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by cross-entropy importance sampling.
 
@@ -447,32 +473,14 @@ def cross_entropy(
         ``P0``; its search box constrains the proposals.
     gamma : float
         Threshold of the event ``f <= gamma``.
-    rho : float, default=0.01
-        Quantile level defining the elite samples, in (0, 1).
-    alpha : float, default=0.8
-        Smoothing of the mean-parameter update, in (0, 1].
-    n_per_iter : int, default=5000
-        Samples per search iteration.
-    n_iter : int, default=100
-        Search iterations ``K`` (0: the final stage samples the base).
-    n_final : int, default=100000
-        Fresh samples of the chosen proposal for the estimate.
+    settings : CESettings, optional
+        The method's settings (default: the defaults of :class:`CESettings`).
     seed : int, default=0
         Run seed; same seed, same result, whatever ``batch_size``.
     gamma_test : float or sequence of float, default=()
         Further thresholds estimated from the final samples.
     batch_size : int or None, default=None
         Largest number of rows per call of ``f``.
-    select : {"quantile", "variance"}, default="quantile"
-        Rule choosing the final proposal among the iterates
-        (:data:`SELECTION_RULES`); ``"quantile"`` is the paper's.
-    defensive : float, default=0.0
-        Fraction ``lam`` in [0, 1) of the final stage drawn from ``base``
-        instead of the chosen proposal (a defensive mixture,
-        :mod:`avrisk.rare.defensive`): every weight is then at most
-        ``1 / lam``, so a proposal that misses part of the event, or has
-        heavy-tailed weights, cannot make the estimate or its standard error
-        collapse. 0 (the paper's): the proposal alone.
     callback : callable, optional
         Called after each iteration with its :class:`CEInfo` and the new
         :class:`CEState` (progress display, checkpoints).
@@ -487,6 +495,11 @@ def cross_entropy(
     stopping : StoppingRule, optional
         Ends the final stage early (:mod:`avrisk.rare.stopping`); the result's
         ``stopped_by`` says what ended it.
+    **overrides
+        Settings of :class:`CESettings` by name (``rho``, ``alpha``,
+        ``n_per_iter``, ``n_iter``, ``n_final``, ``select``, ``defensive``),
+        in place of those of ``settings``: another name is a TypeError, an
+        invalid value a ValueError naming it.
 
     Returns
     -------
@@ -505,17 +518,8 @@ def cross_entropy(
     >>> bool(abs(est.p / norm.sf(5.0) - 1) < 0.1)
     True
     """
-    settings = CESettings.validated(
-        rho=rho,
-        alpha=alpha,
-        n_per_iter=n_per_iter,
-        n_iter=n_iter,
-        n_final=n_final,
-        select=select,
-        defensive=defensive,
-    )
     return estimate_black_box(
-        CrossEntropy(settings),
+        CrossEntropy(CESettings.overridden(settings, "cross_entropy", **overrides)),
         f,
         base,
         gamma,

@@ -28,7 +28,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, ClassVar, Generic, NamedTuple, Protocol, TypeVar
+from typing import Any, ClassVar, Generic, NamedTuple, Protocol, Self, TypeVar
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
@@ -113,6 +113,53 @@ class EstimatorSettings(BaseModel):
                 for e in err.errors()
             )
             raise ValueError(problems) from None
+
+    @classmethod
+    def overridden(
+        cls, settings: EstimatorSettings | None, caller: str, /, **overrides: Any
+    ) -> Self:
+        """``settings`` (default: the defaults) with ``overrides`` by name, validated.
+
+        How the top-level functions (:func:`~avrisk.rare.cross_entropy.cross_entropy`
+        ...) take their settings: a settings object, or any of its settings
+        as keyword arguments of ``caller``, or both.
+
+        Raises
+        ------
+        TypeError
+            If ``settings`` is not of this model, or a name is not one of its
+            settings (as for any unexpected keyword argument of ``caller``).
+        ValueError
+            If a setting is invalid (:meth:`validated`).
+
+        Examples
+        --------
+        >>> from avrisk.rare.cross_entropy import CESettings
+        >>> s = CESettings.overridden(CESettings(rho=0.1), "f", n_iter=5)
+        >>> s.rho, s.n_iter, s.n_final
+        (0.1, 5, 100000)
+        >>> CESettings.overridden(None, "f", n_iters=5)  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        TypeError: f() got an unexpected keyword argument 'n_iters' (the settings...
+        """
+        if settings is not None and not isinstance(settings, cls):
+            raise TypeError(
+                f"{caller}() takes settings of {cls.__name__}; "
+                f"got {type(settings).__name__}"
+            )
+        for name in overrides:
+            if name not in cls.model_fields:
+                raise TypeError(
+                    f"{caller}() got an unexpected keyword argument {name!r} "
+                    f"(the settings of {cls.__name__}: {', '.join(cls.model_fields)})"
+                )
+        given = (
+            {}
+            if settings is None
+            else {k: getattr(settings, k) for k in cls.model_fields}
+        )
+        return cls.validated(**{**given, **overrides})  # type: ignore[return-value]
 
     def recorded(self) -> dict[str, Any]:
         """The settings that define a run, for its record (JSON types)."""

@@ -78,7 +78,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any, Literal, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from pydantic import Field
@@ -86,7 +86,11 @@ from scipy.special import logsumexp
 
 from avrisk.rare.cross_entropy import (
     SELECTION_RULES,
+    CESettings,
     CEState,
+    EliteLevel,
+    SearchIterations,
+    ShareOfP0,
     search_checkpoint,
     search_diagnostics,
     search_final_estimate,
@@ -95,7 +99,6 @@ from avrisk.rare.cross_entropy import (
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
-    EstimatorSettings,
     estimate_black_box,
     register_estimator,
 )
@@ -471,25 +474,37 @@ def merge_overlapping(
     return components, weights
 
 
-class MixtureSettings(EstimatorSettings):
-    """Settings of mixture cross-entropy importance sampling."""
+class MixtureSettings(CESettings):
+    """Settings of mixture cross-entropy importance sampling.
+
+    Those of :class:`~avrisk.rare.cross_entropy.CESettings`, with other
+    defaults for ``rho`` (EM needs elites for every component, hence more
+    than CE's 0.01), ``n_iter`` and ``defensive``, and two of its own.
+
+    Attributes
+    ----------
+    n_components : int, default=4
+        Components at the first iteration; they may die or merge later.
+    rho : float, default=0.1
+        Quantile level of the elite, in (0, 1).
+    n_iter : int, default=20
+        Search iterations (0: the final stage samples the base).
+    defensive : float, default=0.1
+        Weight ``lam`` of the base in every mixture, in [0, 1): every weight
+        is at most ``1 / lam``.
+    min_weight : float, default=0.02
+        Share of the elite weight below which a component dies.
+    """
+
+    OMIT_IF_DEFAULT = ()
 
     n_components: int = Field(
         4, ge=1, description="Components K at the start (they may die or merge)."
     )
-    rho: float = Field(0.1, gt=0.0, lt=1.0, description="Elite quantile level.")
-    alpha: float = Field(0.8, gt=0.0, le=1.0, description="Smoothing of the update.")
-    n_per_iter: int = Field(5000, ge=1, description="Samples per search iteration.")
-    n_iter: int = Field(20, ge=0, description="Search iterations.")
-    n_final: int = Field(100_000, ge=1, description="Samples of the final stage.")
-    select: Literal["quantile", "variance"] = Field(
-        "quantile", description="Rule choosing the final mixture (SELECTION_RULES)."
-    )
-    defensive: float = Field(
-        0.1,
-        ge=0.0,
-        lt=1.0,
-        description="Weight of P0 in every mixture (weights <= 1/defensive).",
+    rho: EliteLevel = 0.1
+    n_iter: SearchIterations = 20
+    defensive: ShareOfP0 = Field(
+        0.1, description="Weight of P0 in every mixture (weights <= 1/defensive)."
     )
     min_weight: float = Field(
         0.02,
@@ -497,6 +512,11 @@ class MixtureSettings(EstimatorSettings):
         lt=1.0,
         description="Share of the elite weight below which a component dies.",
     )
+
+    def recorded(self) -> dict[str, Any]:
+        """As CE's, ``n_components`` first (as runs have always recorded it)."""
+        out = super().recorded()
+        return {"n_components": out.pop("n_components"), **out}
 
 
 @register_estimator
@@ -639,15 +659,7 @@ def mixture_ce(
     base: ExponentialFamily,
     gamma: float,
     *,
-    n_components: int = 4,
-    rho: float = 0.1,
-    alpha: float = 0.8,
-    n_per_iter: int = 5000,
-    n_iter: int = 20,
-    n_final: int = 100_000,
-    defensive: float = 0.1,
-    min_weight: float = 0.02,
-    select: str = "quantile",
+    settings: MixtureSettings | None = None,
     seed: int = 0,
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
@@ -656,6 +668,7 @@ def mixture_ce(
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
     stopping: StoppingRule | None = None,
+    **overrides: Any,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by mixture cross-entropy importance sampling.
 
@@ -667,26 +680,8 @@ def mixture_ce(
         ``P0``; its structure and search box are the components'.
     gamma : float
         Threshold of the event ``f <= gamma``.
-    n_components : int, default=4
-        Components at the first iteration; they may die or merge later.
-    rho : float, default=0.1
-        Quantile level of the elite, in (0, 1); EM needs elites for every
-        component, hence more than CE's 0.01.
-    alpha : float, default=0.8
-        Smoothing of each component's update, in (0, 1].
-    n_per_iter : int, default=5000
-        Samples per search iteration.
-    n_iter : int, default=20
-        Search iterations (0: the final stage samples the base).
-    n_final : int, default=100000
-        Fresh samples of the chosen mixture for the estimate.
-    defensive : float, default=0.1
-        Weight ``lam`` of ``base`` in every mixture, in [0, 1): every weight is
-        at most ``1 / lam``.
-    min_weight : float, default=0.02
-        Share of the elite weight below which a component dies.
-    select : {"quantile", "variance"}, default="quantile"
-        Rule choosing the final mixture among the iterates (as CE's).
+    settings : MixtureSettings, optional
+        The method's settings (default: the defaults of :class:`MixtureSettings`).
     seed : int, default=0
         Run seed; same seed, same result, whatever ``batch_size``.
     gamma_test : float or sequence of float, default=()
@@ -705,6 +700,12 @@ def mixture_ce(
         Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
     stopping : StoppingRule, optional
         Ends the final stage early (:mod:`avrisk.rare.stopping`).
+    **overrides
+        Settings of :class:`MixtureSettings` by name (``n_components``,
+        ``rho``, ``alpha``, ``n_per_iter``, ``n_iter``, ``n_final``,
+        ``select``, ``defensive``, ``min_weight``), in place of those of
+        ``settings``: another name is a TypeError, an invalid value a
+        ValueError naming it.
 
     Returns
     -------
@@ -728,19 +729,10 @@ def mixture_ce(
     >>> bool(abs(est.p / (2 * norm.sf(4.0)) - 1) < 0.1)
     True
     """
-    settings = MixtureSettings.validated(
-        n_components=n_components,
-        rho=rho,
-        alpha=alpha,
-        n_per_iter=n_per_iter,
-        n_iter=n_iter,
-        n_final=n_final,
-        defensive=defensive,
-        min_weight=min_weight,
-        select=select,
-    )
     return estimate_black_box(
-        MixtureCrossEntropy(settings),
+        MixtureCrossEntropy(
+            MixtureSettings.overridden(settings, "mixture_ce", **overrides)
+        ),
         f,
         base,
         gamma,

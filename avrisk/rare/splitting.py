@@ -151,7 +151,25 @@ class SplittingError(ValueError):
 
 
 class SplittingSettings(EstimatorSettings):
-    """Settings of subset simulation (module docstring)."""
+    """Settings of subset simulation (module docstring).
+
+    Attributes
+    ----------
+    n_particles : int, default=2000
+        Particles per level ``N``.
+    p0 : float, default=0.1
+        Quantile of ``f`` that sets each next level (share of survivors).
+    p0_max : float, default=0.5
+        Largest share of survivors ties of ``f`` may leave at a level before
+        the level moves below the tied value (at least ``p0``).
+    max_levels : int, default=12
+        Most particle sets, the draws of ``P0`` included; not reaching
+        ``gamma`` within them is a :class:`SplittingError`.
+    n_moves : int, default=1
+        pCN proposals per kept chain state (``> 1`` thins the chains).
+    initial_beta : float, default=0.6
+        pCN step of the first moves, in (0, 1]; then adapted.
+    """
 
     n_particles: int = Field(2000, ge=10, description="Particles per level N.")
     p0: float = Field(
@@ -720,12 +738,7 @@ def subset_simulation(
     base: ExponentialFamily,
     gamma: float,
     *,
-    n_particles: int = 2000,
-    p0: float = 0.1,
-    p0_max: float = 0.5,
-    max_levels: int = 12,
-    n_moves: int = 1,
-    initial_beta: float = 0.6,
+    settings: SplittingSettings | None = None,
     seed: int = 0,
     gamma_test: Sequence[float] | float = (),
     batch_size: int | None = None,
@@ -733,6 +746,7 @@ def subset_simulation(
     on_batch: BatchRecorder | None = None,
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
+    **overrides: Any,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` by subset simulation with pCN moves.
 
@@ -744,20 +758,8 @@ def subset_simulation(
         ``P0``; it must map to standard normals (``to_standard_normal``).
     gamma : float
         Threshold of the event ``f <= gamma``.
-    n_particles : int, default=2000
-        Particles per level ``N``.
-    p0 : float, default=0.1
-        Quantile of ``f`` that sets each next level (share of survivors).
-    p0_max : float, default=0.5
-        Largest share of survivors ties of ``f`` may leave at a level before
-        the level moves below the tied value (at least ``p0``).
-    max_levels : int, default=12
-        Most particle sets, the draws of ``P0`` included; not reaching
-        ``gamma`` within them is a :class:`SplittingError`.
-    n_moves : int, default=1
-        pCN proposals per kept chain state (``> 1`` thins the chains).
-    initial_beta : float, default=0.6
-        pCN step of the first moves, in (0, 1]; then adapted.
+    settings : SplittingSettings, optional
+        The method's settings (default: the defaults of :class:`SplittingSettings`).
     seed : int, default=0
         Run seed; same seed, same result, whatever ``batch_size``.
     gamma_test : float or sequence of float, default=()
@@ -774,6 +776,11 @@ def subset_simulation(
         with the same settings, or ``None``: resuming replays the record.
     evaluator : Evaluator, optional
         Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
+    **overrides
+        Settings of :class:`SplittingSettings` by name (``n_particles``,
+        ``p0``, ``p0_max``, ``max_levels``, ``n_moves``, ``initial_beta``), in
+        place of those of ``settings``: another name is a TypeError, an
+        invalid value a ValueError naming it.
 
     Returns
     -------
@@ -800,16 +807,10 @@ def subset_simulation(
     >>> bool(est.ci[0] < norm.sf(4.0) < est.ci[1])
     True
     """
-    settings = SplittingSettings.validated(
-        n_particles=n_particles,
-        p0=p0,
-        p0_max=p0_max,
-        max_levels=max_levels,
-        n_moves=n_moves,
-        initial_beta=initial_beta,
-    )
     return estimate_black_box(
-        SubsetSimulation(settings),
+        SubsetSimulation(
+            SplittingSettings.overridden(settings, "subset_simulation", **overrides)
+        ),
         f,
         base,
         gamma,

@@ -41,7 +41,14 @@ Contracts:
   step. An actor that never reads ``obs.lidar`` says so with a class
   attribute ``reads_lidar = False``; when no actor reads it, the simulator
   skips the scan and ``obs.lidar`` is None. Without the attribute an actor is
-  assumed to read it (:func:`reads_lidar`).
+  assumed to read it (:func:`reads_lidar`);
+* repeatability: a rollout's result must depend only on its ``X`` and its
+  seed (the noise above). An actor that cannot vouch for it (an AV in another
+  process, an actor drawing from a generator of its own) says so with
+  ``deterministic = False``: the runs of its scenarios then replay a few
+  rollouts before they start or resume and stop where they differ
+  (:mod:`avrisk.pipeline.repeatability`). Without the attribute an actor is
+  taken at its word (:func:`deterministic`).
 
 Safety measures
 ---------------
@@ -147,6 +154,11 @@ def reads_lidar(actor: Any) -> bool:
     (False, True)
     """
     return bool(getattr(actor, "reads_lidar", True))
+
+
+def deterministic(actor: Any) -> bool:
+    """Whether an actor vouches that it is repeatable (``deterministic``, or True)."""
+    return bool(getattr(actor, "deterministic", True))
 
 
 @runtime_checkable

@@ -36,6 +36,12 @@ class InProcessAcc(LocalEgo):
         super().__init__(AccController(noise=noise))
 
 
+class UnvouchedAcc(InProcessAcc):
+    """The same, declaring that it may not be repeatable (runs check it)."""
+
+    deterministic = False
+
+
 def _sleep(reply, server):
     time.sleep(server.timeout_s * 1.5)  # the next batch finds it awake
     return reply

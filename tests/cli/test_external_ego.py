@@ -23,6 +23,7 @@ from typer.testing import CliRunner
 pytest.importorskip("zmq")
 
 from avrisk.cli.app import app  # noqa: E402
+from avrisk.pipeline.repeatability import check_repeatable  # noqa: E402
 from tests.cli.ego_servers import FaultyServer, in_thread  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -217,6 +218,33 @@ def test_an_av_that_ignores_its_seeds_is_refused(tmp_path):
     assert result.exit_code != 0
     assert "f is not repeatable" in result.output
     assert not out.exists()
+
+
+@pytest.fixture
+def checked(monkeypatch):
+    """The run directories whose runs check repeatability (the checks still run)."""
+    names = []
+
+    def spy(run_dir, *args):
+        names.append(run_dir.path.name)
+        return check_repeatable(run_dir, *args)
+
+    monkeypatch.setattr("avrisk.pipeline.run.check_repeatable", spy)
+    return names
+
+
+def test_only_runs_of_egos_that_may_not_be_repeatable_check_it(tmp_path, checked):
+    for name in ("InProcessAcc", "UnvouchedAcc"):
+        ego = {"policy": f"tests.cli.ego_servers:{name}"}
+        path = scenario(tmp_path, ego, name=name)
+        result = invoke("run", path, "--out", tmp_path / name, *ARGS)
+        assert result.exit_code == 0, result.output
+    address = free_address()
+    with in_thread(FaultyServer("none"), address):
+        out = tmp_path / "external"
+        result = invoke("run", external(tmp_path, address), "--out", out, *ARGS)
+    assert result.exit_code == 0, result.output
+    assert checked == ["UnvouchedAcc", "external"]
 
 
 def test_a_resumed_run_refuses_an_av_that_changed(tmp_path):

@@ -14,8 +14,11 @@ from avrisk.rare import (
     UnreliableEstimateWarning,
     ZeroHitsWarning,
     cross_entropy,
+    mixture_ce,
+    subset_simulation,
 )
 from avrisk.rare.cross_entropy import CESettings
+from avrisk.rare.naive_mc import NaiveSettings
 from avrisk.testing import (
     beta_sum_cdf,
     beta_sum_problem,
@@ -291,3 +294,26 @@ def test_an_unknown_selection_rule_is_rejected_by_name():
         ValueError, match="select: Input should be 'quantile' or 'variance'"
     ):
         cross_entropy(lambda x: x[:, 0], base, 0.0, select="best")
+
+
+def test_a_settings_object_and_its_overrides_give_the_run_of_the_keywords():
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+
+    def run(**kwargs):
+        est = cross_entropy(lambda x: x[:, 0], base, -2.0, seed=1, **kwargs)
+        return {**est.to_dict(), "wall_time_s": None}
+
+    settings = CESettings(rho=0.1, n_per_iter=200, n_iter=5, n_final=500)
+    assert run(settings=settings, n_iter=2) == run(
+        rho=0.1, n_per_iter=200, n_iter=2, n_final=500
+    )
+
+
+@pytest.mark.parametrize("estimate", [cross_entropy, mixture_ce, subset_simulation])
+def test_a_keyword_that_is_no_setting_is_a_type_error_naming_it(estimate):
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    name = estimate.__name__
+    with pytest.raises(TypeError, match=rf"{name}\(\) got .* keyword .* 'n_iters'"):
+        estimate(lambda x: x[:, 0], base, 0.0, n_iters=3)
+    with pytest.raises(TypeError, match=rf"{name}\(\) takes settings of"):
+        estimate(lambda x: x[:, 0], base, 0.0, settings=NaiveSettings())

@@ -153,6 +153,9 @@ class ExternalEgo:
 
     noise = None
     reads_lidar = True
+    #: What another process computes cannot be vouched for: runs check it
+    #: (:mod:`avrisk.pipeline.repeatability`).
+    deterministic = False
 
     def __init__(
         self,
