@@ -172,22 +172,33 @@ def learned_drivers(net, fam, n: int, rng, n_vehicles: int) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ part A
-def part_a(net, fam, n_steps: int, seed: int) -> tuple[str, dict, dict]:
-    """Table A, and the human and simulated samples behind it (for the figure)."""
+def part_a(
+    net, fam, n_steps: int, seed: int, replicates: int = 1
+) -> tuple[str, dict, dict]:
+    """Table A, and the human and simulated samples behind it (for the figure).
+
+    Every held-out window is driven ``replicates`` times (its own noise seed
+    and ``xi`` draw each time), so that rates as low as the targets' (0.5
+    collisions per vehicle-hour) are resolved; the humans drove it once.
+    """
     road = Road()
-    win = held_out_windows(n_steps, road)
+    human_win = held_out_windows(n_steps, road)
+    human_hours = len(human_win) * n_steps * DT / 3600
+    win = human_win.take(np.tile(np.arange(len(human_win)), replicates))
     n = len(win)
     hours = n * n_steps * DT / 3600
-    human_alive = np.ones_like(win.v_f, bool)
-    hv, ha, hj, ha_full, h_ok = kinematics(win.v_f, human_alive)
+    human_alive = np.ones_like(human_win.v_f, bool)
+    hv, ha, hj, ha_full, h_ok = kinematics(human_win.v_f, human_alive)
     human = {
         "speed": hv,
         "accel": ha,
         "jerk": hj,
-        "gap": win.gap[human_alive],
-        "ttc": ttc_samples(win.gap, win.v_f, win.v_l, human_alive),
-        "offset": win.offset[win.has_lateral].ravel(),
-        "hard": hard_brake_events(ha_full, h_ok) / hours,
+        "gap": human_win.gap[human_alive],
+        "ttc": ttc_samples(human_win.gap, human_win.v_f, human_win.v_l, human_alive),
+        "offset": human_win.offset[human_win.has_lateral].ravel(),
+        "hard": hard_brake_events(ha_full, h_ok) / human_hours,
+        "crash": 0.0,
+        "offroad": 0.0,
     }
     drivers = learned_drivers(net, fam, n, np.random.default_rng(seed), 2)
     # Car following only: MOBIL would overtake the replayed leader.
@@ -222,6 +233,7 @@ def part_a(net, fam, n_steps: int, seed: int) -> tuple[str, dict, dict]:
             "hard": hard_brake_events(a_full, ok) / hours,
             "lc": lane_changes(lane_pos, out["alive"]) / hours,
             "crash": out["crash"].sum() / hours,
+            "crash_windows": int(out["crash"].sum()),
             "offroad": out["offroad"].sum() / hours,
             "gap_rmse": float(
                 np.sqrt(np.mean((out["gap"][:, -1] - win.gap[:, -1]) ** 2))
@@ -229,9 +241,10 @@ def part_a(net, fam, n_steps: int, seed: int) -> tuple[str, dict, dict]:
             "seconds": time.perf_counter() - t0,
         }
     lines = [
-        f"**A. Car following on held-out NGSIM I-80** ({n} windows of "
-        f"{n_steps * DT:.0f} s, {hours:.2f} vehicle-hours; leader replayed; "
-        "KS / W1 vs human)",
+        f"**A. Car following on held-out NGSIM I-80** ({len(human_win)} windows "
+        f"of {n_steps * DT:.0f} s, {human_hours:.2f} vehicle-hours of humans; "
+        f"each driven {replicates} time(s) by every model: {hours:.1f} "
+        "vehicle-hours; leader replayed; KS / W1 vs human)",
         "",
         "| metric | human (held out) | " + " | ".join(results) + " |",
         "|---|---|" + "---|" * len(results),
@@ -270,8 +283,10 @@ def part_a(net, fam, n_steps: int, seed: int) -> tuple[str, dict, dict]:
         + " |"
     )
     lines.append(
-        "| collisions with the leader [1/veh-h] | 0 | "
-        + " | ".join(f"{r['crash']:.1f}" for r in results.values())
+        "| collisions with the leader [1/veh-h] (windows) | 0 | "
+        + " | ".join(
+            f"{r['crash']:.2f} ({r['crash_windows']})" for r in results.values()
+        )
         + " |"
     )
     lines.append(
@@ -285,6 +300,77 @@ def part_a(net, fam, n_steps: int, seed: int) -> tuple[str, dict, dict]:
         + " |"
     )
     return "\n".join(lines), human, results
+
+
+def _relative_gap(x: float, ref: float) -> float:
+    return abs(x - ref) / abs(ref) if ref != 0 else float(x != 0) * np.inf
+
+
+def targets_table(human: dict, results: dict, reference: str = "IDM") -> str:
+    """Issue 21's targets on part A, per learned model: figure and pass/fail.
+
+    Percentile targets are relative distances to the humans' percentile; the
+    "closer than IDM" count takes the KS statistic for the five
+    distributions and the absolute rate difference for hard brakes,
+    collisions and road departures (equal to the humans counts as closer);
+    the ninth metric, lane changes, is part B's.
+    """
+
+    def stopped(r):
+        return float(np.mean(r["speed"] < 0.1)) if r["speed"].size else float("nan")
+
+    checks = {
+        "collisions <= 0.5 /veh-h": lambda r: (f"{r['crash']:.2f}", r["crash"] <= 0.5),
+        "accel p5 within 15%": lambda r: _pct_check(
+            r["accel"], human["accel"], 5, 0.15
+        ),
+        "accel p10 within 15%": lambda r: _pct_check(
+            r["accel"], human["accel"], 10, 0.15
+        ),
+        "gap p5 within 10%": lambda r: _pct_check(r["gap"], human["gap"], 5, 0.10),
+        "TTC p5 within 10%": lambda r: _pct_check(r["ttc"], human["ttc"], 5, 0.10),
+        "time stopped within 25%": lambda r: (
+            f"{stopped(r):.3f} (human {stopped(human):.3f})",
+            _relative_gap(stopped(r), stopped(human)) <= 0.25,
+        ),
+    }
+    ref = results[reference]
+
+    def closer(r) -> tuple[str, bool]:
+        wins = 0
+        for key in ("speed", "accel", "jerk", "gap", "ttc"):
+            ks = stats.ks_2samp(r[key], human[key]).statistic
+            ks_ref = stats.ks_2samp(ref[key], human[key]).statistic
+            wins += ks < ks_ref
+        for key in ("hard", "crash", "offroad"):
+            d, d_ref = abs(r[key] - human[key]), abs(ref[key] - human[key])
+            wins += d < d_ref or d == 0
+        # 7 of these 8 meet the 7-of-9 target whatever part B's lane changes do.
+        return f"{wins} of 8", wins >= 7
+
+    checks[f"closer to humans than {reference} (8 of the 9 metrics)"] = closer
+    models = [m for m in results if m != reference]
+    lines = [
+        "**Targets of issue 21 on part A** (pass = meets the target)",
+        "",
+        "| target | " + " | ".join(models) + " |",
+        "|---|" + "---|" * len(models),
+    ]
+    for name, check in checks.items():
+        cells = []
+        for m in models:
+            figure, ok = check(results[m])
+            cells.append(f"{figure} {'pass' if ok else 'FAIL'}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _pct_check(x, ref, q: float, tol: float) -> tuple[str, bool]:
+    """The ``q``-th percentile of ``x`` against the humans' ``ref``."""
+    if x.size == 0:
+        return "n/a", False
+    a, b = float(np.percentile(x, q)), float(np.percentile(ref, q))
+    return f"{a:.2f} (human {b:.2f})", _relative_gap(a, b) <= tol
 
 
 #: Quantities of the figure of part A, with their units and plotted ranges.
@@ -512,6 +598,15 @@ def main() -> None:
     )
     parser.add_argument("--seed", type=int, default=2024)
     parser.add_argument(
+        "--replicates",
+        type=int,
+        default=1,
+        help="part A: drive every held-out window this many times (24: ~20 veh-h)",
+    )
+    parser.add_argument(
+        "--skip-b", action="store_true", help="skip part B (needs the US-101 file)"
+    )
+    parser.add_argument(
         "--figure", default=None, help="Also draw part A's distributions (PNG)."
     )
     parser.add_argument(
@@ -525,14 +620,19 @@ def main() -> None:
     net = load_driver_net(args.net)
     fam = None if args.prior == "none" else xi_base_family(load_xi_prior(args.prior))
     t0 = time.perf_counter()
-    table_a, human, results = part_a(net, fam, round(args.window / DT), args.seed)
+    table_a, human, results = part_a(
+        net, fam, round(args.window / DT), args.seed, args.replicates
+    )
     print(table_a)
+    print()
+    print(targets_table(human, results))
     if args.figure:
         draw_part_a(human, results, args.figure)
         print(f"\nwrote {args.figure}")
     print()
-    print(part_b(net, fam, args.scenes, args.seed + 1, args.horizon))
-    print()
+    if not args.skip_b:
+        print(part_b(net, fam, args.scenes, args.seed + 1, args.horizon))
+        print()
     if args.scenario_rollouts > 0:
         print(part_c(net, fam, args.scenario_rollouts, args.seed + 2))
         print()

@@ -19,7 +19,7 @@ from avrisk.learning.demonstrations import Demonstrations
 from avrisk.learning.imitation_loss import demonstration_tensors, weighted_nll
 from avrisk.learning.train_config import Progress, TrainEvent
 
-__all__ = ["bootstrap_heads"]
+__all__ = ["bootstrap_heads", "centre_heads"]
 
 
 def _bootstrap_counts(
@@ -124,3 +124,24 @@ def bootstrap_heads(
             progress(TrainEvent("heads", epoch + 1, epochs, row))
     heads = pack_xi(weight.detach(), bias.detach()).to(torch.float64).numpy()
     return heads, history
+
+
+def centre_heads(heads: NDArray[np.float64], net: DriverNet) -> NDArray[np.float64]:
+    """Move the members together so that their mean is the network's head.
+
+    The bootstrap heads are refitted by one-step imitation, which pulls them
+    back towards the behaviour-cloning optimum; after closed-loop training
+    the network's own head is the one to centre ``P0(xi)`` on. The members'
+    spread around their mean (the estimation uncertainty) is kept.
+
+    Parameters
+    ----------
+    heads : ndarray of shape (m, XI_DIM)
+    net : DriverNet
+
+    Returns
+    -------
+    ndarray of shape (m, XI_DIM)
+    """
+    centre = net.default_xi.to(torch.float64).numpy()
+    return heads - heads.mean(axis=0) + centre

@@ -13,7 +13,7 @@ recorded one measures realism (:func:`replay_distances`);
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,6 +43,7 @@ __all__ = [
     "car_following_windows",
     "replay",
     "replay_distances",
+    "replay_setup",
 ]
 
 DT = 0.1  # [s] NGSIM sampling period and simulator step
@@ -234,6 +235,50 @@ class ReplayResult:
     offroad: NDArray[np.bool_]
 
 
+def replay_setup(
+    windows: CarFollowingWindows, road: Road
+) -> tuple[Simulator, VehicleState, Callable[[Any], ReplayLeader]]:
+    """The simulator and initial state of a replay of ``windows``.
+
+    Parameters
+    ----------
+    windows : CarFollowingWindows
+        ``W`` windows of ``T`` steps.
+    road : Road
+
+    Returns
+    -------
+    sim : Simulator
+        Horizon ``T`` steps of ``DT``; measure :class:`~avrisk.safety.MinTTC`.
+    state : VehicleState
+        Fields of shape (W, 2): the follower (vehicle 0) at its recorded
+        state, the leader ahead at the recorded gap.
+    replay_leader : callable
+        ``replay_leader(follower_model)`` wraps a follower model (built for
+        ``W`` rollouts of 2 vehicles, controlling both) into the actor whose
+        leader replays its recorded speed profile.
+    """
+    n = len(windows)
+    w = windows
+    centre = (w.lane + 0.5) * road.lane_width
+    x_l = 0.5 * w.len_f + w.gap[:, 0] + 0.5 * w.len_l
+    zeros = np.zeros(n)
+    follower = [
+        zeros,
+        centre + w.offset[:, 0],
+        w.heading,
+        w.v_f[:, 0],
+        w.len_f,
+        w.width_f,
+    ]
+    leader = [x_l, centre, zeros, w.v_l[:, 0], w.len_l, np.full(n, DEFAULT_WIDTH)]
+    rows = np.stack([np.stack(follower, -1), np.stack(leader, -1)], axis=1)
+    sim = Simulator(road, SimConfig(horizon=w.n_steps * DT), measure=MinTTC(n_rays=1))
+    state = sim.prepare(VehicleState.from_rows(rows.tolist()))
+    leader_accel = torch.as_tensor(np.diff(w.v_l, axis=1) / DT, dtype=torch.float32)
+    return sim, state, lambda model: ReplayLeader(model, leader_accel)
+
+
 def replay(
     windows: CarFollowingWindows, follower_model: Any, road: Road, *, seed: int = 0
 ) -> ReplayResult:
@@ -252,28 +297,12 @@ def replay(
     -------
     ReplayResult
     """
-    n = len(windows)
     w = windows
-    centre = (w.lane + 0.5) * road.lane_width
-    x_l = 0.5 * w.len_f + w.gap[:, 0] + 0.5 * w.len_l
-    zeros = np.zeros(n)
-    follower = [
-        zeros,
-        centre + w.offset[:, 0],
-        w.heading,
-        w.v_f[:, 0],
-        w.len_f,
-        w.width_f,
-    ]
-    leader = [x_l, centre, zeros, w.v_l[:, 0], w.len_l, np.full(n, DEFAULT_WIDTH)]
-    rows = np.stack([np.stack(follower, -1), np.stack(leader, -1)], axis=1)
-    state = VehicleState.from_rows(rows.tolist())
-    leader_accel = torch.as_tensor(np.diff(w.v_l, axis=1) / DT, dtype=torch.float32)
-    sim = Simulator(road, SimConfig(horizon=w.n_steps * DT), measure=MinTTC(n_rays=1))
-    seeds = torch.as_tensor(seed * 1_000_003 + np.arange(n), dtype=torch.int64)
-    driver = ReplayLeader(follower_model, leader_accel)
-    res = sim.run(state, [driver], seeds, record_trace=True)
+    sim, state, replay_leader = replay_setup(w, road)
+    seeds = torch.as_tensor(seed * 1_000_003 + np.arange(len(w)), dtype=torch.int64)
+    res = sim.run(state, [replay_leader(follower_model)], seeds, record_trace=True)
     tr = res.trace
+    centre = (w.lane + 0.5) * road.lane_width
     gap = (tr.x[..., 1] - tr.x[..., 0]).double().numpy() - 0.5 * (w.len_f + w.len_l)[
         :, None
     ]

@@ -13,9 +13,13 @@ Pipeline of :func:`train_drivers` (DESIGN.md §4), one module a stage::
     DAgger x K      = learner drives, IDM+MOBIL labels the       covariate shift
                       visited states; refit on the aggregate    (dagger.py)
     sampling noise  = again, for the final network
+    closed loop     = back-propagation through replays of       closed-loop
+                      training windows: imitation + gap barrier  realism
+                                                        (closed_loop.py)
     heads 1..m      = the head refitted on m bootstrap resamples of the
-                      episodes (trunk frozen, so the heads are comparable)
-                                                        (bootstrap_heads.py)
+                      episodes (trunk frozen, so the heads are comparable),
+                      then moved together so that their mean is the
+                      closed-loop head                 (bootstrap_heads.py)
     mu0, Sigma0^-1  = ensemble mean, Ledoit-Wolf + graphical lasso
                                                         (xi_prior_fit.py)
     files, report   = driver_net.npz, xi_prior.npz, training_report.json
@@ -28,9 +32,10 @@ The shipped files are ``driver_net.npz`` (trunk + shared head) and
 and machine give the same files (torch's CPU kernels are deterministic for a
 fixed thread count).
 
-Not done here (see the package docstring of :mod:`avrisk.learning`): the
-paper trains its generators with model-based GAIL; this is behaviour cloning
-with DAgger.
+The paper trains its generators with model-based GAIL (a discriminator's
+reward back-propagated through a model); the closed-loop stage here
+back-propagates an imitation loss of the recorded trajectories plus a gap
+barrier through the simulator itself (BENCHMARKS.md compares it with GAIL).
 """
 
 from __future__ import annotations
@@ -42,7 +47,8 @@ from pathlib import Path
 import torch
 
 from avrisk.learning.behaviour_cloning import fit_driver_net
-from avrisk.learning.bootstrap_heads import bootstrap_heads
+from avrisk.learning.bootstrap_heads import bootstrap_heads, centre_heads
+from avrisk.learning.closed_loop import closed_loop_finetune
 from avrisk.learning.dagger import dagger_rounds
 from avrisk.learning.sampling_noise import fit_sampling_noise
 from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
@@ -156,6 +162,14 @@ def _train_drivers(
     calibration = fit_sampling_noise(net, train, windows, seed, progress)
     stopwatch.lap("noise")
 
+    closed_loop_history: list[dict[str, float]] = []
+    if config.closed_loop.iterations > 0:
+        follow = follow if follow is not None else training_windows(data_dir, 150)
+        closed_loop_history = closed_loop_finetune(
+            net, follow, config.closed_loop, seed, progress
+        )
+    stopwatch.lap("closed_loop")
+
     heads, head_history = bootstrap_heads(
         net,
         train,
@@ -166,6 +180,7 @@ def _train_drivers(
         seed=seed,
         progress=progress,
     )
+    heads = centre_heads(heads, net)
     stopwatch.lap("heads")
 
     prior = fit_xi_prior(heads, config, seed, progress)
@@ -179,6 +194,7 @@ def _train_drivers(
         data=data_meta,
         trunk_history=trunk_history,
         dagger_history=dagger_history,
+        closed_loop_history=closed_loop_history,
         head_history=head_history,
         validation=validation,
         calibration=calibration,

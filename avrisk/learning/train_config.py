@@ -9,10 +9,55 @@ draws them as progress bars).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
-__all__ = ["Progress", "TrainConfig", "TrainEvent"]
+__all__ = ["ClosedLoopConfig", "Progress", "TrainConfig", "TrainEvent"]
+
+
+@dataclass(frozen=True)
+class ClosedLoopConfig:
+    """Settings of :func:`closed_loop_finetune`.
+
+    Parameters
+    ----------
+    iterations : int, default=120
+        Adam steps (0 skips the stage).
+    batch_windows : int, default=64
+        Training windows replayed per step.
+    lr : float, default=1e-4
+        Adam learning rate.
+    gap_margin : float, default=2.0
+        Gap below which the safety barrier acts [m] (humans' 5th percentile
+        of the gap in the training windows is about 2.6 m).
+    safety_weight : float, default=1.0
+        Weight of the barrier [1/m^2].
+    validation_fraction : float, default=0.2
+        Training windows held out for early stopping.
+    validate_every : int, default=10
+        Steps between validations.
+    grad_clip : float, default=1.0
+        Maximal gradient norm per step.
+    """
+
+    iterations: int = 120
+    batch_windows: int = 64
+    lr: float = 1e-4
+    gap_margin: float = 2.0
+    safety_weight: float = 1.0
+    validation_fraction: float = 0.2
+    validate_every: int = 10
+    grad_clip: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.iterations < 0 or self.batch_windows < 1 or self.validate_every < 1:
+            raise ValueError(
+                "iterations must be >= 0 and batch_windows, validate_every >= 1"
+            )
+        if not 0.0 < self.validation_fraction < 1.0:
+            raise ValueError(
+                f"validation_fraction must be in (0, 1); got {self.validation_fraction}"
+            )
 
 
 @dataclass(frozen=True)
@@ -72,6 +117,9 @@ class TrainConfig:
         Graphical lasso: fraction of coordinate pairs that may be linked.
     max_shift : float, default=0.01
         CE search box of the ``xi`` block, recorded in the prior's metadata.
+    closed_loop : ClosedLoopConfig
+        Closed-loop training after DAgger and the noise calibration
+        (:mod:`avrisk.learning.closed_loop`; ``iterations=0`` skips it).
     """
 
     n_members: int = 20
@@ -95,6 +143,7 @@ class TrainConfig:
     calibration_steps: int = 100
     target_density: float = 0.01
     max_shift: float = 0.01
+    closed_loop: ClosedLoopConfig = field(default_factory=ClosedLoopConfig)
 
     def __post_init__(self) -> None:
         if self.n_members < 2:
@@ -110,8 +159,8 @@ class TrainEvent(NamedTuple):
     Attributes
     ----------
     stage : str
-        ``"data"``, ``"trunk"``, ``"dagger"``, ``"noise"``, ``"heads"`` or
-        ``"prior"``.
+        ``"data"``, ``"trunk"``, ``"dagger"``, ``"noise"``, ``"closed_loop"``,
+        ``"heads"`` or ``"prior"``.
     step : int
         Steps of the stage done.
     total : int

@@ -47,6 +47,10 @@ class TrainingReport:
         Per epoch: training loss, validation NLL per source and target.
     dagger_history : list of dict
         Per DAgger round: rows added and the last refit epoch's losses.
+    closed_loop_history : list of dict
+        Per validation of the closed-loop stage: the minibatch's loss parts
+        and the validation windows'
+        (:func:`~avrisk.learning.closed_loop.closed_loop_finetune`).
     head_history : list of dict
         Per head epoch: mean training loss over the heads.
     validation : dict

@@ -476,7 +476,7 @@ class Simulator:
             not a bool tensor of shape (A,), a vehicle that no actor controls,
             or ``params`` that do not match the actors and the batch.
         """
-        state = self._prepare_state(initial)
+        state = self.prepare(initial)
         b, n = state.batch_size, state.n_vehicles
         seeds = torch.as_tensor(seeds, device=self.device)
         if seeds.shape != (b,) or seeds.dtype != torch.int64:
@@ -515,14 +515,16 @@ class Simulator:
         -------
         Observation
         """
-        state = self._prepare_state(state)
+        state = self.prepare(state)
         with torch.no_grad():
             geo = self._geometry(state)
             return self._observation(state, geo, self._lidar(state, geo), seeds, step)
 
-    # ---------------------------------------------------------------- internal
-    def _prepare_state(self, state: VehicleState) -> VehicleState:
+    def prepare(self, state: VehicleState) -> VehicleState:
+        """``state`` on the simulator's device and dtype, validated (for :meth:`start`)."""
         return state.to(self.device, self.dtype).validate()
+
+    # ---------------------------------------------------------------- internal
 
     def controlled(self, actors: Sequence[Actor], n_vehicles: int) -> list[Tensor]:
         """Every actor's ``controlled`` mask on the device, checked.
