@@ -15,7 +15,7 @@ def rng():
 @pytest.fixture
 def tiny_train_config():
     """A ``TrainConfig`` small enough for a test (seconds, not minutes)."""
-    from avrisk.learning.train_config import TrainConfig
+    from avrisk.learning.train_config import ClosedLoopConfig, TrainConfig
 
     return TrainConfig(
         n_members=3,
@@ -28,6 +28,9 @@ def tiny_train_config():
         dagger_epochs=1,
         calibration_windows=4,
         calibration_steps=20,
+        closed_loop=ClosedLoopConfig(
+            iterations=2, batch_windows=4, window_steps=20, validate_every=1
+        ),
     )
 
 

@@ -63,6 +63,7 @@ STAGE_LABELS = {
     "trunk": "behaviour cloning",
     "noise": "sampling noise",
     "dagger": "DAgger rounds",
+    "closed_loop": "closed-loop training",
     "heads": "bootstrap heads",
     "prior": "xi prior",
 }
@@ -74,6 +75,8 @@ SHOWN_METRICS = (
     "rows_added",
     "train_loss",
     "val/loss",
+    "val_loss",
+    "val_crash_rate",
     "rho_accel",
     "c_accel",
     "c_steer",

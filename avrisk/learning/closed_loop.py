@@ -160,7 +160,7 @@ def closed_loop_loss(
     speed = imitate(trace.v, windows.v_f, SPEED_SCALE, every)
     gap = imitate(trace.gap, windows.gap, GAP_SCALE, every)
     offset = imitate(trace.offset, windows.offset, OFFSET_SCALE, lateral)
-    imitation = speed + gap + offset
+    imitation = speed + gap + config.offset_weight * offset
     barrier = torch.relu(config.gap_margin - trace.gap) ** 2
     safety = (barrier * alive * trace.in_line.to(dtype)).sum() / n
     loss = imitation + config.safety_weight * safety

@@ -164,9 +164,12 @@ def _train_drivers(
 
     closed_loop_history: list[dict[str, float]] = []
     if config.closed_loop.iterations > 0:
-        follow = follow if follow is not None else training_windows(data_dir, 150)
         closed_loop_history = closed_loop_finetune(
-            net, follow, config.closed_loop, seed, progress
+            net,
+            training_windows(data_dir, config.closed_loop.window_steps),
+            config.closed_loop,
+            seed,
+            progress,
         )
     stopwatch.lap("closed_loop")
 

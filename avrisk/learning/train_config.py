@@ -25,13 +25,17 @@ class ClosedLoopConfig:
         Adam steps (0 skips the stage).
     batch_windows : int, default=64
         Training windows replayed per step.
-    lr : float, default=1e-4
+    window_steps : int, default=150
+        Steps per window (15 s), back-propagated through in full.
+    lr : float, default=3e-4
         Adam learning rate.
     gap_margin : float, default=2.0
         Gap below which the safety barrier acts [m] (humans' 5th percentile
         of the gap in the training windows is about 2.6 m).
     safety_weight : float, default=1.0
         Weight of the barrier [1/m^2].
+    offset_weight : float, default=1.0
+        Weight of the lane-offset imitation term (lateral windows).
     validation_fraction : float, default=0.2
         Training windows held out for early stopping.
     validate_every : int, default=10
@@ -42,17 +46,23 @@ class ClosedLoopConfig:
 
     iterations: int = 120
     batch_windows: int = 64
-    lr: float = 1e-4
+    window_steps: int = 150
+    lr: float = 3e-4
     gap_margin: float = 2.0
     safety_weight: float = 1.0
+    offset_weight: float = 1.0
     validation_fraction: float = 0.2
     validate_every: int = 10
     grad_clip: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.iterations < 0 or self.batch_windows < 1 or self.validate_every < 1:
+        if (
+            self.iterations < 0
+            or min(self.batch_windows, self.window_steps, self.validate_every) < 1
+        ):
             raise ValueError(
-                "iterations must be >= 0 and batch_windows, validate_every >= 1"
+                "iterations must be >= 0 and batch_windows, window_steps, "
+                "validate_every >= 1"
             )
         if not 0.0 < self.validation_fraction < 1.0:
             raise ValueError(

@@ -74,6 +74,7 @@ class TrainingReport:
     data: dict[str, Any]
     trunk_history: list[dict[str, float]]
     dagger_history: list[dict[str, float]]
+    closed_loop_history: list[dict[str, float]]
     head_history: list[dict[str, float]]
     validation: dict[str, Any]
     calibration: dict[str, Any]

@@ -521,7 +521,7 @@ class Simulator:
             return self._observation(state, geo, self._lidar(state, geo), seeds, step)
 
     def prepare(self, state: VehicleState) -> VehicleState:
-        """``state`` on the simulator's device and dtype, validated (for :meth:`start`)."""
+        """``state`` on the simulator's device and dtype, validated (for start)."""
         return state.to(self.device, self.dtype).validate()
 
     # ---------------------------------------------------------------- internal

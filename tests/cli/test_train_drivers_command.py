@@ -38,7 +38,8 @@ def test_train_drivers_writes_the_model_files_and_names_them(
     for name in ("driver_net.npz", "xi_prior.npz", "training_report.json"):
         assert name in result.output
     assert "kB" in result.output and "wrote" in result.output
-    for stage in ("behaviour cloning", "DAgger rounds", "bootstrap heads", "xi prior"):
+    stages = ("behaviour cloning", "DAgger rounds", "closed-loop training", "xi prior")
+    for stage in stages:
         assert stage in result.output
     assert "val/loss=" in result.output
     after = {p.name: p.stat().st_mtime_ns for p in default_drivers_dir().iterdir()}

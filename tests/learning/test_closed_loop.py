@@ -134,7 +134,12 @@ def test_centred_heads_keep_their_spread_around_the_network_head():
 
 @pytest.mark.parametrize(
     "kwargs",
-    [{"iterations": -1}, {"batch_windows": 0}, {"validation_fraction": 1.0}],
+    [
+        {"iterations": -1},
+        {"batch_windows": 0},
+        {"window_steps": 0},
+        {"validation_fraction": 1.0},
+    ],
 )
 def test_closed_loop_config_refuses_bad_settings(kwargs):
     with pytest.raises(ValueError):

@@ -24,3 +24,4 @@ def test_train_drivers_writes_loadable_weights_a_prior_and_a_report(
         "xi_prior.npz",
     }
     assert len(saved["trunk_history"]) == 1 and len(saved["dagger_history"]) == 1
+    assert [row["iteration"] for row in saved["closed_loop_history"]] == [0, 1, 2]
