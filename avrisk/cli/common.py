@@ -11,9 +11,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
-import click
 import typer
-from click.core import ParameterSource
 from rich.console import Console
 from rich.markup import escape
 
@@ -78,7 +76,7 @@ def user_errors(*expected: type[Exception]) -> Iterator[None]:
         raise typer.Exit(code=2) from None
 
 
-def command_line(ctx: click.Context) -> str:
+def command_line(ctx: typer.Context) -> str:
     """The command being run, as one could type it again.
 
     Rebuilt from the parameters given on the command line (arguments first,
@@ -93,13 +91,13 @@ def command_line(ctx: click.Context) -> str:
     arguments, options = [], []
     for param in ctx.command.params:
         name = param.name
-        given = name is not None and ctx.get_parameter_source(name)
-        if given != ParameterSource.COMMANDLINE:
+        source = ctx.get_parameter_source(name) if name else None
+        if source is None or source.name != "COMMANDLINE":
             continue
         value = ctx.params[name]
-        if isinstance(param, click.Argument):
+        if param.param_type_name == "argument":
             arguments.append(str(value))
-        elif isinstance(param, click.Option) and param.is_flag:
+        elif getattr(param, "is_flag", False):
             options.append(param.opts[0] if value else param.secondary_opts[0])
         else:
             for item in value if param.multiple else [value]:
@@ -108,7 +106,7 @@ def command_line(ctx: click.Context) -> str:
 
 
 @contextmanager
-def resumable(ctx: click.Context) -> Iterator[None]:
+def resumable(ctx: typer.Context) -> Iterator[None]:
     """Ctrl-C: one line saying how to resume, and exit status 130, no traceback.
 
     For commands whose work is recorded as it goes (``run``, ``compare``):

@@ -42,8 +42,10 @@ def duration(seconds: float) -> str:
 
 
 def megabytes(n_bytes: float) -> str:
-    """``"55 MB"``, ``"1.2 GB"``."""
-    return f"{n_bytes / 1e9:.1f} GB" if n_bytes >= 1e9 else f"{n_bytes / 1e6:.0f} MB"
+    """``"64 kB"``, ``"55 MB"``, ``"1.2 GB"``."""
+    if n_bytes >= 1e9:
+        return f"{n_bytes / 1e9:.1f} GB"
+    return f"{n_bytes / 1e6:.0f} MB" if n_bytes >= 1e6 else f"{n_bytes / 1e3:.0f} kB"
 
 
 @dataclass

@@ -255,7 +255,9 @@ def show_results(
             print_ratios(runs[0][0], est["n_evals"], ratios, has_reference)
     print_failed(runs)
     if report is not None:
-        err_console.print(f"report: {escape(str(report))}", highlight=False)
+        err_console.print(  # a path is never broken
+            f"report: {escape(str(report))}", highlight=False, soft_wrap=True
+        )
 
 
 def result_document(
