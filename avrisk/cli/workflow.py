@@ -161,7 +161,7 @@ def execute(
 #: Disk a rollout takes in ``samples.parquet`` [B], measured on the bundled
 #: six-vehicle scenarios: with the learned drivers' ``xi`` left out (drawn
 #: again when read), and stored (``--store-full-samples``).
-SAMPLE_BYTES, SAMPLE_BYTES_WITH_XI = 290, 2600
+SAMPLE_BYTES, SAMPLE_BYTES_WITH_XI = 275, 2600
 
 
 def cost_meter(

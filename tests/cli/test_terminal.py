@@ -60,11 +60,9 @@ def test_the_plan_and_the_measured_rate_come_before_the_results(
     short_scenario, tmp_path
 ):
     result = invoke("run", short_scenario, "--out", tmp_path / "run", *RUN_ARGS)
-    err = result.stderr
-    assert (
-        "plan: cross-entropy (CE 2x60 + 100): 220 rollouts; samples take about" in err
-    )
-    assert "B a rollout" in err
+    err = words(result.stderr)
+    assert "plan: cross-entropy (CE 2x60 + 100): 220 rollouts; samples take" in err
+    assert "about 60 kB on disk (275 B a rollout)" in err
     assert "rate: " in err and "rollouts/s on the first 60: about" in err
     assert err.index("plan:") < err.index("rate:")
 
