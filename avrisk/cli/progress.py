@@ -93,7 +93,8 @@ class CostMeter:
     def count(self, n: int, seconds: float | None) -> None:
         """``n`` rollouts are done: simulated in ``seconds``, or replayed (None).
 
-        The first simulated chunk gives the rate, and with it the time left.
+        The first simulated chunk gives the rate, and with it the time left
+        (said when some is).
         """
         self.done += n
         if seconds is None or self._measured or seconds <= 0:
@@ -101,6 +102,8 @@ class CostMeter:
         self._measured = True
         rate = n / seconds
         left = max(self.total - self.done, 0)
+        if not left:
+            return
         self.console.print(
             f"rate: {rate:,.0f} rollouts/s on the first {n:,}: about "
             f"{duration(left / rate)} for the {left:,} left",
