@@ -1,4 +1,4 @@
-"""What ``run``, ``compare``, ``report`` and ``demo`` share: runs, tables, reports.
+"""What ``run``, ``compare``, ``report`` and ``demo`` share: runs, costs, reports.
 
 Every function here works for any registered estimator
 (:func:`avrisk.rare.estimator_names`): labels, progress lines and report
