@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import shlex
 import tempfile
+import textwrap
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -37,7 +38,10 @@ ONCE_PER_COMMAND = (UnreliableEstimateWarning, ZeroHitsWarning)
 
 
 class _WarningPrinter:
-    """``warnings.showwarning`` as yellow lines, wrapped at the console's width."""
+    """``warnings.showwarning`` as yellow lines, wrapped at the console's width.
+
+    Each warning is wrapped at spaces, never inside a word (a path).
+    """
 
     def __init__(self) -> None:
         self.shown: set[type[Warning]] = set()
@@ -49,8 +53,15 @@ class _WarningPrinter:
             if category in self.shown:
                 return
             self.shown.add(category)
+        # Wrapped at spaces only: a path in the message stays whole.
+        lines = textwrap.fill(
+            f"warning: {message}",
+            err_console.width,
+            break_long_words=False,
+            break_on_hyphens=False,
+        ).removeprefix("warning:")
         err_console.print(
-            f"[yellow]warning:[/] {escape(str(message))}", highlight=False
+            f"[yellow]warning:[/]{escape(lines)}", highlight=False, soft_wrap=True
         )
 
 
