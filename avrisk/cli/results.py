@@ -22,7 +22,7 @@ from avrisk.pipeline import RunDirectory
 from avrisk.pipeline.files import json_text
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.results import jsonable
-from avrisk.report.answer import Headline, headline, trust_at
+from avrisk.report.answer import Headline, headline, run_trust, trust_at
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
 from avrisk.scenario import ScenarioSpec
 
@@ -92,6 +92,12 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
                 trust_at(g, weighted).word,
             )
         out_console.print(table)
+        trust = run_trust(summary)
+        if not trust.ok and label != lead.label:  # the answer's reasons are above
+            out_console.print(
+                f"{escape(label)}: trust at {est['gamma']:g} s: {escape(str(trust))}",
+                highlight=False,
+            )
         if est.get("stopped_by", "budget") != "budget":
             rule = est["stopped_by"].replace("_", " ")
             out_console.print(

@@ -103,6 +103,9 @@ def test_compare_json_has_one_variance_ratio_per_threshold(short_scenario, tmp_p
         assert {"variance_ratio", "rare_event_ratio", "p_from"} <= set(row)
         assert "variance_reduction" not in row
     assert "plan: " in result.stderr and "590 rollouts in all" in words(result.stderr)
+    tables = words(invoke("report", out, "--failures", 0).stdout)
+    # the runs other than the answer's say why they are not trusted
+    assert tables.count("trust at 1 s: caution (") == 2
 
 
 def test_compare_defaults_finish_in_minutes():
