@@ -69,6 +69,8 @@ class RolloutTrace:
         Whether the rollout ended in a crash.
     label : str
         Shown in the panel title, e.g. ``"row 12"``.
+    hit : int
+        Vehicle the ego crashed into (index into the vehicles; -1: none).
     """
 
     x: FloatArray
@@ -81,6 +83,7 @@ class RolloutTrace:
     n_frames: int
     crashed: bool
     label: str = ""
+    hit: int = -1
 
     @property
     def min_ttc(self) -> float:
@@ -155,6 +158,7 @@ def traces_from_rollout(
     length = np.array([v.length for v in spec.vehicles], dtype=np.float64)
     width = np.array([v.width for v in spec.vehicles], dtype=np.float64)
     crash = np_(result.crash).astype(bool)
+    hit = np_(result.collision_with).astype(np.int64)
     out = []
     for n in range(len(chosen)):
         n_frames = int(alive[n].sum()) if alive[n].any() else 1
@@ -170,6 +174,7 @@ def traces_from_rollout(
                 n_frames=n_frames,
                 crashed=bool(crash[n]),
                 label=labels[n] if labels is not None else "",
+                hit=int(hit[n]),
             )
         )
     return out

@@ -7,6 +7,7 @@ import typer
 
 from avrisk.cli.demo import demo
 from avrisk.cli.run import compare, report, run
+from avrisk.cli.scenarios import list_scenarios, show_scenario
 from avrisk.cli.serve_ego import serve_ego
 from avrisk.cli.simulate import replay, simulate
 from avrisk.cli.train_drivers import train_drivers_command
@@ -47,6 +48,23 @@ for command in (run, compare, report, simulate, replay, demo):
     app.command()(command)
 app.command("train-drivers")(train_drivers_command)
 app.command("serve-ego")(serve_ego)
+
+scenarios = typer.Typer(
+    help="The bundled scenarios: list them (no command), or show one.",
+    invoke_without_command=True,
+    rich_markup_mode=None,
+)
+
+
+@scenarios.callback()
+def _scenarios(ctx: typer.Context) -> None:
+    """List the bundled scenarios, one line each; 'show NAME' prints one."""
+    if ctx.invoked_subcommand is None:
+        list_scenarios()
+
+
+scenarios.command("show")(show_scenario)
+app.add_typer(scenarios, name="scenarios")
 
 
 def main() -> None:

@@ -1,9 +1,11 @@
-"""What every command shares: user-facing errors and warnings."""
+"""What every command shares: consoles, user-facing errors, warnings, Ctrl-C."""
 
 from __future__ import annotations
 
 import errno
+import shlex
 import tempfile
+import textwrap
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -14,34 +16,67 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-#: Diagnostics and progress go to stderr; results to stdout. Both are at least
-#: 120 columns wide so that tables and progress lines do not wrap or get cut
-#: when piped to a file (Rich assumes 80 columns there).
-_WIDTH = max(Console().width, 120)
-err_console = Console(stderr=True, width=_WIDTH)
-out_console = Console(width=_WIDTH)
+from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
+
+#: Diagnostics and progress go to stderr; results to stdout (so that a
+#: command's ``--json`` output parses). Each is as wide as its terminal, or
+#: ``$COLUMNS`` (80 when unset) when piped: the tables fit 80 columns.
+err_console = Console(stderr=True)
+out_console = Console()
+
+#: Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells give it).
+INTERRUPTED = 130
 
 
 class CliError(Exception):
     """A problem to report to the user in one sentence, without a traceback."""
 
 
-def _show_warning(message: Any, category: type[Warning], *args: Any, **kw: Any) -> None:
-    err_console.print(
-        f"[yellow]warning:[/] {escape(str(message))}", highlight=False, soft_wrap=True
-    )
+#: Warnings of an estimate's own diagnostics, raised once per threshold: the
+#: first of each kind is printed, the others are in the results' trust column.
+ONCE_PER_COMMAND = (UnreliableEstimateWarning, ZeroHitsWarning)
+
+
+class _WarningPrinter:
+    """``warnings.showwarning`` as yellow lines, wrapped at the console's width.
+
+    Each warning is wrapped at spaces, never inside a word (a path).
+    """
+
+    def __init__(self) -> None:
+        self.shown: set[type[Warning]] = set()
+
+    def __call__(
+        self, message: Any, category: type[Warning], *args: Any, **kw: Any
+    ) -> None:
+        if issubclass(category, ONCE_PER_COMMAND):
+            if category in self.shown:
+                return
+            self.shown.add(category)
+        # Wrapped at spaces only: a path in the message stays whole.
+        lines = textwrap.fill(
+            f"warning: {message}",
+            err_console.width,
+            break_long_words=False,
+            break_on_hyphens=False,
+        ).removeprefix("warning:")
+        err_console.print(
+            f"[yellow]warning:[/]{escape(lines)}", highlight=False, soft_wrap=True
+        )
 
 
 @contextmanager
 def user_errors(*expected: type[Exception]) -> Iterator[None]:
     """Turn expected failures into a red one-line message and exit code 2.
 
-    Warnings raised meanwhile (an estimate with zero or few effective hits) are
-    printed as one yellow line each instead of Python's source-line format.
+    Warnings raised meanwhile are printed as yellow lines instead of Python's
+    source-line format; of an estimate's diagnostics (zero or few effective
+    hits, a heavy tail), only the first of each kind (the results give each
+    threshold's trust).
     """
     try:
         with warnings.catch_warnings():
-            warnings.showwarning = _show_warning
+            warnings.showwarning = _WarningPrinter()
             yield
     except (CliError, *expected) as exc:
         err_console.print(
@@ -50,6 +85,54 @@ def user_errors(*expected: type[Exception]) -> Iterator[None]:
             soft_wrap=True,
         )
         raise typer.Exit(code=2) from None
+
+
+def command_line(ctx: typer.Context) -> str:
+    """The command being run, as one could type it again.
+
+    Rebuilt from the parameters given on the command line (arguments first,
+    then options in their order of declaration, each with its value as
+    parsed); defaults are left out, so the command means the same after a
+    change of a default only if it named every value.
+
+    Examples
+    --------
+    ``avrisk run highway_idm --out runs/x --n-final 2000``
+    """
+    arguments, options = [], []
+    for param in ctx.command.params:
+        name = param.name
+        source = ctx.get_parameter_source(name) if name else None
+        if source is None or source.name != "COMMANDLINE":
+            continue
+        value = ctx.params[name]
+        if param.param_type_name == "argument":
+            arguments.append(str(value))
+        elif getattr(param, "is_flag", False):
+            options.append(param.opts[0] if value else param.secondary_opts[0])
+        else:
+            for item in value if param.multiple else [value]:
+                options += [param.opts[0], str(item)]
+    return shlex.join(["avrisk", ctx.info_name or "", *arguments, *options])
+
+
+@contextmanager
+def resumable(ctx: typer.Context) -> Iterator[None]:
+    """Ctrl-C: one line saying how to resume, and exit status 130, no traceback.
+
+    For commands whose work is recorded as it goes (``run``, ``compare``):
+    rerunning the same command resumes it.
+    """
+    try:
+        yield
+    except KeyboardInterrupt:
+        err_console.print(
+            "interrupted; what was simulated is recorded. Resume with: "
+            f"{escape(command_line(ctx))}",
+            highlight=False,
+            soft_wrap=True,
+        )
+        raise typer.Exit(code=INTERRUPTED) from None
 
 
 def resolve_device(name: str) -> str:

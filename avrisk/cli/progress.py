@@ -1,8 +1,20 @@
-"""Rich progress display of an estimation run."""
+"""Rich progress display of an estimation run, and what the work will cost.
+
+A :class:`CostMeter` is shared by the runs of one command (a ``compare`` has
+three): before the first rollout it prints the plan (rollouts and disk), and
+once the first chunk has been simulated, the rate measured on it and the time
+the rest will take. A run that resumes says so when it ends: how many
+rollouts it reused from the earlier session.
+"""
 
 from __future__ import annotations
 
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -11,29 +23,139 @@ from rich.progress import (
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
+from rich.table import Column
+
+#: Width of the progress bar [characters].
+BAR_WIDTH = 12
+#: Consoles at least this wide also show the time elapsed [characters].
+WIDE = 100
+
+
+def duration(seconds: float) -> str:
+    """``"7 min 20 s"``, ``"45 s"``, ``"2 h 05 min"``: a time for a person."""
+    s = round(seconds)
+    if s < 60:
+        return f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60:02d} s"
+    return f"{s // 3600} h {s % 3600 // 60:02d} min"
+
+
+def megabytes(n_bytes: float) -> str:
+    """``"64 kB"``, ``"55 MB"``, ``"1.2 GB"``."""
+    if n_bytes >= 1e9:
+        return f"{n_bytes / 1e9:.1f} GB"
+    return f"{n_bytes / 1e6:.0f} MB" if n_bytes >= 1e6 else f"{n_bytes / 1e3:.0f} kB"
+
+
+@dataclass
+class CostMeter:
+    """What a command's runs will cost, printed before and once measured.
+
+    Parameters
+    ----------
+    console : Console
+        Where the lines go (stderr).
+    plan : sequence of (str, str, int)
+        Each run of the command: its label, what it does (the estimator's
+        ``describe()``) and the rollouts it plans.
+    bytes_per_rollout : float
+        Disk a rollout takes in ``samples.parquet`` [B]; the chunk files hold
+        as much again until they are gathered at the end of a run.
+    """
+
+    console: Console
+    plan: Sequence[tuple[str, str, int]]
+    bytes_per_rollout: float
+    done: int = 0
+    _announced: bool = False
+    _measured: bool = False
+
+    @property
+    def total(self) -> int:
+        """Rollouts of every run of the plan."""
+        return sum(n for _, _, n in self.plan)
+
+    def announce(self) -> None:
+        """The plan, once, before the first rollout of the command."""
+        if self._announced:
+            return
+        self._announced = True
+        runs = ", ".join(f"{label} ({what})" for label, what, _ in self.plan)
+        in_all = " in all" if len(self.plan) > 1 else ""
+        self.console.print(
+            f"plan: {escape(runs)}: {self.total:,} rollouts{in_all}; samples take "
+            f"about {megabytes(self.total * self.bytes_per_rollout)} on disk "
+            f"({self.bytes_per_rollout:,.0f} B a rollout)",
+            highlight=False,
+        )
+
+    def count(self, n: int, seconds: float | None) -> None:
+        """``n`` rollouts are done: simulated in ``seconds``, or replayed (None).
+
+        The first simulated chunk gives the rate, and with it the time left
+        (said when some is).
+        """
+        self.done += n
+        if seconds is None or self._measured or seconds <= 0:
+            return
+        self._measured = True
+        rate = n / seconds
+        left = max(self.total - self.done, 0)
+        if not left:
+            return
+        self.console.print(
+            f"rate: {rate:,.0f} rollouts/s on the first {n:,}: about "
+            f"{duration(left / rate)} for the {left:,} left",
+            highlight=False,
+        )
 
 
 class RichRunMonitor:
     """Progress of a run: a bar over all rollouts, the estimator's status, ETA.
 
     Implements :class:`avrisk.pipeline.RunMonitor`.
+
+    Parameters
+    ----------
+    console : Console
+    label : str
+        The run, as the bar names it.
+    cost : CostMeter, optional
+        Told of every rollout (shared by the runs of one command).
+
+    Attributes
+    ----------
+    started : bool
+        Whether the run did any work (a complete run is only read back).
+    replayed, simulated : int
+        Rollouts reused from an earlier session, and simulated in this one.
     """
 
-    def __init__(self, console: Console, label: str) -> None:
+    def __init__(
+        self, console: Console, label: str, cost: CostMeter | None = None
+    ) -> None:
         self.console = console
         self.label = label
+        self.cost = cost
+        self.started = False
+        self.replayed = 0
+        self.simulated = 0
         self._progress: Progress | None = None
         self._task = 0
+        self._last = 0.0
 
     def __enter__(self) -> RichRunMonitor:
+        self._status = Column(no_wrap=True, overflow="ellipsis")
+        elapsed = [TimeElapsedColumn()] if self.console.width >= WIDE else []
         self._progress = Progress(
-            TextColumn("[bold]{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("{task.fields[status]}"),
-            TimeElapsedColumn(),
-            TextColumn("ETA"),
+            TextColumn("[bold]{task.description}", table_column=Column(no_wrap=True)),
+            BarColumn(bar_width=BAR_WIDTH),
+            MofNCompleteColumn(table_column=Column(no_wrap=True)),
+            *elapsed,
+            TextColumn("ETA", table_column=Column(no_wrap=True)),
             TimeRemainingColumn(),
+            TextColumn("{task.fields[status]}", table_column=self._status),
             console=self.console,
         )
         self._progress.__enter__()
@@ -42,17 +164,37 @@ class RichRunMonitor:
     def __exit__(self, *exc: object) -> None:
         assert self._progress is not None
         self._progress.__exit__(*exc)  # type: ignore[arg-type]
+        if exc[0] is None and self.replayed:
+            self.console.print(
+                f"{escape(self.label)}: resumed: {self.replayed:,} rollouts reused "
+                f"from the earlier session, {self.simulated:,} simulated now",
+                highlight=False,
+            )
 
     def start(self, total: int, description: str) -> None:
-        """Open the bar for ``total`` rollouts."""
+        """Open the bar for ``total`` rollouts (``description``: in the plan line)."""
         assert self._progress is not None
-        self._task = self._progress.add_task(
-            f"{self.label}: {description}", total=total, status=""
-        )
+        self.started = True
+        if self.cost is not None:
+            self.cost.announce()
+        # The estimator's status gets what the other columns leave of a line.
+        used = len(self.label) + BAR_WIDTH + len(f"{total}/{total}") + len("ETA")
+        used += len("0:00:00") * (2 if self.console.width >= WIDE else 1) + 7
+        self._status.width = max(self.console.width - used, 10)
+        self._task = self._progress.add_task(self.label, total=total, status="")
+        self._last = time.perf_counter()
 
     def advance(self, n: int, *, replayed: bool) -> None:
         """Count ``n`` rollouts (replayed ones come from an earlier session)."""
         assert self._progress is not None
+        now = time.perf_counter()
+        if replayed:
+            self.replayed += n
+        else:
+            self.simulated += n
+        if self.cost is not None:
+            self.cost.count(n, None if replayed else now - self._last)
+        self._last = now
         self._progress.update(self._task, advance=n)
 
     def status(self, text: str) -> None:

@@ -196,12 +196,22 @@ def spec_from_parquet(path: Path) -> ScenarioSpec:
 
 
 # ------------------------------------------------------------------------ CLI
-def _check_out_path(out: Path, suffixes: Sequence[str]) -> None:
+#: Where ``simulate`` and ``replay`` write without ``--out`` (``runs/`` is made).
+DEFAULT_ROLLOUTS = Path("runs/rollouts.parquet")
+DEFAULT_GIF = Path("runs/replay.gif")
+
+
+def _out_path(out: Path | None, default: Path, suffixes: Sequence[str]) -> Path:
+    """``--out``, or ``default`` (its folder made); checked to be writable."""
+    if out is None:
+        out = default
+        out.parent.mkdir(parents=True, exist_ok=True)
     if out.suffix.lower() not in suffixes:
         raise CliError(
             f"--out {out}: expected a file ending in {' or '.join(suffixes)}"
         )
     check_output_file(out)
+    return out
 
 
 def _summary_table(table: pa.Table, wall_s: float) -> Table:
@@ -232,8 +242,13 @@ def simulate(
     n: Annotated[int, typer.Option("--n", min=1, help="Number of rollouts.")] = 1000,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Run seed.")] = 0,
     out: Annotated[
-        Path, typer.Option("--out", help="Parquet file to write (one row per rollout).")
-    ] = Path("rollouts.parquet"),
+        Path | None,
+        typer.Option(
+            "--out",
+            help=f"Parquet file to write (one row per rollout) [default: "
+            f"{DEFAULT_ROLLOUTS}].",
+        ),
+    ] = None,
     batch_size: Annotated[
         int, typer.Option("--batch-size", min=1, help="Rollouts simulated together.")
     ] = 1024,
@@ -245,7 +260,7 @@ def simulate(
     """Sample scenarios from P0, simulate them, write one Parquet row per rollout."""
     with user_errors(ScenarioSpecError):
         spec = load_spec(scenario)
-        _check_out_path(out, (".parquet", ".pq"))
+        out = _out_path(out, DEFAULT_ROLLOUTS, (".parquet", ".pq"))
         if threads is not None:
             import torch
 
@@ -295,7 +310,8 @@ def replay(
         Path,
         typer.Argument(
             help="Parquet file written by 'avrisk simulate', or a run directory "
-            "(its samples.parquet)."
+            "(or its samples.parquet): its scenario is read from the file or the "
+            "run's config.json, as data (no code imported)."
         ),
     ],
     rows: Annotated[
@@ -305,10 +321,15 @@ def replay(
         int | None,
         typer.Option(min=1, help="Instead of --rows: the K rows of lowest f."),
     ] = None,
-    out: Annotated[Path, typer.Option(help="GIF file to write.")] = Path("replay.gif"),
+    out: Annotated[
+        Path | None, typer.Option(help=f"GIF file to write [default: {DEFAULT_GIF}].")
+    ] = None,
     scenario: Annotated[
         str | None,
-        typer.Option(help="Scenario to use instead of the one stored in the file."),
+        typer.Option(
+            help="Scenario to use instead of the one stored with the samples: "
+            "needed only for one that names user code by import path."
+        ),
     ] = None,
     fps: Annotated[int, typer.Option(min=1, max=50, help="Frames per second.")] = 10,
     view_length: Annotated[
@@ -324,11 +345,15 @@ def replay(
     from avrisk.report.animate import animate_rollouts, save_frame_png
 
     with user_errors(ScenarioSpecError, ComponentError, RegenerationError):
+        if file.is_dir() and not (file / SAMPLES_FILE).is_file():
+            parts = sorted(p.parent.name for p in file.glob(f"*/{SAMPLES_FILE}"))
+            hint = f"; a comparison: give one of its runs, e.g. {file / parts[0]}"
+            raise CliError(f"{file}: holds no {SAMPLES_FILE}" + (hint if parts else ""))
         if file.is_dir():
             file = file / SAMPLES_FILE
         if not file.is_file():
             raise CliError(f"{file}: no such file")
-        _check_out_path(out, (".gif",))
+        out = _out_path(out, DEFAULT_GIF, (".gif",))
         if frame_png is not None:
             check_output_file(frame_png, "--frame-png")
         table = read_table(file)

@@ -1,4 +1,4 @@
-"""What ``run``, ``compare``, ``report`` and ``demo`` share: runs, tables, reports.
+"""What ``run``, ``compare``, ``report`` and ``demo`` share: runs, costs, reports.
 
 Every function here works for any registered estimator
 (:func:`avrisk.rare.estimator_names`): labels, progress lines and report
@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 from rich.markup import escape
-from rich.table import Table
 
 from avrisk.assembly import (
     FAILURES_FILE,
@@ -25,9 +24,10 @@ from avrisk.assembly import (
     read_failure_traces,
 )
 from avrisk.cli.backends import Backend, open_evaluator
-from avrisk.cli.common import CliError, err_console, out_console, write_failures
-from avrisk.cli.progress import RichRunMonitor
+from avrisk.cli.common import CliError, err_console, write_failures
+from avrisk.cli.progress import CostMeter, RichRunMonitor
 from avrisk.cli.readback import check_recorded
+from avrisk.cli.results import ratio_rows, show_results
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
 from avrisk.pipeline.provenance import (
     ProvenanceMismatchError,
@@ -42,7 +42,6 @@ from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import WorkerError
 from avrisk.report.animate import animate_rollouts, animate_samples
 from avrisk.report.html import write_report
-from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
 from avrisk.scenario import ScenarioSpec, ScenarioSpecError, load_spec
 
 #: Failures reported as one red line (no traceback).
@@ -105,6 +104,7 @@ def execute(
     evaluator: Evaluator | None = None,
     *,
     store_full: bool = False,
+    cost: CostMeter | None = None,
 ) -> RunDirectory:
     """Run (or resume, or read back) one estimation into ``out`` with progress.
 
@@ -117,7 +117,10 @@ def execute(
     when read). Where an actor does not vouch for its repeatability (an
     external AV, :attr:`ScenarioSimulator.deterministic`), a few rollouts are
     replayed first, in this process: an objective that is not repeatable
-    stops the run (an AV that ignores its seeds).
+    stops the run (an AV that ignores its seeds). ``cost``: told of every
+    rollout, to print the plan and the time measured on the first chunk
+    (:class:`CostMeter`). A run that was complete already says it was read
+    back; one that resumed, how many rollouts it reused.
     """
     check_recorded(out)  # a damaged config or summary: one line, not a traceback
     base = base_distribution(objective.simulator.spec)
@@ -133,7 +136,8 @@ def execute(
         "what was recorded is kept: free space (or fix the folder) and rerun the "
         "same command to resume"
     )
-    with write_failures(out, resume), RichRunMonitor(err_console, label) as monitor:
+    monitor = RichRunMonitor(err_console, label, cost)
+    with write_failures(out, resume), monitor:
         run_estimation(
             run_dir,
             base,
@@ -146,7 +150,34 @@ def execute(
             mechanisms=MECHANISMS,
             replay_check=None if plain.simulator.deterministic else plain,
         )
+    if not monitor.started:
+        err_console.print(
+            f"{escape(label)}: complete already in {escape(str(out))}: read back, "
+            "nothing simulated",
+            highlight=False,
+        )
     return run_dir
+
+
+#: Disk a rollout takes in ``samples.parquet`` [B], measured on the bundled
+#: six-vehicle scenarios: with the learned drivers' ``xi`` left out (drawn
+#: again when read), and stored (``--store-full-samples``).
+SAMPLE_BYTES, SAMPLE_BYTES_WITH_XI = 275, 2600
+
+
+def cost_meter(
+    spec: ScenarioSpec,
+    plan: list[tuple[str, RunSettings]],
+    *,
+    store_full: bool = False,
+) -> CostMeter:
+    """The cost of ``plan`` (label and settings of each run), printed on stderr."""
+    with_xi = store_full and spec.has_learned_drivers
+    return CostMeter(
+        err_console,
+        [(label, s.estimator.describe(), s.total_rollouts) for label, s in plan],
+        SAMPLE_BYTES_WITH_XI if with_xi else SAMPLE_BYTES,
+    )
 
 
 def samples_directory(
@@ -165,80 +196,6 @@ def samples_directory(
         base=base_distribution(spec),
         store_full=store_full,
     )
-
-
-def print_summary(runs: list[tuple[str, RunDirectory]]) -> None:
-    """One table: every run's estimate at every threshold."""
-    table = Table(title="P(min TTC <= gamma)")
-    columns = ("run", "gamma [s]", "p", "stderr", "95% CI", "hits", "ESS", "Pareto k")
-    for col in (*columns, "rollouts"):
-        table.add_column(escape(col), justify="left" if col == "run" else "right")
-    for label, run_dir in runs:
-        est = run_dir.summary()["estimate"]
-        for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
-            table.add_row(
-                label,
-                f"{g['gamma']:g}",
-                f"{g['p']:.3g}",
-                f"{g['stderr']:.2g}",
-                f"{g['ci'][0]:.2g}..{g['ci'][1]:.2g}",
-                str(g["n_hits"]),
-                f"{g['ess'] or 0:.1f}",
-                "-" if g.get("pareto_k") is None else f"{g['pareto_k']:.2f}",
-                f"{est['n_evals']:,}",
-            )
-    out_console.print(table)
-    for label, run_dir in runs:
-        est = run_dir.summary()["estimate"]
-        main = next(g for g in est["by_gamma"] if g["gamma"] == est["gamma"])
-        if main.get("interval"):  # absent from older summaries
-            out_console.print(
-                f"{label}: 95% interval: {main['interval']}", highlight=False
-            )
-        if est.get("stopped_by", "budget") != "budget":
-            out_console.print(
-                f"{label}: stopped by its {est['stopped_by'].replace('_', ' ')} rule "
-                f"after {est['n_evals']:,} rollouts",
-                highlight=False,
-            )
-        print_mechanisms(label, run_dir.summary())
-    for label, run_dir in runs:
-        failed = max((g.get("n_failed", 0) for g in _by_gamma(run_dir)), default=0)
-        if failed:
-            err_console.print(
-                f"[yellow]warning:[/] {escape(label)}: {failed} rollouts failed to "
-                "evaluate; p counts them safe, the interval reaches up to counting "
-                "them dangerous (rerun the command to evaluate them again)",
-                highlight=False,
-            )
-
-
-def print_mechanisms(label: str, summary: dict[str, Any]) -> None:
-    """What the dangerous rollouts were, at the run's main threshold: p by mechanism."""
-    mechanisms = summary.get("mechanisms")
-    if not mechanisms:
-        return
-    gamma = summary["estimate"]["gamma"]
-    main = next(m for m in mechanisms["by_gamma"] if m["gamma"] == gamma)
-    if not main["by_label"]:
-        return
-    table = Table(title=f"{label}: P(min TTC <= {gamma:g} s) by what happened")
-    for col in ("mechanism", "p", "95% CI", "share of p", "hits"):
-        table.add_column(col, justify="left" if col == "mechanism" else "right")
-    for part in main["by_label"]:
-        share = part["share"]
-        table.add_row(
-            part["label"],
-            f"{part['p']:.3g}",
-            f"{part['ci'][0]:.2g}..{part['ci'][1]:.2g}",
-            "-" if share is None else f"{share:.0%}",
-            str(part["n_hits"]),
-        )
-    out_console.print(table)
-
-
-def _by_gamma(run_dir: RunDirectory) -> list[dict[str, Any]]:
-    return run_dir.summary()["estimate"]["by_gamma"]
 
 
 def write_run_report(
@@ -261,8 +218,8 @@ def write_run_report(
 
     def animate(row: dict[str, Any], path: Path) -> Path | None:
         found = traces.get(int(row["seed"]))
-        if found is not None:
-            trace = replace(found[1], label=f"min TTC {row['f']:.2f} s")
+        if found is not None:  # the title shows its min TTC; mark the vehicle hit
+            trace = replace(found[1], hit=int(row.get("collision_with") or -1))
             path.parent.mkdir(parents=True, exist_ok=True)
             return animate_rollouts([trace], spec.road, spec.simulation.dt, path)
         if simulator is not None:
@@ -281,8 +238,8 @@ def write_run_report(
             n_failures=failures,
             param_names=param_layout(spec).columns,
             animate=animate,
+            spec=spec,
         )
-    err_console.print(f"report: {path}")
     return path
 
 
@@ -294,13 +251,17 @@ def compare_runs(
     failures: int,
     device: str,
     backend: tuple[Backend, int | None, str | None] = (Backend.local, None, None),
+    *,
+    as_json: bool = False,
 ) -> Path:
     """A method, naive MC at its budget and a naive reference into ``out``; report.
 
     The tested method's run goes to ``out/<method>``, naive Monte Carlo with
     the same number of rollouts to ``out/naive`` and the reference (if
     ``reference_n``) to ``out/reference``. ``backend``: ``--backend``,
-    ``--workers`` and ``--address`` (:mod:`avrisk.cli.backends`).
+    ``--workers`` and ``--address`` (:mod:`avrisk.cli.backends`). The plan's
+    cost is printed before the first rollout; the results as tables, or with
+    ``as_json`` as one JSON document on stdout (:mod:`avrisk.cli.results`).
     """
     spec = load_spec(scenario)
     check_thresholds(spec, tested)
@@ -329,12 +290,17 @@ def compare_runs(
                 settings("naive", n_final=reference_n, seed=tested.seed + 2, **shared),
             )
         )
+    cost = cost_meter(spec, [(label, s) for label, _, s in plan])
     with open_evaluator(objective, *backend) as evaluator:
         runs = [
-            (label, execute(label, path, objective, spec_json, s, failures, evaluator))
+            (
+                label,
+                execute(
+                    label, path, objective, spec_json, s, failures, evaluator, cost=cost
+                ),
+            )
             for label, path, s in plan
         ]
-    print_summary(runs)
     reference = runs[2][1] if reference_n else None
     if reference is not None:
         notes = check_same_definition(
@@ -344,10 +310,19 @@ def compare_runs(
         )
         for note in notes:
             err_console.print(f"note: {escape(note)}", highlight=False)
-    print_ratios(runs[0], runs[1][1], reference)
-    return write_run_report(
+    report = write_run_report(
         out, runs, spec, failures, reference, simulator=objective.simulator
     )
+    show_results(
+        "compare",
+        runs,
+        spec,
+        as_json=as_json,
+        ratios=ratio_rows(runs[0][1], runs[1][1], reference),
+        has_reference=reference is not None,
+        report=report,
+    )
+    return report
 
 
 def comparison_parts(out: Path) -> list[tuple[str, Path]]:
@@ -359,51 +334,3 @@ def comparison_parts(out: Path) -> list[tuple[str, Path]]:
     )
     rank = {NAIVE_PART: 1, REFERENCE_PART: 2}
     return [(name, out / name) for name in sorted(parts, key=lambda n: rank.get(n, 0))]
-
-
-def print_ratios(
-    tested: tuple[str, RunDirectory],
-    naive: RunDirectory,
-    reference: RunDirectory | None,
-) -> None:
-    """The method against naive MC at the same budget, per threshold (Fig. 2-3)."""
-    label, run_dir = tested
-    naive_hits = {g["gamma"]: g["n_hits"] for g in _by_gamma(naive)}
-    rows = comparison_rows(
-        run_dir.summary()["estimate"],
-        reference.summary()["estimate"] if reference is not None else None,
-    )
-    caption = (
-        "Expected naive hits and variance p(1-p)/n use p from the "
-        + ("naive reference run." if reference is not None else "method's estimate.")
-        + "\nThe variance ratio trusts the method's own standard error; the spread "
-        "over seeds (benchmarks/ce_vs_naive.py) is the stricter test."
-    )
-    if not all(row["reliable"] for row in rows):
-        caption += "\n" + UNRELIABLE_NOTE + "."
-    table = Table(
-        title=f"{label} against naive Monte Carlo with the same number of rollouts",
-        caption=escape(caption),
-    )
-    for col in (
-        "gamma [s]",
-        "p used",
-        "method hits",
-        "naive hits (seen)",
-        "naive hits (expected)",
-        "rare-event ratio",
-        "variance ratio",
-    ):
-        table.add_column(escape(col), justify="right")
-    for row in rows:
-        table.add_row(
-            f"{row['gamma']:g}",
-            f"{row['p']:.3g}",
-            str(row["ce_hits"]),
-            str(naive_hits.get(row["gamma"], "")),
-            f"{row['naive_hits_expected']:.1f}",
-            f"{row['rare_event_ratio']:.1f}x",
-            f"{row['variance_ratio']:.1f}x"
-            + ("" if row["reliable"] else UNRELIABLE_MARK),
-        )
-    out_console.print(table)

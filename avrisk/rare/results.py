@@ -91,7 +91,7 @@ class GammaEstimate:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (non-finite floats become ``None``)."""
-        return _jsonable(
+        return jsonable(
             {
                 "gamma": self.gamma,
                 "p": self.p,
@@ -149,7 +149,7 @@ class CEInfo(NamedTuple):
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
-        return _jsonable(self._asdict())
+        return jsonable(self._asdict())
 
 
 class MixtureInfo(NamedTuple):
@@ -180,7 +180,7 @@ class MixtureInfo(NamedTuple):
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
-        return _jsonable(self._asdict())
+        return jsonable(self._asdict())
 
 
 @dataclass(frozen=True)
@@ -267,7 +267,7 @@ class Estimate:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-serialisable dictionary of everything above."""
-        return _jsonable(
+        return jsonable(
             {
                 "method": self.method,
                 "gamma": self.gamma,
@@ -298,12 +298,12 @@ class Estimate:
         )
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
     """Replace non-finite floats by ``None`` and tuples by lists, recursively."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
+        return {k: jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     return value

@@ -2,9 +2,10 @@
 
 One panel per rollout, stacked vertically and played in lockstep. Each panel
 follows its ego along the road and shows the lanes, every vehicle as an
-oriented rectangle (the ego in orange, a short line marking each heading), and
-a title with the time and the minimum time-to-collision so far. A rollout that
-ended early (crash) holds its last frame, marked in red.
+oriented rectangle (the ego in orange, a short line marking each heading, the
+vehicle the ego crashes into outlined red), and a title with the time and the
+minimum time-to-collision so far. A rollout that ended early (crash) holds its
+last frame, marked in red.
 """
 
 from __future__ import annotations
@@ -108,12 +109,13 @@ class _Panel:
         self.noses = []
         for j in range(n_agents):
             colour = EGO_COLOUR if j == 0 else OTHER_COLOUR
+            hit = j == trace.hit and j > 0
             poly = Polygon(
                 np.zeros((4, 2)),
                 closed=True,
                 facecolor=colour,
-                edgecolor="black",
-                lw=1.4 if j == 0 else 0.6,
+                edgecolor=CRASH_COLOUR if hit else "black",
+                lw=1.4 if j == 0 or hit else 0.6,
                 zorder=3 if j == 0 else 2,
             )
             ax.add_patch(poly)
@@ -166,7 +168,8 @@ def _figure(
         _Panel(ax, tr, road, view_length)
         for ax, tr in zip(axes[:, 0], traces, strict=True)
     ]
-    axes[-1, 0].set_xlabel("x along the road [m]   (ego orange)", fontsize=8)
+    hit = "; vehicle hit outlined red" if any(tr.hit > 0 for tr in traces) else ""
+    axes[-1, 0].set_xlabel(f"x along the road [m]   (ego orange{hit})", fontsize=8)
     fig.tight_layout(pad=0.5, h_pad=0.8)
     return fig, panels
 
@@ -310,7 +313,7 @@ def animate_samples(
     sim : avrisk.assembly.ScenarioSimulator
         The scenario the rows were simulated in.
     rows : sequence of mapping
-        Samples-table rows: the columns of ``sim.layout``, ``seed`` and ``f``.
+        Samples-table rows: the columns of ``sim.layout`` and ``seed``.
     path : Path
         GIF to write (its folder is created).
 
@@ -321,8 +324,7 @@ def animate_samples(
     """
     x = np.array([[row[c] for c in sim.layout.columns] for row in rows])
     seeds = np.array([row["seed"] for row in rows], dtype=np.int64)
-    labels = [f"min TTC {row['f']:.2f} s" for row in rows]
-    _, traces = resimulate(sim, x, seeds, labels)
+    _, traces = resimulate(sim, x, seeds)
     spec = sim.spec
     path.parent.mkdir(parents=True, exist_ok=True)
     animate_rollouts(traces, spec.road, spec.simulation.dt, path)

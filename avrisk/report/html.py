@@ -2,15 +2,15 @@
 
 The report reads only what runs leave behind (``summary.json``,
 ``samples.parquet``) plus images drawn next to it, so ``avrisk report DIR``
-can rebuild it at any time.
+can rebuild it at any time. It leads with one answer
+(:func:`avrisk.report.answer.headline`): the probability per rollout, its
+interval, the method and whether the estimator's own diagnostics trust it.
 """
 
 from __future__ import annotations
 
 import datetime as dt
-import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +21,8 @@ import pyarrow.compute as pc
 from avrisk.pipeline.files import write_atomic
 from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
 from avrisk.rare.estimator import estimator_class
-from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable
-from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
+from avrisk.report.answer import headline, run_trust, trust_at
+from avrisk.report.failures import failure_view, p0_log_density_sample
 from avrisk.report.plots import (
     UNRELIABLE_MARK,
     UNRELIABLE_NOTE,
@@ -30,27 +30,10 @@ from avrisk.report.plots import (
     plot_comparison,
     plot_diagnostic,
 )
-from avrisk.scenario.params import XI_PREFIX
+from avrisk.scenario import ScenarioSpec
 
 #: Sections of the report, in order (a golden list for tests).
-SECTIONS = ("runs", "comparison", "failures", "settings")
-
-
-@dataclass(frozen=True)
-class Failure:
-    """A dangerous rollout as the report shows it.
-
-    Attributes
-    ----------
-    row : dict
-        Its row of the samples table (scenario parameters by name, ``f``,
-        ``log_p0``, ``seed``, ...).
-    animation : str or None
-        Path of its animation, relative to the report.
-    """
-
-    row: dict[str, Any]
-    animation: str | None = None
+SECTIONS = ("answer", "runs", "comparison", "failures", "settings")
 
 
 def top_failures(run_dir: RunDirectory, gamma: float, k: int) -> list[dict[str, Any]]:
@@ -77,36 +60,9 @@ def _run_view(
     est = summary["estimate"]
     timing = summary["timing"]
     rate = timing.get("rollouts_per_second")
-    main = next(g for g in est["by_gamma"] if g["gamma"] == est["gamma"])
     weighted = estimator_class(summary["method"]).weighted
-    warning = None
-    if main["n_hits"] == 0:
-        warning = (
-            "No rollout reached the threshold: the estimate is 0 and the interval is "
-            "an upper bound only."
-        )
-    elif not weighted and main["n_hits"] < MIN_RELIABLE_ESS:
-        warning = (
-            f"Only {main['n_hits']} hits: the relative standard error is about "
-            f"{1 / math.sqrt(main['n_hits']):.0%}."
-        )
-    elif (main["ess"] or 0) < MIN_RELIABLE_ESS:
-        warning = (
-            f"Only {main['ess']:.1f} effective hits: a few weights dominate, so the "
-            "standard error is unreliable."
-        )
-    elif not is_reliable(main["ess"], main.get("pareto_k")):
-        warning = (
-            f"The hits' weights have a heavy tail (Pareto k = {main['pareto_k']:.2f} "
-            f"> {MAX_RELIABLE_PARETO_K:g}): the standard error is unreliable, likely "
-            "too small; compare runs with other seeds."
-        )
     by_gamma = [
-        {
-            "pareto_k": None,  # summaries written before it was recorded
-            **g,
-            "reliable": not weighted or is_reliable(g["ess"], g.get("pareto_k")),
-        }
+        {"pareto_k": None, **g, "trust": trust_at(g, weighted)}  # older: no pareto_k
         for g in sorted(est["by_gamma"], key=lambda g: g["gamma"])
     ]
     return {
@@ -119,8 +75,10 @@ def _run_view(
         "ess": est["ess"] or 0.0,
         "n_evals": est["n_evals"],
         "by_gamma": by_gamma,
-        "warning": warning,
-        "interval": main.get("interval"),  # absent from older summaries
+        "trust": run_trust(summary),
+        "interval": next(g for g in by_gamma if g["gamma"] == est["gamma"]).get(
+            "interval"  # absent from older summaries
+        ),
         "timing": (
             f"{timing['wall_time_s']:.1f} s wall time; "
             f"{timing['rollouts_evaluated']:,} rollouts evaluated"
@@ -154,6 +112,7 @@ def write_report(
     n_failures: int = 6,
     param_names: Sequence[str] = (),
     animate: Callable[[dict[str, Any], Path], Path | None] | None = None,
+    spec: ScenarioSpec | None = None,
 ) -> Path:
     """Draw the plots and write ``out_dir/report.html``.
 
@@ -162,9 +121,9 @@ def write_report(
     out_dir : Path
         Where ``report.html`` and ``plots/`` go.
     runs : sequence of (label, RunDirectory)
-        Complete runs to show, in order; each gets its estimator's diagnostic
-        plots, and the first importance-weighted one is compared with naive
-        sampling.
+        Complete runs to show, in order, the run under test first; each gets
+        its estimator's diagnostic plots, and the first importance-weighted
+        one is compared with naive sampling.
     title, subtitle : str
     reference : RunDirectory, optional
         A large naive run whose estimates serve as ``p`` in the comparison.
@@ -173,10 +132,15 @@ def write_report(
     n_failures : int
         How many failures to show.
     param_names : sequence of str
-        Scenario parameters to list with each failure.
+        Scenario parameters to list with each failure (without ``spec``).
     animate : callable, optional
         ``animate(row, path)`` writes an animation of a samples-table row and
         returns its path (or ``None``).
+    spec : ScenarioSpec, optional
+        The runs' scenario: gives the time base of ``p`` (its horizon [s]),
+        and each failure's vehicles at absolute positions with the percentile
+        of its ``log p0`` under P0. Without it the answer is per rollout and
+        failures list their parameters as recorded.
 
     Returns
     -------
@@ -185,7 +149,7 @@ def write_report(
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     plots = out_dir / "plots"
-    views, ce_summary = [], None
+    views, weighted = [], None
     for i, (label, run_dir) in enumerate(runs):
         summary = run_dir.summary()
         estimator = estimator_class(summary["method"])
@@ -194,31 +158,48 @@ def write_report(
             name = f"diagnostics_{i}_{j}.png"
             plot_diagnostic(table, summary["estimate"]["gamma"], plots / name)
             images.append(f"plots/{name}")
-        if estimator.weighted:
-            ce_summary = ce_summary or summary
+        if estimator.weighted and weighted is None:
+            weighted = (label, summary)
         views.append(_run_view(label, run_dir, images))
     comparison = None
-    if ce_summary is not None:
+    if weighted is not None:
         ref = reference.summary()["estimate"] if reference is not None else None
-        plot_comparison(ce_summary["estimate"], plots / "comparison.png", ref)
+        plot_comparison(weighted[1]["estimate"], plots / "comparison.png", ref)
         comparison = {
+            "label": weighted[0],
+            "n_evals": weighted[1]["estimate"]["n_evals"],
             "plot": "plots/comparison.png",
-            "rows": comparison_rows(ce_summary["estimate"], ref),
-            "mark": UNRELIABLE_MARK,
+            "rows": comparison_rows(weighted[1]["estimate"], ref),
+            "has_reference": ref is not None,
             "note": UNRELIABLE_NOTE,
         }
     failures, gamma = [], None
     if failures_from is not None:
         gamma = failures_from.summary()["estimate"]["gamma"]
-        for j, row in enumerate(top_failures(failures_from, gamma, n_failures)):
+        rows = top_failures(failures_from, gamma, n_failures)
+        p0_sample = p0_log_density_sample(spec) if spec is not None and rows else None
+        for j, row in enumerate(rows):
             anim = (
                 animate(row, out_dir / "animations" / f"failure_{j + 1}.gif")
                 if animate
                 else None
             )
-            failures.append(_failure_view(row, param_names, anim, out_dir))
+            failures.append(
+                failure_view(
+                    row,
+                    spec,
+                    p0_sample,
+                    names=[n for n in param_names if n in row]
+                    or [n for n in row if n not in BOOKKEEPING + DENSITIES],
+                    units=failures_from.units,
+                    animation=str(anim.relative_to(out_dir)) if anim else None,
+                )
+            )
     first = runs[0][1]
-    settings = {**first.config().get("settings", {})}
+    answer = headline(
+        [(label, d.summary()) for label, d in runs],
+        spec.simulation.horizon if spec is not None else None,
+    )
     env = jinja2.Environment(
         loader=jinja2.PackageLoader("avrisk.report", "templates"),
         autoescape=jinja2.select_autoescape(["html", "j2"]),
@@ -226,37 +207,16 @@ def write_report(
     html = env.get_template("report.html.j2").render(
         title=title,
         subtitle=subtitle,
+        answer=answer,
         runs=views,
         comparison=comparison,
         mark=UNRELIABLE_MARK,
         failures=failures,
         failures_gamma=gamma,
-        settings=settings,
+        settings={**first.config().get("settings", {})},
         footer=f"avrisk {first.summary()['versions']['avrisk']} - "
         f"generated {dt.datetime.now().isoformat(timespec='seconds')}",
     )
     path = out_dir / "report.html"
     write_atomic(path, html)  # a full disk leaves no half-written report
     return path
-
-
-def _failure_view(
-    row: dict[str, Any], names: Sequence[str], anim: Path | None, out_dir: Path
-) -> dict[str, Any]:
-    skip = set(BOOKKEEPING + DENSITIES)
-    shown = [n for n in names if n in row] or [n for n in row if n not in skip]
-    # The driver network's hundreds of weights are no reading for a person.
-    n_xi = sum(n.startswith(XI_PREFIX) for n in shown)
-    shown = [n for n in shown if not n.startswith(XI_PREFIX)]
-    params = ", ".join(f"{n}={row[n]:.3g}" for n in shown if isinstance(row[n], float))
-    if n_xi:
-        params += f" (and {n_xi} driver-network weights {XI_PREFIX}*)"
-    return {
-        "f": row["f"],
-        "crash": bool(row.get("crash", False)),
-        "log_p0": row["log_p0"],
-        "phase": row["phase"],
-        "sample_id": row["sample_id"],
-        "animation": str(anim.relative_to(out_dir)) if anim is not None else None,
-        "params": params,
-    }

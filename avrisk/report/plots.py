@@ -39,7 +39,7 @@ UNRELIABLE_NOTE = (
 
 def comparison_rows(
     ce: dict[str, Any], reference: dict[str, Any] | None = None
-) -> list[dict[str, float]]:
+) -> list[dict[str, Any]]:
     """Per test threshold: CE hits, expected naive hits and the two ratios.
 
     The comparison is at an equal budget: naive Monte Carlo with as many
@@ -58,7 +58,8 @@ def comparison_rows(
     Returns
     -------
     list of dict
-        Keys ``gamma``, ``p``, ``ce_hits``, ``naive_hits_expected``,
+        Keys ``gamma``, ``p``, ``p_from`` (``"reference"`` or ``"own"``: where
+        ``p`` comes from), ``ce_hits``, ``naive_hits_expected``,
         ``rare_event_ratio``, ``variance_ratio``, and ``reliable``: whether CE's
         standard error there can be trusted
         (:func:`avrisk.rare.final_stage.is_reliable`; else the variance ratio
@@ -68,7 +69,8 @@ def comparison_rows(
     rows = []
     for g in ce["by_gamma"]:
         r = ref.get(g["gamma"])
-        p = r["p"] if r is not None and r["n_hits"] > 0 else g["p"]
+        p_from = "reference" if r is not None and r["n_hits"] > 0 else "own"
+        p = r["p"] if p_from == "reference" else g["p"]
         n = ce["n_evals"]
         naive_hits = n * p
         naive_var = p * (1 - p) / n
@@ -77,6 +79,7 @@ def comparison_rows(
             {
                 "gamma": g["gamma"],
                 "p": p,
+                "p_from": p_from,
                 "ce_hits": g["n_hits"],
                 "naive_hits_expected": naive_hits,
                 "rare_event_ratio": g["n_hits"] / naive_hits

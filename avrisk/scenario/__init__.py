@@ -22,6 +22,8 @@ from avrisk.scenario.base_distribution import (
 from avrisk.scenario.errors import ScenarioSpecError
 from avrisk.scenario.loading import (
     MAX_SPEC_BYTES,
+    bundled_folder,
+    bundled_scenario_text,
     bundled_scenarios,
     load_spec,
     spec_from_dict,
@@ -40,6 +42,8 @@ __all__ = [
     "ScenarioSpec",
     "ScenarioSpecError",
     "build_base_distribution",
+    "bundled_folder",
+    "bundled_scenario_text",
     "bundled_scenarios",
     "load_spec",
     "marginal_family",

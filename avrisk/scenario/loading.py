@@ -11,13 +11,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from importlib import resources
+from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
 
 import yaml
 from pydantic import ValidationError
 
-from avrisk.scenario.errors import ScenarioSpecError, format_validation_error
+from avrisk.scenario.errors import ScenarioSpecError, clip, format_validation_error
 from avrisk.scenario.spec import SCENARIO_NAME, ScenarioSpec
 
 #: Largest scenario file accepted [bytes]. Real specs are a few kB.
@@ -31,6 +32,11 @@ _BUNDLED_PACKAGE = "avrisk"
 _BUNDLED_DIR = ("data", "scenarios")
 
 
+def bundled_folder() -> Traversable:
+    """The folder of the bundled scenario files: ``avrisk/data/scenarios``."""
+    return resources.files(_BUNDLED_PACKAGE).joinpath(*_BUNDLED_DIR)
+
+
 def bundled_scenarios() -> list[str]:
     """Names of the scenarios shipped with avrisk (usable by name in the CLI).
 
@@ -39,12 +45,27 @@ def bundled_scenarios() -> list[str]:
     list of str
         Sorted names, e.g. ``["highway_default"]``.
     """
-    folder = resources.files(_BUNDLED_PACKAGE).joinpath(*_BUNDLED_DIR)
     return sorted(
         p.name.removesuffix(".yaml")
-        for p in folder.iterdir()
+        for p in bundled_folder().iterdir()
         if p.name.endswith(".yaml")
     )
+
+
+def bundled_scenario_text(name: str) -> str:
+    """The YAML text of a bundled scenario, comments included (a starting file).
+
+    Raises
+    ------
+    ScenarioSpecError
+        If no bundled scenario has that name (the message lists them).
+    """
+    if not (SCENARIO_NAME.match(name) and name in bundled_scenarios()):
+        raise ScenarioSpecError(
+            f"no bundled scenario {clip(name, 80)!r}; the bundled ones are "
+            f"{', '.join(bundled_scenarios())}"
+        )
+    return bundled_folder().joinpath(name + ".yaml").read_text(encoding="utf-8")
 
 
 def load_spec(path_or_name: str | Path) -> ScenarioSpec:
@@ -229,8 +250,7 @@ def _read_source(path_or_name: str | Path) -> tuple[str, str]:
             raise ScenarioSpecError(f"{path}: cannot be read: {exc}") from None
     name = str(path_or_name)
     if SCENARIO_NAME.match(name) and name in bundled_scenarios():
-        res = resources.files(_BUNDLED_PACKAGE).joinpath(*_BUNDLED_DIR, name + ".yaml")
-        return res.read_text(encoding="utf-8"), f"{name} (bundled)"
+        return bundled_scenario_text(name), f"{name} (bundled)"
     raise ScenarioSpecError(
         f"no scenario file {str(path_or_name)!r} and no bundled scenario of that "
         f"name; give a path to a .yaml file or one of {bundled_scenarios()}"

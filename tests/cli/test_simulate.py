@@ -254,3 +254,38 @@ def test_device_auto_picks_cuda_when_present_and_is_recorded(short_scenario, tmp
     assert result.exit_code == 0, result.output
     meta = json.loads(pq.read_schema(out).metadata[simulate_mod.META_RUN])
     assert meta["device"] == ("cuda" if torch.cuda.is_available() else "cpu")
+
+
+def test_simulate_and_replay_write_under_runs_by_default(
+    short_scenario, tmp_path, monkeypatch
+):
+    monkeypatch.chdir(tmp_path)
+    result = _simulate(str(short_scenario), "--n", "4")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "runs" / "rollouts.parquet").is_file()
+    replayed = runner.invoke(app, ["replay", "runs/rollouts.parquet", "--rows", "0"])
+    assert replayed.exit_code == 0, replayed.output
+    assert (tmp_path / "runs" / "replay.gif").is_file()
+    assert not list(tmp_path.glob("*.gif")) and not list(tmp_path.glob("*.parquet"))
+
+
+def test_replay_takes_the_samples_of_a_run_without_its_scenario(
+    short_scenario, tmp_path
+):
+    compared = tmp_path / "cmp"
+    args = ["compare", str(short_scenario), "--out", str(compared), "--failures", "0"]
+    args += ["--n-per-iter", "20", "--n-iter", "1", "--n-final", "20"]
+    args += ["--reference-n", "0", "--gamma", "1.0", "--gamma-test", ""]
+    assert runner.invoke(app, args).exit_code == 0
+    samples = compared / "naive" / "samples.parquet"
+    gif = tmp_path / "w.gif"
+    result = runner.invoke(
+        app, ["replay", str(samples), "--worst", "1", "--out", str(gif)]
+    )
+    assert result.exit_code == 0, result.output
+    assert gif.is_file()
+    # the comparison itself holds no samples: one line naming a run to give
+    whole = runner.invoke(app, ["replay", str(compared), "--worst", "1"])
+    assert whole.exit_code == 2
+    assert "a comparison: give one of its runs, e.g." in whole.output
+    assert str(compared / "ce") in whole.output

@@ -1,5 +1,7 @@
 """Top-down animation of recorded rollouts."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -69,3 +71,16 @@ def test_a_frame_png_shows_the_ego_in_its_highlight_colour(tmp_path):
 def test_animating_nothing_is_an_error(tmp_path):
     with pytest.raises(ValueError, match="at least one"):
         animate_rollouts([], RoadSpec(), 0.1, tmp_path / "a.gif")
+
+
+def test_the_vehicle_hit_is_outlined_red(tmp_path):
+    crash_red = np.array([0xD6, 0x27, 0x28])
+
+    def red_pixels(trace, name):
+        out = save_frame_png([trace], RoadSpec(), 0.1, tmp_path / name, step=0)
+        rgb = np.asarray(Image.open(out).convert("RGB")).reshape(-1, 3).astype(int)
+        return (np.abs(rgb - crash_red).sum(axis=1) < 60).sum()
+
+    plain = _trace()
+    assert red_pixels(plain, "plain.png") == 0
+    assert red_pixels(replace(plain, hit=1), "hit.png") > 20

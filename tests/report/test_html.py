@@ -62,7 +62,7 @@ def test_report_has_every_section_and_only_working_image_links(runs):
     )
     html = report.read_text()
     for heading in (
-        "Cross-entropy vs naive Monte Carlo",
+        "CE vs naive Monte Carlo",
         "Most likely failures under P0",
         "Settings",
     ):
@@ -169,5 +169,43 @@ def test_a_naive_run_with_few_hits_is_told_its_relative_error(runs, tmp_path):
         text = write_report(tmp_path / "few", dirs[1:], title="t").read_text()
     finally:
         _reseal(summary_path, original)
-    assert "Only 4 hits: the relative standard error is about 50%." in text
+    assert "only 4 hits: relative standard error about 50%" in text
     assert "weights dominate" not in text
+
+
+def test_the_report_leads_with_one_answer_and_its_trust(runs, tmp_path):
+    _, dirs = runs
+    text = write_report(tmp_path / "r", dirs, title="t").read_text()
+    answer = text.index('id="answer"')
+    assert answer < text.index("<h2>")  # before any other section
+    block = text[answer : text.index("</div>", answer)]
+    assert "P(min TTC ≤" in block and "per rollout from P0" in block
+    assert "95% CI" in block and "method " in block and "trust:" in block
+    assert "Of the 2 runs below" in block
+
+
+def test_one_variance_ratio_per_threshold_and_no_borrowed_reference(runs, tmp_path):
+    _, dirs = runs
+    text = write_report(tmp_path / "single", dirs[:1], title="t").read_text()
+    # one variance ratio: against naive MC with the run's whole budget
+    assert "variance reduction" not in text and "final-stage n" not in text
+    assert text.count("variance ratio: naive MC at") == 1
+    ce = dirs[0][1].summary()["estimate"]
+    for row in comparison_rows(ce):
+        assert f"{row['variance_ratio']:.3g}" in text
+    # a single run has no reference: its own estimate is named so
+    assert "p (reference)" not in text and "reference run" not in text.split("<h2>")[0]
+    assert "this run&#39;s own estimate" in text
+    with_ref = write_report(
+        tmp_path / "ref", dirs, title="t", reference=dirs[1][1]
+    ).read_text()
+    assert "naive reference" in with_ref and "there is no reference" not in with_ref
+
+
+def test_every_threshold_dependent_column_names_its_threshold(runs, tmp_path):
+    _, dirs = runs
+    text = write_report(tmp_path / "r", dirs, title="t").read_text()
+    headers = re.findall(r"<th[^>]*>([^<]*)</th>", text)
+    for header in headers:
+        if header.startswith(("P(", "hits", "p used", "naive hits", "what happened")):
+            assert "gamma" in header or " s)" in header, header

@@ -1,0 +1,356 @@
+"""What ``run``, ``compare`` and ``report`` print: the answer, tables, or JSON.
+
+The terminal gets the one answer first (:func:`avrisk.report.answer.headline`,
+the same as the report's), then a table per run that fits 80 columns (Rich
+wraps the text cells of a narrower terminal). With ``--json``, stdout gets one
+JSON document instead (:func:`result_document`, schema ``avrisk.result/1``);
+progress, warnings and notes stay on stderr, so stdout parses.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+from rich import box
+from rich.markup import escape
+from rich.table import Table
+
+from avrisk.cli.common import err_console, out_console
+from avrisk.pipeline import RunDirectory
+from avrisk.pipeline.files import json_text
+from avrisk.rare.estimator import estimator_class
+from avrisk.rare.results import jsonable
+from avrisk.report.answer import Headline, headline, run_trust, trust_at
+from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
+from avrisk.scenario import ScenarioSpec
+
+#: Schema of the ``--json`` document.
+RESULT_SCHEMA = "avrisk.result/1"
+
+Runs = list[tuple[str, RunDirectory]]
+
+
+def _table(title: str, caption: str | None = None) -> Table:
+    """A compact table (no vertical rules) that fits 80 columns."""
+    return Table(
+        title=escape(title),
+        caption=escape(caption) if caption else None,
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+        collapse_padding=True,
+        title_justify="left",
+        caption_justify="left",
+    )
+
+
+def _columns(table: Table, names: list[str], wrap: str | None = None) -> None:
+    """Columns that never wrap, numbers right-aligned; text ``wrap`` may wrap.
+
+    A header wraps only where its name has a newline.
+    """
+    for name in names:
+        table.add_column(
+            escape(name),
+            justify="left" if name in (wrap, "trust") else "right",
+            no_wrap=name != wrap,
+        )
+
+
+def answer(runs: Runs, spec: ScenarioSpec) -> Headline:
+    """The answer of ``runs`` (the first one under test), as the report gives it."""
+    return headline(
+        [(label, d.summary()) for label, d in runs], spec.simulation.horizon
+    )
+
+
+def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
+    """The answer in one sentence, then every run's estimate at every threshold."""
+    lead = answer(runs, spec)
+    out_console.print(f"[bold]{escape(lead.sentence())}[/]", highlight=False)
+    out_console.print(escape(lead.time_base()), highlight=False)
+    for label, run_dir in runs:
+        summary = run_dir.summary()
+        est = summary["estimate"]
+        weighted = estimator_class(summary["method"]).weighted
+        table = _table(
+            f"{label}, {est['n_evals']:,} rollouts: P(min TTC <= gamma) per rollout",
+            f"95% interval: {_interval(est)}" if _interval(est) else None,
+        )
+        names = ["gamma [s]", "p", "stderr", "95% CI", "hits", "ESS", "Pareto k"]
+        _columns(table, [*names, "trust"])
+        for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
+            table.add_row(
+                f"{g['gamma']:g}",
+                f"{g['p']:.3g}",
+                f"{g['stderr']:.2g}",
+                f"{g['ci'][0]:.2g}..{g['ci'][1]:.2g}",
+                str(g["n_hits"]),
+                f"{g['ess'] or 0:.1f}",
+                "-" if g.get("pareto_k") is None else f"{g['pareto_k']:.2f}",
+                trust_at(g, weighted).word,
+            )
+        out_console.print(table)
+        trust = run_trust(summary)
+        if not trust.ok and label != lead.label:  # the answer's reasons are above
+            out_console.print(
+                f"{escape(label)}: trust at {est['gamma']:g} s: {escape(str(trust))}",
+                highlight=False,
+            )
+        if est.get("stopped_by", "budget") != "budget":
+            rule = est["stopped_by"].replace("_", " ")
+            out_console.print(
+                f"{escape(label)}: stopped by its {rule} rule after "
+                f"{est['n_evals']:,} rollouts",
+                highlight=False,
+            )
+        print_mechanisms(label, summary)
+
+
+def _interval(est: dict[str, Any]) -> str | None:
+    """How the main threshold's interval was computed (absent from older runs)."""
+    main = next(g for g in est["by_gamma"] if g["gamma"] == est["gamma"])
+    return main.get("interval") or None
+
+
+def print_mechanisms(label: str, summary: dict[str, Any]) -> None:
+    """What the dangerous rollouts were, at the run's main threshold: p by mechanism."""
+    parts = _mechanisms(summary)
+    if not parts:
+        return
+    gamma = summary["estimate"]["gamma"]
+    table = _table(f"{label}: P(min TTC <= {gamma:g} s) by what happened")
+    _columns(table, ["what happened", "p", "95% CI", "share", "hits"], "what happened")
+    for part in parts:
+        share = part["share"]
+        table.add_row(
+            part["label"],
+            f"{part['p']:.3g}",
+            f"{part['ci'][0]:.2g}..{part['ci'][1]:.2g}",
+            "-" if share is None else f"{share:.0%}",
+            str(part["n_hits"]),
+        )
+    out_console.print(table)
+
+
+def _mechanisms(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """``p`` by mechanism at the main threshold (empty when not recorded)."""
+    gamma = summary["estimate"]["gamma"]
+    return next(
+        (
+            m["by_label"]
+            for m in (summary.get("mechanisms") or {}).get("by_gamma", [])
+            if m["gamma"] == gamma
+        ),
+        [],
+    )
+
+
+def print_failed(runs: Runs) -> None:
+    """One warning line on stderr per run with rollouts that failed to evaluate."""
+    for label, run_dir in runs:
+        by_gamma = run_dir.summary()["estimate"]["by_gamma"]
+        failed = max((g.get("n_failed", 0) for g in by_gamma), default=0)
+        if failed:
+            err_console.print(
+                f"[yellow]warning:[/] {escape(label)}: {failed} rollouts failed to "
+                "evaluate; p counts them safe, the interval reaches up to counting "
+                "them dangerous (rerun the command to evaluate them again)",
+                highlight=False,
+            )
+
+
+def ratio_rows(
+    tested: RunDirectory, naive: RunDirectory, reference: RunDirectory | None
+) -> list[dict[str, Any]]:
+    """The method against naive MC at its budget, per threshold, naive hits seen too.
+
+    :func:`avrisk.report.plots.comparison_rows` (the report's) with
+    ``naive_hits_seen``: the hits of the naive run at the same budget.
+    """
+    seen = {g["gamma"]: g["n_hits"] for g in naive.summary()["estimate"]["by_gamma"]}
+    rows = comparison_rows(
+        tested.summary()["estimate"],
+        reference.summary()["estimate"] if reference is not None else None,
+    )
+    return [{**row, "naive_hits_seen": seen.get(row["gamma"])} for row in rows]
+
+
+def print_ratios(
+    label: str, n_rollouts: int, rows: list[dict[str, Any]], has_reference: bool
+) -> None:
+    """The method against naive MC at the same budget, per threshold (Fig. 2-3)."""
+    caption = (
+        "Naive figures are expected values (n p hits, variance p(1-p)/n) with p "
+        + (
+            "from the naive reference run (the method's own where it saw no hit)"
+            if has_reference
+            else "the method's own estimate (no reference run)"
+        )
+        + ". The variance ratio trusts the method's own standard error; the spread "
+        "over seeds (benchmarks/ce_vs_naive.py) is the stricter test."
+    )
+    if not all(row["reliable"] for row in rows):
+        caption += " " + UNRELIABLE_NOTE + "."
+    table = _table(
+        f"{label} against naive Monte Carlo, both with {n_rollouts:,} rollouts",
+        caption,
+    )
+    _columns(
+        table,
+        [
+            "gamma\n[s]",
+            "p\nused",
+            "method\nhits",
+            "naive hits\nseen",
+            "naive hits\nexpected",
+            "rare-event\nratio",
+            "variance\nratio",
+        ],
+    )
+    for row in rows:
+        table.add_row(
+            f"{row['gamma']:g}",
+            f"{row['p']:.3g}",
+            str(row["ce_hits"]),
+            str(row["naive_hits_seen"] if row["naive_hits_seen"] is not None else ""),
+            f"{row['naive_hits_expected']:.1f}",
+            f"{row['rare_event_ratio']:.1f}x",
+            f"{row['variance_ratio']:.1f}x"
+            + ("" if row["reliable"] else UNRELIABLE_MARK),
+        )
+    out_console.print(table)
+
+
+def show_results(
+    command: str,
+    runs: Runs,
+    spec: ScenarioSpec,
+    *,
+    as_json: bool = False,
+    ratios: list[dict[str, Any]] | None = None,
+    has_reference: bool = False,
+    report: Path | None = None,
+) -> None:
+    """The results of ``command``: tables on stdout, or one JSON document.
+
+    Parameters
+    ----------
+    command : str
+        ``"run"``, ``"compare"`` or ``"report"``.
+    runs : list of (label, RunDirectory)
+        Complete runs, the one under test first.
+    spec : ScenarioSpec
+        Their scenario.
+    as_json : bool, default=False
+        Print :func:`result_document` instead of tables.
+    ratios : list of dict, optional
+        :func:`ratio_rows` of a comparison.
+    has_reference : bool, default=False
+        Whether the comparison has a naive reference run (for ``ratios``).
+    report : Path, optional
+        The report written (named on stderr).
+    """
+    if as_json:
+        print_json(result_document(command, runs, spec, ratios=ratios, report=report))
+    else:
+        print_summary(runs, spec)
+        if ratios is not None:
+            est = runs[0][1].summary()["estimate"]
+            print_ratios(runs[0][0], est["n_evals"], ratios, has_reference)
+    print_failed(runs)
+    if report is not None:
+        err_console.print(  # a path is never broken
+            f"report: {escape(str(report))}", highlight=False, soft_wrap=True
+        )
+
+
+def result_document(
+    command: str,
+    runs: Runs,
+    spec: ScenarioSpec,
+    *,
+    ratios: list[dict[str, Any]] | None = None,
+    report: Path | None = None,
+) -> dict[str, Any]:
+    """The ``--json`` document: the answer, every run, the comparison, the report.
+
+    Parameters
+    ----------
+    command : str
+        ``"run"``, ``"compare"`` or ``"report"``.
+    runs : list of (label, RunDirectory)
+        Complete runs, the one under test first.
+    spec : ScenarioSpec
+        Their scenario (its name and horizon [s]).
+    ratios : list of dict, optional
+        :func:`ratio_rows` of a comparison.
+    report : Path, optional
+        The HTML report written.
+
+    Returns
+    -------
+    dict
+        Schema :data:`RESULT_SCHEMA`; non-finite numbers are ``null``. Keys
+        ``answer`` (:meth:`Headline.to_dict`), ``runs`` (per run: ``label``,
+        ``path``, ``method``, ``n_rollouts``, ``rollouts_reused`` from an
+        earlier session, ``stopped_by``, ``by_gamma`` with ``trust`` and
+        ``reasons`` per threshold, ``mechanisms`` at the main threshold),
+        ``comparison`` (or null) and ``report`` (or null).
+    """
+    docs = []
+    for label, run_dir in runs:
+        summary = run_dir.summary()
+        est = summary["estimate"]
+        weighted = estimator_class(summary["method"]).weighted
+        by_gamma = []
+        for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
+            trust = trust_at(g, weighted)
+            by_gamma.append(
+                {
+                    key: g.get(key)
+                    for key in (
+                        "gamma",
+                        "p",
+                        "stderr",
+                        "ci",
+                        "n_hits",
+                        "ess",
+                        "pareto_k",
+                        "n_failed",
+                        "p_if_failed_dangerous",
+                        "interval",
+                    )
+                }
+                | {"trust": trust.word, "reasons": list(trust.reasons)}
+            )
+        docs.append(
+            {
+                "label": label,
+                "path": str(run_dir.path),
+                "method": summary["method"],
+                "n_rollouts": est["n_evals"],
+                "rollouts_reused": summary["timing"]["rollouts_replayed"],
+                "stopped_by": est.get("stopped_by", "budget"),
+                "by_gamma": by_gamma,
+                "mechanisms": _mechanisms(summary),
+            }
+        )
+    doc = {
+        "schema": RESULT_SCHEMA,
+        "command": command,
+        "scenario": spec.name,
+        "horizon_s": spec.simulation.horizon,
+        "answer": answer(runs, spec).to_dict(),
+        "runs": docs,
+        "comparison": ratios,
+        "report": None if report is None else str(report),
+    }
+    return jsonable(doc)
+
+
+def print_json(doc: dict[str, Any]) -> None:
+    """``doc`` on stdout as one JSON document (plain, no Rich markup)."""
+    sys.stdout.write(json_text(doc))
+    sys.stdout.flush()

@@ -1,0 +1,99 @@
+"""``avrisk scenarios``: the bundled scenarios, listed or written out as a start.
+
+The bundled scenarios are YAML files inside the package
+(``avrisk/data/scenarios/``); ``avrisk run NAME`` takes them by name.
+``avrisk scenarios`` lists them one line each; ``avrisk scenarios show NAME``
+prints one (comments included) and ``--write FILE`` writes it as a starting
+file to edit, never over an existing file unless ``--force``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich import box
+from rich.markup import escape
+from rich.table import Table
+
+from avrisk.cli.common import (
+    CliError,
+    check_output_file,
+    err_console,
+    out_console,
+    user_errors,
+)
+from avrisk.pipeline.files import write_atomic
+from avrisk.scenario import (
+    ScenarioSpecError,
+    bundled_folder,
+    bundled_scenario_text,
+    bundled_scenarios,
+    load_spec,
+)
+
+
+def list_scenarios() -> None:
+    """List the bundled scenarios, one line each (name, size, horizon, ego, what)."""
+    with user_errors(ScenarioSpecError):
+        table = Table(
+            box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True, expand=True
+        )
+        for name in ("name", "vehicles", "horizon", "ego"):
+            table.add_column(name, no_wrap=True)
+        # What is left of the line; cut with an ellipsis: one line each.
+        table.add_column("description", no_wrap=True, overflow="ellipsis", ratio=1)
+        for name in bundled_scenarios():
+            spec = load_spec(name)
+            table.add_row(
+                name,
+                str(spec.n_vehicles),
+                f"{spec.simulation.horizon:g} s",
+                spec.ego.policy,
+                escape(" ".join((spec.description or "").split())),
+            )
+    out_console.print(table)
+    err_console.print(
+        f"bundled in {escape(str(bundled_folder()))}; start your own with: avrisk "
+        "scenarios show NAME --write my_scenario.yaml",
+        highlight=False,
+        soft_wrap=True,
+    )
+
+
+def show_scenario(
+    name: Annotated[str, typer.Argument(help="A bundled scenario's name.")],
+    write: Annotated[
+        Path | None,
+        typer.Option(
+            "--write",
+            help="Write it to this YAML file (a starting point to edit) instead of "
+            "printing it.",
+        ),
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Overwrite --write FILE if it exists.")
+    ] = False,
+) -> None:
+    """Print a bundled scenario's YAML, or write it out as a starting file."""
+    with user_errors(ScenarioSpecError):
+        text = bundled_scenario_text(name)
+        if write is None:
+            typer.echo(text, nl=False)
+            return
+        check_output_file(write, "--write")
+        if write.exists() and not force:
+            raise CliError(
+                f"--write {write}: exists already; give --force to overwrite it"
+            )
+        try:
+            write_atomic(write, text)
+        except OSError as exc:
+            raise CliError(f"--write {write}: cannot write: {exc.strerror}") from None
+    err_console.print(
+        f"wrote {escape(str(write))} (bundled scenario {name}); edit it, then: "
+        f"avrisk run {escape(str(write))} --out runs/{name}",
+        highlight=False,
+        soft_wrap=True,
+    )

@@ -1,0 +1,60 @@
+"""``avrisk scenarios``: the bundled scenarios, listed and written out."""
+
+import yaml
+from typer.testing import CliRunner
+
+from avrisk.cli.app import app
+from avrisk.scenario import bundled_scenario_text, bundled_scenarios, load_spec
+
+
+def invoke(*args):
+    return CliRunner().invoke(app, [str(a) for a in args], env={"COLUMNS": "80"})
+
+
+def test_scenarios_lists_every_bundled_scenario_one_line_each():
+    result = invoke("scenarios")
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.strip().splitlines()
+    rows = [ln for ln in lines if ln.split() and ln.split()[0] in bundled_scenarios()]
+    assert (
+        [r.split()[0] for r in rows]
+        == bundled_scenarios()
+        == [
+            "highway_default",
+            "highway_idm",
+        ]
+    )
+    assert all(len(line) <= 80 for line in lines)
+    idm = next(r for r in rows if r.split()[0] == "highway_idm")
+    assert "6" in idm.split() and "10 s" in idm and "idm_mobil" in idm
+    assert "avrisk/data/scenarios" in result.stderr  # where they live
+
+
+def test_show_prints_a_scenario_and_write_makes_a_starting_file(tmp_path):
+    shown = invoke("scenarios", "show", "highway_idm")
+    assert shown.exit_code == 0 and shown.stdout == bundled_scenario_text("highway_idm")
+    target = tmp_path / "mine.yaml"
+    result = invoke("scenarios", "show", "highway_idm", "--write", target)
+    assert result.exit_code == 0, result.output
+    assert target.read_text() == bundled_scenario_text("highway_idm")
+    assert load_spec(target) == load_spec("highway_idm")  # a valid start
+    assert f"avrisk run {target}" in " ".join(result.stderr.split())
+
+
+def test_an_existing_file_is_kept_without_force(tmp_path):
+    target = tmp_path / "mine.yaml"
+    target.write_text("name: mine\n")
+    refused = invoke("scenarios", "show", "highway_idm", "--write", target)
+    assert refused.exit_code == 2 and "exists already" in refused.output
+    assert "--force" in refused.output and target.read_text() == "name: mine\n"
+    forced = invoke("scenarios", "show", "highway_idm", "--write", target, "--force")
+    assert forced.exit_code == 0
+    assert yaml.safe_load(target.read_text())["name"] == "highway_idm"
+
+
+def test_an_unknown_name_lists_the_bundled_ones(tmp_path):
+    result = invoke("scenarios", "show", "nope", "--write", tmp_path / "x.yaml")
+    assert result.exit_code == 2
+    assert "no bundled scenario 'nope'" in result.output
+    assert "highway_default, highway_idm" in result.output
+    assert not (tmp_path / "x.yaml").exists()

@@ -1,0 +1,152 @@
+"""What a person and a script see: 80 columns, ``--json``, the cost, Ctrl-C."""
+
+import inspect
+import json
+import shlex
+from importlib import resources
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from avrisk.cli.app import app
+from avrisk.cli.run import COMPARE_DEFAULTS, compare, estimator_options
+from avrisk.pipeline.store import RunDirectory
+from avrisk.rare import get_estimator
+
+
+@pytest.fixture(scope="module")
+def short_scenario(tmp_path_factory):
+    """``highway_idm`` cut to 1.5 s, to keep the tests fast."""
+    text = resources.files("avrisk.data.scenarios").joinpath("highway_idm.yaml")
+    spec = yaml.safe_load(text.read_text())
+    spec["simulation"]["horizon"] = 1.5
+    path = tmp_path_factory.mktemp("scenario") / "short.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+RUN_ARGS = ("--rho", "0.1", "--n-per-iter", "60", "--n-iter", "2", "--n-final", "100")
+RUN_ARGS += ("--gamma", "1.0", "--gamma-test", "0.5,2.0", "--batch-size", "64")
+RUN_ARGS += ("--failures", "1")
+
+
+def invoke(*args):
+    return CliRunner().invoke(app, [str(a) for a in args], env={"COLUMNS": "80"})
+
+
+def words(text):
+    """``text`` with every run of white space (wrapped lines) as one space."""
+    return " ".join(text.split())
+
+
+def test_run_fits_80_columns_and_leads_with_the_answer(short_scenario, tmp_path):
+    result = invoke("run", short_scenario, "--out", tmp_path / "run", *RUN_ARGS)
+    assert result.exit_code == 0, result.output
+    for line in result.stdout.splitlines():
+        assert len(line) <= 80, line
+    for line in result.stderr.splitlines():  # but the path of the report
+        assert len(line) <= 80 or line.startswith("report: "), line
+    first = result.stdout.lstrip().splitlines()[0]
+    assert first.startswith("P(min TTC <= 1 s) per 1.5-s rollout from P0 = ")
+    assert "trust:" in result.stdout and "Per hour of" in result.stdout
+    # every column of the table is there, none cut short
+    for header in ("gamma [s]", "stderr", "95% CI", "hits", "ESS", "Pareto k"):
+        assert header in result.stdout
+    assert "…" not in result.stdout
+
+
+def test_the_plan_and_the_measured_rate_come_before_the_results(
+    short_scenario, tmp_path
+):
+    result = invoke("run", short_scenario, "--out", tmp_path / "run", *RUN_ARGS)
+    err = words(result.stderr)
+    assert "plan: cross-entropy (CE 2x60 + 100): 220 rollouts; samples take" in err
+    assert "about 60 kB on disk (275 B a rollout)" in err
+    assert "rate: " in err and "rollouts/s on the first 60: about" in err
+    assert err.index("plan:") < err.index("rate:")
+
+
+def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
+    out = tmp_path / "run"
+    result = invoke("run", short_scenario, "--out", out, *RUN_ARGS, "--json")
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)  # progress and notes went to stderr
+    assert doc["schema"] == "avrisk.result/1" and doc["command"] == "run"
+    assert doc["horizon_s"] == 1.5 and doc["report"] == str(out / "report.html")
+    answer = doc["answer"]
+    assert answer["event"] == "P(min TTC <= 1 s) per 1.5-s rollout from P0"
+    assert answer["trust"] in ("ok", "caution") and answer["run"] == "cross-entropy"
+    (run,) = doc["runs"]
+    assert run["n_rollouts"] == 220 and run["path"] == str(out)
+    assert [g["gamma"] for g in run["by_gamma"]] == [0.5, 1.0, 2.0]
+    assert {"p", "ci", "pareto_k", "trust", "reasons"} <= set(run["by_gamma"][0])
+    assert doc["comparison"] is None
+    again = invoke("report", out, "--failures", 0, "--json")
+    assert json.loads(again.stdout)["answer"] == answer
+
+
+def test_compare_json_has_one_variance_ratio_per_threshold(short_scenario, tmp_path):
+    out = tmp_path / "cmp"
+    args = ("compare", short_scenario, "--out", out, *RUN_ARGS, "--reference-n", 150)
+    result = invoke(*args, "--json")
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)
+    assert [r["label"] for r in doc["runs"]] == [
+        "cross-entropy",
+        "naive MC, same budget",
+        "naive MC reference",
+    ]
+    rows = doc["comparison"]
+    assert [r["gamma"] for r in rows] == [0.5, 1.0, 2.0]
+    for row in rows:
+        assert {"variance_ratio", "rare_event_ratio", "p_from"} <= set(row)
+        assert "variance_reduction" not in row
+    assert "plan: " in result.stderr and "590 rollouts in all" in words(result.stderr)
+    tables = words(invoke("report", out, "--failures", 0).stdout)
+    # the runs other than the answer's say why they are not trusted
+    assert tables.count("trust at 1 s: caution (") == 2
+
+
+def test_compare_defaults_finish_in_minutes():
+    options = estimator_options("ce", {}, None, COMPARE_DEFAULTS)
+    budget = get_estimator("ce", **options).budget()
+    reference = inspect.signature(compare).parameters["reference_n"].default
+    assert budget == 20_000 and reference == 50_000
+    assert 2 * budget + reference <= 100_000  # ~3.5 min at 450 rollouts/s
+
+
+def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(
+    short_scenario, tmp_path, monkeypatch
+):
+    out = tmp_path / "run"
+    record = RunDirectory.record
+    calls = []
+
+    def interrupted(self, batch):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        record(self, batch)
+
+    monkeypatch.setattr(RunDirectory, "record", interrupted)
+    result = invoke("run", short_scenario, "--out", out, *RUN_ARGS)
+    assert result.exit_code == 130
+    assert "Traceback" not in result.output and "Aborted" not in result.output
+    (line,) = [ln for ln in result.stderr.splitlines() if "Resume with:" in ln]
+    command = shlex.split(line.split("Resume with: ")[1])
+    assert command[:2] == ["avrisk", "run"]
+    assert command[2] == str(short_scenario) and str(out) in command
+    assert "--n-per-iter" in command and "--gamma-test" in command
+
+    monkeypatch.setattr(RunDirectory, "record", record)
+    resumed = invoke(*command[1:])
+    assert resumed.exit_code == 0, resumed.output
+    assert "resumed: 120 rollouts reused from the earlier session, 100 simulated" in (
+        words(resumed.stderr)
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["timing"]["rollouts_replayed"] == 120
+    finished = invoke(*command[1:])
+    assert "complete already in" in words(finished.stderr)
+    assert "read back, nothing simulated" in words(finished.stderr)

@@ -1,0 +1,60 @@
+import pytest
+
+from avrisk.report.answer import Trust, headline, run_trust, trust_at
+
+
+def summary(method="ce", p=1e-4, ci=(0.5e-4, 1.5e-4), **main):
+    g = {"gamma": 0.1, "p": p, "ci": list(ci), "n_hits": 50, "ess": 40.0}
+    g.update(main)
+    est = {"gamma": 0.1, "p": p, "ci": list(ci), "n_evals": 1000, "by_gamma": [g]}
+    return {"method": method, "estimate": est}
+
+
+def test_the_estimators_own_diagnostics_decide_the_trust():
+    good = {"n_hits": 50, "ess": 40.0, "pareto_k": 0.4}
+    assert trust_at(good, weighted=True) == Trust()
+    assert str(trust_at(good, weighted=True)) == "ok"
+    heavy = trust_at({**good, "pareto_k": 0.9}, weighted=True)
+    assert not heavy.ok and "Pareto k = 0.90 > 0.7" in str(heavy)
+    assert "effective hits" in str(trust_at({**good, "ess": 3.0}, weighted=True))
+    assert "no rollout" in str(trust_at({**good, "n_hits": 0}, weighted=True))
+    # naive Monte Carlo: its hits decide, weights have no tail to speak of
+    assert trust_at({"n_hits": 50, "ess": 50.0}, weighted=False).ok
+    few = trust_at({"n_hits": 4, "ess": 4.0}, weighted=False)
+    assert str(few) == "caution (only 4 hits: relative standard error about 50%)"
+    failed = trust_at({**good, "n_failed": 3}, weighted=True)
+    assert failed.reasons == (
+        "3 rollouts failed to evaluate: p counts them safe, the interval reaches "
+        "counting them dangerous",
+    )
+    # an older summary without pareto_k is read on its effective hits
+    assert trust_at({"n_hits": 50, "ess": 40.0, "pareto_k": None}, True).ok
+
+
+def test_the_headline_is_the_trusted_run_with_the_narrowest_interval():
+    ce = summary(ci=(0.9e-4, 1.1e-4), pareto_k=0.9)  # narrowest, but caution
+    naive = summary("naive", ci=(0.2e-4, 3e-4))
+    reference = summary("naive", p=1.2e-4, ci=(1e-4, 1.4e-4))
+    runs = [("ce", ce), ("naive", naive), ("reference", reference)]
+    lead = headline(runs, horizon_s=10.0)
+    assert lead.label == "reference" and lead.trust.ok and lead.chosen_from == 3
+    # when no run is trusted, the run under test, with its reasons
+    lead = headline([("ce", ce)], horizon_s=10.0)
+    assert lead.label == "ce" and not lead.trust.ok
+    assert not run_trust(ce).ok
+
+
+def test_the_headline_states_its_time_base_and_per_hour_approximation():
+    lead = headline([("cross-entropy", summary(p=2e-4))], horizon_s=10.0)
+    assert lead.sentence() == (
+        "P(min TTC <= 0.1 s) per 10-s rollout from P0 = 0.0002 (95% CI 5e-05 to "
+        "0.00015), method cross-entropy, 1,000 rollouts; trust: ok"
+    )
+    assert lead.per_hour == pytest.approx(2e-4 * 360)
+    assert "about 0.072 events" in lead.time_base()
+    assert "approximation" in lead.time_base()
+    doc = lead.to_dict()
+    assert doc["trust"] == "ok" and doc["per_hour_approx"] == pytest.approx(0.072)
+    unknown = headline([("ce", summary())], horizon_s=None)
+    assert unknown.event == "P(min TTC <= 0.1 s) per rollout from P0"
+    assert unknown.per_hour is None and unknown.to_dict()["per_hour_approx"] is None
