@@ -10,9 +10,10 @@ from avrisk.learning.closed_loop import (
     closed_loop_loss,
     differentiable_replay,
 )
-from avrisk.learning.replay import CarFollowingWindows, replay
+from avrisk.learning.replay import replay
 from avrisk.learning.train_config import ClosedLoopConfig
 from avrisk.sim import Road
+from tests.learning.recorded_windows import recorded_windows
 
 
 @pytest.fixture(autouse=True)
@@ -30,18 +31,7 @@ def queue_windows(n=6, steps=40, gap0=6.0):
     v_l = np.maximum(8.0 - decel * t, 0.0)
     v_f = np.maximum(8.0 - 0.8 * decel * t, 0.0)
     gap = gap0 + np.cumsum(np.c_[np.zeros(n), (v_l - v_f)[:, 1:]] * 0.1, axis=1)
-    return CarFollowingWindows(
-        v_f=v_f,
-        v_l=v_l,
-        gap=gap,
-        offset=np.zeros((n, steps + 1)),
-        has_lateral=np.zeros(n, bool),
-        len_f=np.full(n, 4.5),
-        len_l=np.full(n, 4.5),
-        width_f=np.full(n, 1.9),
-        lane=np.full(n, 2),
-        heading=np.zeros(n),
-    )
+    return recorded_windows(v_f, v_l, gap)
 
 
 def test_the_differentiable_replay_is_the_replay_of_the_simulator_with_gradient():

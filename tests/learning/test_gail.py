@@ -15,7 +15,7 @@ from avrisk.learning.gail import (
     train_discriminator,
     translate_prior,
 )
-from avrisk.learning.replay import CarFollowingWindows
+from tests.learning.recorded_windows import recorded_windows
 
 STEER_ROWS = [1, 3]
 
@@ -114,17 +114,8 @@ def test_ppo_moves_the_mean_acceleration_towards_a_toy_reward():
 def windows(n=4, steps=20):
     t = np.arange(steps + 1) * 0.1
     v_l = np.stack([10 + 2 * np.sin(t + k) for k in range(n)])
-    return CarFollowingWindows(
-        v_f=np.full((n, steps + 1), 10.0),
-        v_l=v_l,
-        gap=np.full((n, steps + 1), 15.0),
-        offset=np.zeros((n, steps + 1)),
-        has_lateral=np.zeros(n, bool),
-        len_f=np.full(n, 4.5),
-        len_l=np.full(n, 4.5),
-        width_f=np.full(n, 1.9),
-        lane=np.full(n, 2),
-        heading=np.zeros(n),
+    return recorded_windows(
+        np.full((n, steps + 1), 10.0), v_l, np.full((n, steps + 1), 15.0)
     )
 
 

@@ -5,7 +5,6 @@ from avrisk.agents.idm import IDMDriver, IDMParams
 from avrisk.learning.dagger import ExpertLabeller
 from avrisk.learning.demonstrations import SOURCE_IDM
 from avrisk.learning.replay import (
-    CarFollowingWindows,
     replay,
     replay_distances,
 )
@@ -13,22 +12,17 @@ from avrisk.learning.simulated_demonstrations import NO_LANE_CHANGE
 from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 from avrisk.sim.interfaces import Action
+from tests.learning.recorded_windows import recorded_windows
 
 
 def windows(n=3, steps=30):
     t = np.arange(steps + 1) * 0.1
     v_l = np.stack([10 + np.sin(t + k) for k in range(n)])
-    return CarFollowingWindows(
-        v_f=np.full((n, steps + 1), 10.0),
-        v_l=v_l,
-        gap=np.full((n, steps + 1), 20.0),
-        offset=np.zeros((n, steps + 1)),
+    return recorded_windows(
+        np.full((n, steps + 1), 10.0),
+        v_l,
+        np.full((n, steps + 1), 20.0),
         has_lateral=np.array([False, True, True][:n]),
-        len_f=np.full(n, 4.5),
-        len_l=np.full(n, 4.5),
-        width_f=np.full(n, 1.9),
-        lane=np.full(n, 2),
-        heading=np.zeros(n),
     )
 
 
