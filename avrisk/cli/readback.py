@@ -78,7 +78,9 @@ def read_config(run_dir: Path) -> dict[str, Any]:
 Number = float  # NaN and infinities are refused by parse_json already
 
 
-class _Threshold(BaseModel):
+class _GammaFigures(BaseModel):
+    """What a summary records at one threshold, as an estimate or a test threshold."""
+
     model_config = ConfigDict(extra="allow")
 
     gamma: Number
@@ -86,17 +88,13 @@ class _Threshold(BaseModel):
     stderr: Number = Field(ge=0.0)
     ci: tuple[Number, Number]
     n_hits: int = Field(ge=0)
+
+
+class _Threshold(_GammaFigures):
     ess: Number | None = None
 
 
-class _Estimate(BaseModel):
-    model_config = ConfigDict(extra="allow")
-
-    gamma: Number
-    p: Number = Field(ge=0.0)
-    stderr: Number = Field(ge=0.0)
-    ci: tuple[Number, Number]
-    n_hits: int = Field(ge=0)
+class _Estimate(_GammaFigures):
     n_evals: int = Field(ge=0)
     by_gamma: list[_Threshold] = Field(min_length=1)
 
