@@ -13,14 +13,12 @@ import os
 import shutil
 import subprocess
 import sys
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-import yaml
 from typer.testing import CliRunner
 
 import avrisk
@@ -28,6 +26,7 @@ from avrisk.cli.app import app
 from avrisk.pipeline import RunDirectoryError, RunSettings
 from avrisk.pipeline.lock import run_lock
 from avrisk.pipeline.store import LOCK_FILE
+from tests.scenario_files import shortened_scenario
 
 ROOT = os.geteuid() == 0
 
@@ -54,13 +53,8 @@ def one_error(result, *needles):
 @pytest.fixture(scope="module")
 def short_scenario(tmp_path_factory):
     """highway_idm with a 1.5 s horizon: runs of seconds."""
-    text = resources.files("avrisk.data.scenarios").joinpath("highway_idm.yaml")
-    spec = yaml.safe_load(text.read_text())
-    spec["name"] = "highway_short"
-    spec["simulation"]["horizon"] = 1.5
-    path = tmp_path_factory.mktemp("scenario") / "short.yaml"
-    path.write_text(yaml.safe_dump(spec))
-    return path
+    directory = tmp_path_factory.mktemp("scenario")
+    return shortened_scenario(directory, 1.5, name="highway_short")
 
 
 #: A run of three chunks (two CE iterations and the final stage): seconds.

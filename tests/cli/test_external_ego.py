@@ -11,13 +11,11 @@ import shutil
 import socket
 import subprocess
 import sys
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-import yaml
 from typer.testing import CliRunner
 
 pytest.importorskip("zmq")
@@ -25,6 +23,7 @@ pytest.importorskip("zmq")
 from avrisk.cli.app import app  # noqa: E402
 from avrisk.pipeline.repeatability import check_repeatable  # noqa: E402
 from tests.cli.ego_servers import FaultyServer, in_thread  # noqa: E402
+from tests.scenario_files import shortened_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 ARGS = ("--method", "naive", "--n-final", 200, "--batch-size", 50, "--failures", 0)
@@ -38,14 +37,7 @@ def free_address():
 
 
 def scenario(tmp_path, ego, name="external"):
-    text = resources.files("avrisk.data.scenarios").joinpath("highway_idm.yaml")
-    spec = yaml.safe_load(text.read_text())
-    spec["name"] = name
-    spec["simulation"]["horizon"] = 2.0
-    spec["ego"] = ego
-    path = tmp_path / f"{name}.yaml"
-    path.write_text(yaml.safe_dump(spec))
-    return path
+    return shortened_scenario(tmp_path, 2.0, file=f"{name}.yaml", name=name, ego=ego)
 
 
 def external(tmp_path, address):

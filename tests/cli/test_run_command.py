@@ -1,12 +1,11 @@
 import json
-from importlib import resources
 
 import pyarrow.parquet as pq
 import pytest
-import yaml
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
+from tests.scenario_files import shortened_scenario
 
 SUMMARY_KEYS = {"schema", "method", "settings", "estimate", "timing", "versions"}
 
@@ -14,13 +13,8 @@ SUMMARY_KEYS = {"schema", "method", "settings", "estimate", "timing", "versions"
 @pytest.fixture(scope="module")
 def short_scenario(tmp_path_factory):
     """The bundled scenario with a 1.5 s horizon, to keep CI fast."""
-    text = resources.files("avrisk.data.scenarios").joinpath("highway_idm.yaml")
-    spec = yaml.safe_load(text.read_text())
-    spec["name"] = "highway_short"
-    spec["simulation"]["horizon"] = 1.5
-    path = tmp_path_factory.mktemp("scenario") / "short.yaml"
-    path.write_text(yaml.safe_dump(spec))
-    return path
+    directory = tmp_path_factory.mktemp("scenario")
+    return shortened_scenario(directory, 1.5, name="highway_short")
 
 
 def invoke(*args):

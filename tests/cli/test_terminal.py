@@ -3,27 +3,21 @@
 import inspect
 import json
 import shlex
-from importlib import resources
 
 import pytest
-import yaml
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
 from avrisk.cli.run import COMPARE_DEFAULTS, compare, estimator_options
 from avrisk.pipeline.store import RunDirectory
 from avrisk.rare import get_estimator
+from tests.scenario_files import shortened_scenario
 
 
 @pytest.fixture(scope="module")
 def short_scenario(tmp_path_factory):
     """``highway_idm`` cut to 1.5 s, to keep the tests fast."""
-    text = resources.files("avrisk.data.scenarios").joinpath("highway_idm.yaml")
-    spec = yaml.safe_load(text.read_text())
-    spec["simulation"]["horizon"] = 1.5
-    path = tmp_path_factory.mktemp("scenario") / "short.yaml"
-    path.write_text(yaml.safe_dump(spec))
-    return path
+    return shortened_scenario(tmp_path_factory.mktemp("scenario"), 1.5)
 
 
 RUN_ARGS = ("--rho", "0.1", "--n-per-iter", "60", "--n-iter", "2", "--n-final", "100")

@@ -15,6 +15,7 @@ from typer.testing import CliRunner
 import avrisk.registry
 from avrisk.assembly import FAILURES_FILE, read_failure_traces
 from avrisk.cli.app import app
+from tests.scenario_files import shortened_scenario
 
 USER_EGO = "tests.user_components:HoldSpeedEgo"
 ARGS = ("--method", "naive", "--n-final", 300, "--gamma", 1.5, "--failures", 2)
@@ -22,14 +23,13 @@ ARGS = ("--method", "naive", "--n-final", 300, "--gamma", 1.5, "--failures", 2)
 
 @pytest.fixture(scope="module")
 def user_scenario(tmp_path_factory):
-    text = resources.files("avrisk.data.scenarios").joinpath("highway_idm.yaml")
-    spec = yaml.safe_load(text.read_text())
-    spec["name"] = "user_ego"
-    spec["simulation"]["horizon"] = 3.0
-    spec["ego"] = {"policy": USER_EGO, "params": {"speed": 30.0}}
-    path = tmp_path_factory.mktemp("scenario") / "user_ego.yaml"
-    path.write_text(yaml.safe_dump(spec))
-    return path
+    return shortened_scenario(
+        tmp_path_factory.mktemp("scenario"),
+        3.0,
+        file="user_ego.yaml",
+        name="user_ego",
+        ego={"policy": USER_EGO, "params": {"speed": 30.0}},
+    )
 
 
 def invoke(*args):

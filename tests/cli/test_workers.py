@@ -2,15 +2,14 @@
 
 import json
 import sys
-from importlib import resources
 
 import pyarrow.parquet as pq
 import pytest
-import yaml
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
 from avrisk.rare.parallel import EVALUATED_BY
+from tests.scenario_files import shortened_scenario
 
 #: Two chunks (8192 + 8 rollouts) so that two workers share the stage.
 NAIVE_ARGS = ("--method", "naive", "--n-final", 8200, "--seed", 4, "--failures", 1)
@@ -19,12 +18,8 @@ NAIVE_ARGS = ("--method", "naive", "--n-final", 8200, "--seed", 4, "--failures",
 @pytest.fixture(scope="module")
 def tiny_scenario(tmp_path_factory):
     """The bundled highway_idm with a 0.5 s horizon (worker start-up dominates)."""
-    text = resources.files("avrisk.data.scenarios").joinpath("highway_idm.yaml")
-    spec = yaml.safe_load(text.read_text())
-    spec["simulation"]["horizon"] = 0.5
-    path = tmp_path_factory.mktemp("scenario") / "tiny.yaml"
-    path.write_text(yaml.safe_dump(spec))
-    return path
+    directory = tmp_path_factory.mktemp("scenario")
+    return shortened_scenario(directory, 0.5, file="tiny.yaml")
 
 
 def invoke(*args):
