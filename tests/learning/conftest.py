@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+import torch
 
 from avrisk.learning.ngsim_samples import LateralPairs
 
@@ -22,3 +23,12 @@ def lateral_stub():
         return LateralPairs(**cols)
 
     return make
+
+
+@pytest.fixture
+def one_thread():
+    """torch on one thread during the test (bit-reproducible CPU kernels)."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)

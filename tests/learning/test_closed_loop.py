@@ -15,13 +15,7 @@ from avrisk.learning.train_config import ClosedLoopConfig
 from avrisk.sim import Road
 from tests.learning.recorded_windows import recorded_windows
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 def queue_windows(n=6, steps=40, gap0=6.0):

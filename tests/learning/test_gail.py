@@ -17,15 +17,9 @@ from avrisk.learning.gail import (
 )
 from tests.learning.recorded_windows import recorded_windows
 
+pytestmark = pytest.mark.usefixtures("one_thread")
+
 STEER_ROWS = [1, 3]
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    previous = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(previous)
 
 
 def test_discriminator_separates_shifted_accelerations_and_not_identical_ones():
