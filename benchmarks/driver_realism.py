@@ -219,7 +219,7 @@ def part_a(
             "offroad": res.offroad,
         }
         v, a, j, a_full, ok = kinematics(out["v"], out["alive"])
-        lane_pos = (res.offset + (win.lane + 0.5)[:, None] * road.lane_width) / (
+        lane_pos = (res.offset + road.lane_center_y(win.lane)[:, None]) / (
             road.lane_width
         )
         lat = win.has_lateral

@@ -103,7 +103,7 @@ def differentiable_replay(
     masks = sim.controlled(actors, state.n_vehicles)
     xi = pack_xi(net.last.weight, net.last.bias).expand(len(windows), -1)
     carry, _ = sim.start(state, actors, seeds, [xi])
-    centre = torch.as_tensor((windows.lane + 0.5) * road.lane_width)
+    centre = torch.as_tensor(road.lane_center_y(windows.lane))
     half_lengths = torch.as_tensor(0.5 * (windows.len_f + windows.len_l))
     half_widths = torch.as_tensor(0.5 * windows.width_f + 0.5 * DEFAULT_WIDTH)
     v, gap, offset, alive, in_line = [], [], [], [], []

@@ -260,7 +260,7 @@ def replay_setup(
     """
     n = len(windows)
     w = windows
-    centre = (w.lane + 0.5) * road.lane_width
+    centre = road.lane_center_y(w.lane)
     x_l = 0.5 * w.len_f + w.gap[:, 0] + 0.5 * w.len_l
     zeros = np.zeros(n)
     follower = [
@@ -302,7 +302,7 @@ def replay(
     seeds = torch.as_tensor(seed * 1_000_003 + np.arange(len(w)), dtype=torch.int64)
     res = sim.run(state, [replay_leader(follower_model)], seeds, record_trace=True)
     tr = res.trace
-    centre = (w.lane + 0.5) * road.lane_width
+    centre = road.lane_center_y(w.lane)
     gap = (tr.x[..., 1] - tr.x[..., 0]).double().numpy() - 0.5 * (w.len_f + w.len_l)[
         :, None
     ]
