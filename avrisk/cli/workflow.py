@@ -40,6 +40,7 @@ from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import WorkerError
+from avrisk.rare.splitting import SplittingError
 from avrisk.report.animate import animate_rollouts, animate_samples
 from avrisk.report.html import write_report
 from avrisk.scenario import ScenarioSpec, ScenarioSpecError, load_spec
@@ -54,6 +55,7 @@ EXPECTED = (
     ProvenanceMismatchError,
     NotRepeatableError,
     WorkerError,
+    SplittingError,
 )
 #: Sub-directories of a comparison besides the tested method's own.
 NAIVE_PART, REFERENCE_PART = "naive", "reference"

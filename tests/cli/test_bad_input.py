@@ -144,6 +144,19 @@ def test_a_meaningless_count_or_limit_is_refused_before_any_work(
     assert not out.exists()
 
 
+def test_splitting_whose_levels_cannot_reach_gamma_is_one_line(
+    short_scenario, tmp_path
+):
+    """Levels that stall above gamma end the run with the estimator's message."""
+    out = tmp_path / "out"
+    result = invoke(
+        "run", short_scenario, "--out", out, "--method", "splitting",
+        "--set", "n_particles=40", "--set", "max_levels=1", "--gamma", 0.01,
+        "--failures", 0,
+    )  # fmt: skip
+    one_error(result, "after max_levels=1 levels", "raise max_levels")
+
+
 # ---------------------------------------------------------------- outputs
 FOLDER_COMMANDS = {
     "run": lambda out: ("run", "highway_idm", "--out", out, "--n-final", 10),
