@@ -26,7 +26,10 @@ calibration scenes only):
 Evaluation (fresh scenes, another seed): lane changes per vehicle-hour with
 their exact Poisson interval against the *held-out* US-101 vehicles (target:
 within +-30%) and IDM+MOBIL (same scenes), duration and peak lateral speed,
-and collisions per vehicle-hour with the layer on and off.
+and collisions per vehicle-hour with the layer on and off; then the bundled
+``highway_default`` against ``highway_lane_changes`` on the same draws of ``X``
+and seeds (how many environment vehicles change lanes in a rollout, and the
+ego's crash rate and safety measure).
 
 Usage::
 
@@ -312,6 +315,37 @@ def table(human: LaneChangeStatistics, results: dict) -> str:
     return "\n".join(lines)
 
 
+def bundled(n: int, seed: int) -> str:
+    """``highway_default`` against ``highway_lane_changes``: same draws of X, seeds."""
+    from avrisk.assembly.builder import ScenarioSimulator, base_distribution
+    from avrisk.rare.problem import chunk_rng, sample_seeds
+    from avrisk.scenario import load_spec
+
+    lines = [
+        f"| scenario ({n} draws of X, seed {seed}) | environment vehicles ending in "
+        "another lane | ego crash rate | P(f <= 0.3 s) | P(f <= 1 s) | f p10 [s] | "
+        "rollouts whose f differs from highway_default's |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    reference = None
+    for name in ("highway_default", "highway_lane_changes"):
+        spec = load_spec(name)
+        x = base_distribution(spec).sample(n, chunk_rng(seed, 0, 0))
+        seeds = sample_seeds(seed, 0, np.arange(n))
+        ss = ScenarioSimulator(spec)
+        res = ss.rollout(x, seeds, record_trace=True)
+        lanes = ss.road.lane_index(res.trace.y)[:, :, 1:]
+        moved = float((lanes[:, -1] != lanes[:, 0]).float().mean())
+        f = res.f.numpy()
+        reference = f if reference is None else reference
+        lines.append(
+            f"| {name} | {moved:.3f} | {float(res.crash.float().mean()):.4f} | "
+            f"{np.mean(f <= 0.3):.4f} | {np.mean(f <= 1.0):.4f} | "
+            f"{np.percentile(f, 10):.2f} | {np.mean(f != reference):.4f} |"
+        )
+    return "\n".join(lines)
+
+
 def main() -> None:
     """Calibrate (optionally), evaluate, print the tables, write the JSON."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -320,6 +354,12 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=2024)
     parser.add_argument("--calibrate", action="store_true")
     parser.add_argument("--json", default=None, help="write the figures here")
+    parser.add_argument(
+        "--scenario-rollouts",
+        type=int,
+        default=2000,
+        help="rollouts of highway_default and highway_lane_changes (0 skips)",
+    )
     args = parser.parse_args()
     torch.manual_seed(args.seed)
     t0 = time.perf_counter()
@@ -349,6 +389,9 @@ def main() -> None:
     )
     print()
     print(table(held_out, results))
+    if args.scenario_rollouts > 0:
+        print()
+        print(bundled(args.scenario_rollouts, args.seed + 2))
     print(
         f"\n_{time.perf_counter() - t0:.0f} s, torch {torch.__version__}, "
         f"{torch.get_num_threads()} threads._"

@@ -304,19 +304,19 @@ class LaneChangingDriver:
         lead_gap, lead_close, back_gap, back_close = target_lane_gaps(
             obs, query, road.lane_width
         )
-        exists = torch.stack([lane + 1 < road.n_lanes, lane >= 1], dim=-1)
+        exists = torch.stack([lane >= 0, lane + 1 < road.n_lanes, lane >= 1], dim=-1)
 
         # 1. Desire: clock E ~ Exp(1) against rate dt; side by room ahead.
         clock = 0.5 * (z[:, 0, :, 0] * z[:, 0, :, 0] + z[:, 0, :, 1] * z[:, 0, :, 1])
         arrives = keeping & (state.pending == 0) & (clock < p.rate * obs.dt)
         room = torch.clamp_max(lead_gap, p.gap_cap)
-        gain = torch.where(exists, room[..., 1:] - room[..., :1], -math.inf)
+        gain = torch.where(exists[..., 1:], room[..., 1:] - room[..., :1], -math.inf)
         coin_left = z[:, 1, :, 0] > 0
         left = (gain[..., 0] > gain[..., 1]) | (
             (gain[..., 0] == gain[..., 1]) & coin_left
         )
         side = torch.where(left, 1, -1)
-        side = torch.where(exists.any(-1), side, 0)
+        side = torch.where(exists[..., 1:].any(-1), side, 0)
         pending = torch.where(arrives, side, state.pending)
         waited = torch.where(arrives, 0, state.waited + 1)
 
@@ -329,7 +329,7 @@ class LaneChangingDriver:
         safe = _acceptable(at(lead_gap), at(lead_close), p) & _acceptable(
             at(back_gap), at(back_close), p
         )
-        go = keeping & (pending != 0) & safe
+        go = keeping & (pending != 0) & safe & at(exists)
         target = torch.where(go, lane + pending, target)
         changing = changing | go
         lapsed = waited.to(dtype) * obs.dt > p.patience
