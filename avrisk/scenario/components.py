@@ -252,8 +252,8 @@ class LaneChangeSpec(SpecModel):
     offset. A setting left out takes the driver's default
     (:class:`~avrisk.agents.drivers.lane_change.LaneChangeParams`: the rate
     fitted in closed loop to the US-101 training vehicles, the gap thresholds
-    chosen in closed loop for no lane-change collisions; BENCHMARKS.md,
-    "Lane changes").
+    chosen in closed loop for the fewest lane-change collisions that keep the
+    rate; BENCHMARKS.md, "Lane changes of the learned drivers").
     """
 
     rate_per_hour: float | None = _unset_field(
