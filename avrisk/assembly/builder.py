@@ -44,6 +44,7 @@ from avrisk.agents import (
     get_policy,
 )
 from avrisk.agents.drivers import XI_DIM, DriverNet, load_driver_net, load_xi_prior
+from avrisk.agents.drivers.lane_change import LaneChangeParams, LaneChangingDriver
 from avrisk.rare import Product
 from avrisk.safety import get_safety_measure
 from avrisk.scenario import ParamLayout, ScenarioParams, build_base_distribution
@@ -244,6 +245,32 @@ def driver_params(
     return IDMParams(**fields)
 
 
+def learned_drivers(
+    net: DriverNet, controlled: torch.Tensor, spec: ScenarioSpec, road: Road
+) -> LearnedDriver | LaneChangingDriver:
+    """The actor of a scenario's learned drivers, changing lanes if the spec says so.
+
+    Parameters
+    ----------
+    net : DriverNet
+    controlled : Tensor of bool, shape (A,)
+        The learned drivers' slots.
+    spec : ScenarioSpec
+        Its ``learned_drivers`` section: sampled or mean actions, lane changes.
+    road : Road
+
+    Returns
+    -------
+    LearnedDriver or LaneChangingDriver
+    """
+    settings = spec.learned_drivers
+    driver = LearnedDriver(net, controlled=controlled, stochastic=settings.stochastic)
+    if settings.lane_changes is None:
+        return driver
+    params = LaneChangeParams(**settings.lane_changes.settings())
+    return LaneChangingDriver(driver, road, params)
+
+
 class ScenarioSimulator:
     """A scenario bound to a simulator: flat ``X`` and seeds in, rollouts out.
 
@@ -319,11 +346,7 @@ class ScenarioSimulator:
             load_driver_net().to(self.device) if needs_net else None
         )
         self._learned_driver = (
-            LearnedDriver(
-                self.net,
-                controlled=self._learned,
-                stochastic=spec.learned_drivers.stochastic,
-            )
+            learned_drivers(self.net, self._learned, spec, self.road)
             if self.net is not None and bool(self._learned.any())
             else None
         )

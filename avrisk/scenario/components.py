@@ -232,6 +232,58 @@ class SafetySpec(SpecModel):
     )
 
 
+def _is_none(value: Any) -> bool:
+    """Whether an optional setting was left out (the dump then leaves it out)."""
+    return value is None
+
+
+def _unset_field(description: str, **bounds: float) -> Any:
+    """An optional number: None (left out of the dump) takes the model's default."""
+    return Field(None, exclude_if=_is_none, description=description, **bounds)
+
+
+class LaneChangeSpec(SpecModel):
+    """Lane changes of the learned drivers (:mod:`avrisk.agents.drivers.lane_change`).
+
+    A desire to change arrives at a constant hazard ``rate``; it is carried out
+    once the target lane's vehicles ahead and behind leave at least
+    ``min_gap`` and ``min_ttc``, or lapses after ``patience``; the driver
+    network then steers to the target lane, seeing at most ``offset_clip`` of
+    offset. A setting left out takes the driver's default
+    (:class:`~avrisk.agents.drivers.lane_change.LaneChangeParams`: the rate
+    fitted in closed loop to the US-101 training vehicles, the gap thresholds
+    chosen in closed loop for the fewest lane-change collisions that keep the
+    rate; BENCHMARKS.md, "Lane changes of the learned drivers").
+    """
+
+    rate_per_hour: float | None = _unset_field(
+        "Hazard of a lane-change desire [1/vehicle-h].", ge=0.0, le=3600.0
+    )
+    min_gap: float | None = _unset_field(
+        "Least bumper gap to the target lane's vehicles ahead and behind [m].",
+        ge=0.0,
+        le=100.0,
+    )
+    min_ttc: float | None = _unset_field(
+        "Least time-to-collision with them, when closing [s].", ge=0.0, le=60.0
+    )
+    patience: float | None = _unset_field(
+        "A desire not carried out within this long lapses [s].", ge=0.0, le=600.0
+    )
+    offset_clip: float | None = _unset_field(
+        "Largest offset from the target lane's centre the network sees [m].",
+        gt=0.0,
+        le=10.0,
+    )
+
+    def settings(self) -> dict[str, float]:
+        """The settings given, in the driver's units (``rate`` [1/s])."""
+        given = self.model_dump(exclude_none=True)
+        if "rate_per_hour" in given:
+            given["rate"] = given.pop("rate_per_hour") / 3600.0
+        return given
+
+
 class LearnedDriversSpec(SpecModel):
     """How the learned environment drivers act and how CE may tilt their ``xi``.
 
@@ -249,6 +301,9 @@ class LearnedDriversSpec(SpecModel):
     deviations ``sqrt(diag Sigma0)`` (``prior_sd``), which treats every
     coordinate alike whatever its spread. 0 keeps ``xi ~ P0`` (CE does not
     tilt it; its likelihood ratio is 1).
+
+    ``lane_changes`` (:class:`LaneChangeSpec`) lets them change lanes; left
+    out, they keep their lanes (and the spec dumps as before the option).
     """
 
     actions: Literal["sampled", "mean"] = Field(
@@ -267,6 +322,12 @@ class LearnedDriversSpec(SpecModel):
         "absolute",
         description="Unit of xi_search: 'absolute' (units of xi) or 'prior_sd' "
         "(prior standard deviations of each coordinate).",
+    )
+    lane_changes: LaneChangeSpec | None = Field(
+        None,
+        exclude_if=_is_none,
+        description="Lane changes of the learned drivers; left out: they keep "
+        "their lanes ({} turns them on with the defaults).",
     )
 
     @property

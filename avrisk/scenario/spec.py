@@ -32,9 +32,12 @@ built (:mod:`avrisk.scenario.components`)::
 A scenario with any ``learned`` driver adds the network's last layer ``xi``
 (one draw per rollout, shared by all its learned drivers) to the sample ``X``;
 its ``learned_drivers`` section (:class:`LearnedDriversSpec`) says whether they
-sample their actions and how far the cross-entropy method may move ``xi``::
+sample their actions, how far the cross-entropy method may move ``xi`` and
+whether they change lanes
+(:class:`~avrisk.scenario.components.LaneChangeSpec`; off when left out)::
 
-    learned_drivers: {actions: mean, xi_search: 0.0, xi_search_unit: prior_sd}
+    learned_drivers: {actions: mean, xi_search: 0.0, xi_search_unit: prior_sd,
+                      lane_changes: {min_gap: 4.0}}
 
 Unknown keys are rejected and every error names the field, the allowed range
 and the value given. This module holds the whole scenario

@@ -4,16 +4,19 @@ import numpy as np
 import pytest
 import torch
 
-from avrisk.agents.drivers import XI_DIM, LearnedEgoPolicy, load_xi_prior
+from avrisk.agents.drivers import XI_DIM, LearnedDriver, LearnedEgoPolicy, load_xi_prior
+from avrisk.agents.drivers.lane_change import LaneChangeParams, LaneChangingDriver
 from avrisk.assembly.builder import ScenarioSimulator, base_distribution, param_layout
 from avrisk.rare import FixedCovNormal, ScaledBeta
 from avrisk.rare.problem import chunk_rng, sample_seeds
 from avrisk.scenario import (
     ParamLayout,
+    ScenarioSpecError,
     build_base_distribution,
     load_spec,
     spec_from_dict,
 )
+from avrisk.scenario.components import LaneChangeSpec
 
 
 def shortened(name, horizon):
@@ -195,3 +198,48 @@ def test_the_lidar_ego_drives_on_its_mean_action_whatever_the_seed(models):
     assert torch.equal(first[:, 0, :, 0], first[:, 1, :, 0])
     sim = ScenarioSimulator(spec)
     assert isinstance(sim.ego_policy, LearnedEgoPolicy)
+
+
+def with_lane_changes(spec, **settings):
+    """``spec`` with its learned drivers changing lanes (``settings`` as in YAML)."""
+    drivers = spec.learned_drivers.model_copy(
+        update={"lane_changes": LaneChangeSpec(**settings)}
+    )
+    return spec.model_copy(update={"learned_drivers": drivers})
+
+
+def test_lane_changes_are_off_unless_the_spec_turns_them_on():
+    default = load_spec("highway_default")
+    assert default.learned_drivers.lane_changes is None
+    assert "lane_changes" not in default.model_dump(mode="json")["learned_drivers"]
+    assert isinstance(ScenarioSimulator(default)._learned_driver, LearnedDriver)
+    bundled = load_spec("highway_lane_changes")
+    assert bundled.model_dump(mode="json")["learned_drivers"]["lane_changes"] == {}
+    actor = ScenarioSimulator(bundled)._learned_driver
+    assert isinstance(actor, LaneChangingDriver)
+    assert actor.params == LaneChangeParams()
+    tuned = with_lane_changes(default, rate_per_hour=36.0, min_gap=7.0)
+    params = ScenarioSimulator(tuned)._learned_driver.params
+    assert (params.rate, params.min_gap) == (0.01, 7.0)
+    assert params.min_ttc == LaneChangeParams().min_ttc
+
+
+@pytest.mark.parametrize(
+    ("setting", "message"),
+    [({"min_gap": -1.0}, "min_gap"), ({"rate_per_hour": 1e5}, "rate_per_hour")],
+)
+def test_lane_change_settings_out_of_range_are_rejected(setting, message):
+    data = load_spec("highway_lane_changes").model_dump(mode="json")
+    data["learned_drivers"]["lane_changes"] = setting
+    with pytest.raises(ScenarioSpecError, match=message):
+        spec_from_dict(data)
+
+
+def test_a_lane_changing_scenario_depends_only_on_its_row_and_seed():
+    spec = with_lane_changes(shortened("highway_default", 3.0), rate_per_hour=3600.0)
+    x, seeds = sample(spec, 4)
+    together, _ = frames(spec, x, seeds)
+    alone, _ = frames(spec, x[2:3], seeds[2:3])
+    assert torch.equal(together[:, 2], alone[:, 0])
+    plain, _ = frames(shortened("highway_default", 3.0), x, seeds)
+    assert not torch.equal(together[1], plain[1]), "no lane change: the test is void"

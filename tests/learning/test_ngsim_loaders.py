@@ -1,6 +1,5 @@
 import dataclasses
 import gzip
-import os
 from pathlib import Path
 
 import numpy as np
@@ -26,10 +25,7 @@ from avrisk.learning.ngsim_files import (
 )
 from avrisk.learning.ngsim_packed import DECIMALS_KEY, EXCEPTIONS_SUFFIX
 from avrisk.learning.ngsim_samples import FT, CarFollowingPairs, episode_bounds
-
-#: The original NGSIM files (see their SOURCE.md): on the project's machines
-#: only, not in CI.
-ORIGINAL_DIR = Path(os.environ.get(NGSIM_DIR_ENV) or "/work/shared/data/ngsim")
+from tests.ngsim_originals import original_file
 
 I80_HEADER = (
     "pair_id,period,follower_id,leader_id,lane_id,split,in_manifest,source_file,t,"
@@ -219,17 +215,6 @@ def test_the_shipped_ngsim_files_load_with_plausible_si_values(monkeypatch):
     lat = load_i80_lateral()
     assert len(lat) == 68_339 and np.unique(lat.pair_id).size == 142
     assert set(np.unique(lat.lane)) <= {1, 2, 3, 4, 5, 6}
-
-
-def original_file(name):
-    """A file of :data:`ORIGINAL_DIR`; skips the test where it is absent."""
-    path = ORIGINAL_DIR / name
-    if not path.is_file():
-        pytest.skip(
-            f"original NGSIM file {path} absent (only on the project's machines; "
-            f"set ${NGSIM_DIR_ENV} to the folder holding it)"
-        )
-    return path
 
 
 @pytest.mark.parametrize(

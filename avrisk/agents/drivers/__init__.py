@@ -6,6 +6,8 @@
   ``xi`` in one batched pass;
 * :mod:`~avrisk.agents.drivers.driver` -- :class:`LearnedDriver` (environment)
   and :class:`LearnedEgoPolicy` (registered as ``"lidar_imitation"``);
+* :mod:`~avrisk.agents.drivers.lane_change` -- :class:`LaneChangingDriver`, a
+  lane-change intention (hazard, gap acceptance) on top of a learned driver;
 * :mod:`~avrisk.agents.drivers.store` -- the shipped weights and
   ``xi ~ N(mu0, Sigma0)``.
 
@@ -19,6 +21,7 @@ from avrisk.agents.drivers.features import (
     assemble_features,
     features_from_observation,
 )
+from avrisk.agents.drivers.lane_change import LaneChangeParams, LaneChangingDriver
 from avrisk.agents.drivers.network import ActionDistribution, DriverNet
 from avrisk.agents.drivers.store import XiPrior, load_driver_net, load_xi_prior
 from avrisk.agents.drivers.xi import XI_DIM, pack_xi, unpack_xi
@@ -29,6 +32,8 @@ __all__ = [
     "XI_DIM",
     "ActionDistribution",
     "DriverNet",
+    "LaneChangeParams",
+    "LaneChangingDriver",
     "LearnedDriver",
     "LearnedEgoPolicy",
     "XiPrior",
