@@ -212,13 +212,13 @@ class _Batch:
     def observe(self) -> np.ndarray:
         """The ego's flat observation of the carried state, (B, n) float32."""
         obs = self.sim.simulator.observe(
-            self.carry.state, torch.as_tensor(self.seeds), self._t_tensor()
+            self.carry.state, self._on_device(self.seeds), self._on_device(self.t)
         )
         return flat_observation(obs, self.sim.config.n_lidar_beams)
 
-    def _t_tensor(self) -> torch.Tensor:
-        """Every rollout's step index (B,), int64 on the simulator's device."""
-        return torch.as_tensor(self.t, device=self.sim.device)
+    def _on_device(self, per_row: np.ndarray) -> torch.Tensor:
+        """Rollouts' seeds or step indices (B,), int64 on the simulator's device."""
+        return torch.as_tensor(per_row, device=self.sim.device)
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, ...]:
         """Every rollout one step on; rewards, terminated and truncated (B,)."""
@@ -227,12 +227,10 @@ class _Batch:
         self.held.action = Action(accel=act[:, 0], steer=act[:, 1])
         was_alive = self.carry.alive
         x_before = self.carry.state.x[:, 0]
-        seeds = torch.as_tensor(self.seeds, device=self.sim.device)
+        seeds, t = self._on_device(self.seeds), self._on_device(self.t)
         try:
             with torch.no_grad():
-                self.carry, self.ttc = self._step(
-                    self.carry, self._t_tensor(), seeds=seeds
-                )
+                self.carry, self.ttc = self._step(self.carry, t, seeds=seeds)
         finally:
             self.held.action = None
         self.t = self.t + 1
