@@ -162,3 +162,11 @@ def test_a_proposal_given_at_reset_draws_the_autoreset_episodes_too():
     for _ in range(3 * 4):  # three episodes of three steps each, and a reset
         *_, info = envs.step(envs.action_space.sample())
         assert np.array_equal(info["x"], np.tile(x, (2, 1)))
+
+
+def test_given_x_starts_each_sub_environment():
+    envs = HighwayVectorEnv(3, short(horizon=0.3))
+    x = base_distribution(envs._batch.sim.spec).sample(3, np.random.default_rng(2))
+    obs, info = envs.reset(seed=0, options={"x": x})
+    assert np.array_equal(info["x"], x)
+    assert obs[:, 0] == pytest.approx(x[:, 0])  # the egos start at their s_0
