@@ -76,3 +76,30 @@ def test_the_run_directory_table_lists_every_file_a_run_may_leave():
         "animations/",
     }
     assert expected <= files, expected - files
+
+
+def test_the_readme_user_policy_is_tested_with_avrisk_run(tmp_path, monkeypatch):
+    """The README's own policy, in its mypolicies.py, named as the README names it."""
+    import pyarrow.parquet as pq
+    import yaml
+    from typer.testing import CliRunner
+
+    from avrisk.cli.app import app
+    from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE
+    from tests.scenario_files import shortened_scenario
+
+    (policy,) = [b for b in python_blocks() if "class HoldSpeed" in b]
+    (tmp_path / "mypolicies.py").write_text(policy)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    line = re.search(
+        r'`(ego: \{policy: "mypolicies:HoldSpeed"[^`]*)`', README.read_text()
+    )
+    ego = yaml.safe_load(line.group(1))["ego"]
+    scenario = shortened_scenario(tmp_path, 2.0, file="my_scenario.yaml", ego=ego)
+    out = tmp_path / "runs" / "mine"
+    args = ["run", scenario, "--out", out, "--method", "naive", "--n-final", 64]
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    assert result.exit_code == 0, result.output
+    assert "mypolicies:HoldSpeed" in (out / CONFIG_FILE).read_text()
+    status = pq.read_table(out / SAMPLES_FILE)["status"].to_numpy()
+    assert len(status) == 64 and (status == 0).all()

@@ -230,8 +230,15 @@ def get_policy(
     return _POLICIES.build(name, params, allow_import=allow_import, **context)
 
 
-def _constant_factory(*, n_vehicles: int, **params: Any) -> ConstantPolicy:
-    return ConstantPolicy(ego_only(n_vehicles), **params)
+def _constant_factory(
+    *,
+    n_vehicles: int,
+    accel: float = 0.0,
+    steer: float = 0.0,
+    device: str | torch.device = "cpu",
+) -> ConstantPolicy:
+    """The ego holding ``accel`` and ``steer`` (only the context it needs)."""
+    return ConstantPolicy(ego_only(n_vehicles, device=device), accel, steer)
 
 
 register_policy("constant", _constant_factory, params=ConstantPolicy.Params)

@@ -427,7 +427,8 @@ class ScenarioSimulator:
             At ``t = 0``.
         step : callable
             ``step(carry, t) -> (carry, ttc)``: :meth:`Simulator.step` with
-            this batch's seeds, actors and masks bound.
+            this batch's seeds, actors and masks bound (``step(carry, t,
+            seeds=...)`` overrides the seeds, after :meth:`restart`).
         """
         state, actors, blocks, seeds_t = self._prepare(x, seeds)
         sim = self.simulator
@@ -435,6 +436,37 @@ class ScenarioSimulator:
         carry, _ = sim.start(state, actors, seeds_t, blocks)
         step = partial(sim.step, seeds=seeds_t, actors=tuple(actors), masks=masks)
         return carry, step
+
+    def restart(
+        self, carry: RolloutCarry, rows: torch.Tensor, x: ArrayLike, seeds: ArrayLike
+    ) -> RolloutCarry:
+        """``carry`` of a batch from :meth:`start` with some rollouts started anew.
+
+        The rollouts where ``rows`` is true start again from ``x`` and
+        ``seeds``, at ``t = 0``; the others are untouched. The batch's
+        ``step`` goes on stepping every rollout: a scenario's actors keep what
+        differs between rollouts in their parameter blocks and states (the
+        carry), the IDM+MOBIL drivers' parameters are the same for every
+        rollout. Step it with a step index per rollout and the new seeds:
+        ``step(carry, t, seeds=seeds)``, ``t`` of shape (B,).
+
+        Parameters
+        ----------
+        carry : RolloutCarry
+            A batch of ``B`` rollouts of this scenario.
+        rows : Tensor of bool, shape (B,)
+            The rollouts to restart (``n`` of them).
+        x : array_like of shape (n, D)
+            Their scenario samples, in the order of ``rows``.
+        seeds : array_like of int, shape (n,)
+
+        Returns
+        -------
+        RolloutCarry
+        """
+        state, actors, blocks, seeds_t = self._prepare(x, seeds)
+        fresh, _ = self.simulator.start(state, actors, seeds_t, blocks)
+        return carry.with_rows(rows.to(self.device), fresh)
 
     def _prepare(
         self, x: ArrayLike, seeds: ArrayLike

@@ -6,7 +6,8 @@ Importing this package registers ``avrisk/Highway-v0``::
     import avrisk.gym  # noqa: F401  (registers the id)
 
     env = gymnasium.make("avrisk/Highway-v0", scenario="highway_idm")
-    envs = gymnasium.make_vec("avrisk/Highway-v0", num_envs=64)  # one batch
+    envs = gymnasium.make_vec("avrisk/Highway-v0", num_envs=64)  # one batch,
+    # each row a Highway-v0 of its own (seed + i; next-step autoreset)
 
 (``gymnasium.make("avrisk.gym:avrisk/Highway-v0")`` imports it itself.) See
 :mod:`avrisk.gym.env` for the spaces, reward and ``info``.

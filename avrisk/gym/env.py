@@ -1,7 +1,8 @@
 """The simulator as a Gymnasium environment: the agent drives the ego.
 
 :class:`HighwayEnv` is one rollout, :class:`HighwayVectorEnv` ``B`` rollouts
-in one batch of the simulator. Both step the scenario's simulator one ``dt``
+in one batch of the simulator, each restarted on its own when its episode
+ends (Gymnasium's next-step autoreset). Both step the scenario's simulator one ``dt``
 at a time (:meth:`avrisk.assembly.ScenarioSimulator.start`) with the
 scenario's drivers acting and the ego (vehicle 0) taking the agent's action:
 the scenario's ego policy is replaced by :class:`HeldAction`, an ego policy
@@ -35,9 +36,12 @@ Reward (a placeholder; RL users will replace it, e.g. with a wrapper reading
 ``info``): ``-1`` at the crash step, else the ego's progress along the road in
 the step over ``max_speed * horizon`` (so at most about 1 per episode).
 
-``info``: ``min_ttc`` (the scenario's safety measure ``f`` so far [s], the
-quantity avrisk estimates the tail of), ``ttc`` (its instantaneous value),
-``crash``, ``offroad``, ``reversing``, ``failed`` (bool) and ``t`` (steps).
+``info`` (the same keys at reset and at every step): ``min_ttc`` (the
+scenario's safety measure ``f`` so far [s], the quantity avrisk estimates the
+tail of), ``ttc`` (its instantaneous value [s]), ``crash``, ``offroad``,
+``reversing``, ``failed`` (bool), ``t`` (steps), and the episode's ``x``
+(shape (D,)) and ``seed`` (the drivers' noise): ``avrisk`` replays the episode
+from them.
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ import gymnasium
 import numpy as np
 import torch
 from gymnasium import spaces
+from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from avrisk.agents.external.spaces import OBSERVATION_UNITS, observation_arrays
@@ -59,6 +64,7 @@ from avrisk.scenario import load_spec
 from avrisk.scenario.spec import ScenarioSpec
 from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
+from avrisk.sim.state import VehicleState
 
 __all__ = [
     "OBSERVATION_FIELDS",
@@ -162,45 +168,72 @@ class _Batch:
         self.progress_scale = 1.0 / (config.max_speed * config.horizon)
 
     def draw(
-        self, n: int, rng: np.random.Generator, options: dict[str, Any] | None
+        self,
+        rng: np.random.Generator,
+        proposal: Any | None = None,
+        x: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """``X`` (n, D) and seeds (n,) for a reset."""
-        options = options or {}
+        """``X`` (1, D) and the seed (1,) of one rollout, from its generator.
+
+        ``x`` (D,) when given, else a draw from ``proposal`` (``P0`` if None).
+        """
         x_rng, seed_rng = rng.spawn(2)
-        if "x" in options:
-            x = np.asarray(options["x"], dtype=np.float64).reshape(n, self.p0.dim)
+        if x is not None:
+            x = np.asarray(x, dtype=np.float64).reshape(1, self.p0.dim)
         else:
-            x = options.get("proposal", self.p0).sample(n, x_rng)
-        seeds = seed_rng.integers(0, 2**62, size=n, dtype=np.int64)
+            x = (self.p0 if proposal is None else proposal).sample(1, x_rng)
+        seeds = seed_rng.integers(0, 2**62, size=1, dtype=np.int64)
         return x, seeds
 
-    def start(self, x: np.ndarray, seeds: np.ndarray) -> np.ndarray:
-        """Start the batch; the observations (B, n)."""
+    def start(self, x: np.ndarray, seeds: np.ndarray) -> None:
+        """Start the batch from ``X`` (B, D) and seeds (B,)."""
         self.x, self.seeds = x, seeds
         with torch.no_grad():
             self.carry, self._step = self.sim.start(x, seeds)
-        self.t = 0
-        self.done = (~self.carry.alive).cpu().numpy()
-        return self.observe()
+        self.t = np.zeros(len(seeds), dtype=np.int64)
+        self.ttc = self._ttc_now(self.carry.state)
+
+    def restart(self, rows: np.ndarray, x: np.ndarray, seeds: np.ndarray) -> None:
+        """Start the rollouts where ``rows`` (B,) is true anew; the others go on."""
+        rows_t = torch.as_tensor(rows, device=self.sim.device)
+        with torch.no_grad():
+            self.carry = self.sim.restart(self.carry, rows_t, x, seeds)
+        self.x, self.seeds = self.x.copy(), self.seeds.copy()
+        self.x[rows], self.seeds[rows], self.t[rows] = x, seeds, 0
+        ttc = self.ttc.clone()
+        ttc[rows_t] = self._ttc_now(self.carry.state[rows_t])
+        self.ttc = ttc
+
+    def _ttc_now(self, state: VehicleState) -> torch.Tensor:
+        """The measure's instantaneous value of a state (n,) [s], as at ``t = 0``."""
+        with torch.no_grad():
+            return self.sim.simulator.measure.instant(state)
 
     def observe(self) -> np.ndarray:
         """The ego's flat observation of the carried state, (B, n) float32."""
         obs = self.sim.simulator.observe(
-            self.carry.state, torch.as_tensor(self.seeds), self.t
+            self.carry.state, self._on_device(self.seeds), self._on_device(self.t)
         )
         return flat_observation(obs, self.sim.config.n_lidar_beams)
 
+    def _on_device(self, per_row: np.ndarray) -> torch.Tensor:
+        """Rollouts' seeds or step indices (B,), int64 on the simulator's device."""
+        return torch.as_tensor(per_row, device=self.sim.device)
+
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, ...]:
-        """One step; observations, rewards, terminated, truncated, info arrays."""
+        """Every rollout one step on; rewards, terminated and truncated (B,)."""
         actions = np.asarray(actions, dtype=np.float32).reshape(-1, 2)
         act = torch.as_tensor(actions, device=self.sim.device)
         self.held.action = Action(accel=act[:, 0], steer=act[:, 1])
         was_alive = self.carry.alive
         x_before = self.carry.state.x[:, 0]
-        with torch.no_grad():
-            self.carry, ttc = self._step(self.carry, self.t)
-        self.held.action = None
-        self.t += 1
+        seeds, t = self._on_device(self.seeds), self._on_device(self.t)
+        try:
+            with torch.no_grad():
+                self.carry, self.ttc = self._step(self.carry, t, seeds=seeds)
+        finally:
+            self.held.action = None
+        self.t = self.t + 1
         c = self.carry
         progress = (c.state.x[:, 0] - x_before) * self.progress_scale
         hit = (was_alive & c.crash & ~c.alive).cpu().numpy()
@@ -208,30 +241,23 @@ class _Batch:
         reward = np.where(hit, -1.0, progress.cpu().numpy()).astype(np.float64)
         reward = np.where(failed, 0.0, reward)
         terminated = c.crash.cpu().numpy() | failed
-        truncated = np.full_like(terminated, self.t >= self.n_steps) & ~terminated
-        info = {
-            "min_ttc": self.sim.simulator.measure.finalize(c.measure)
-            .cpu()
-            .numpy()
-            .astype(np.float64),
-            "ttc": ttc.cpu().numpy().astype(np.float64),
-            "crash": c.crash.cpu().numpy(),
-            "offroad": c.offroad.cpu().numpy(),
-            "reversing": c.reversing.cpu().numpy(),
-            "failed": failed,
-            "t": np.full(len(self.seeds), self.t, dtype=np.int64),
-        }
-        return self.observe(), reward, terminated, truncated, info
+        truncated = (self.t >= self.n_steps) & ~terminated
+        return reward, terminated, truncated
 
-    def info_at_start(self) -> dict[str, np.ndarray]:
-        """``info`` of a reset: the measure at ``t = 0``."""
+    def info(self) -> dict[str, np.ndarray]:
+        """``info`` of every rollout as it stands, arrays with B rows."""
         c = self.carry
         f = self.sim.simulator.measure.finalize(c.measure)
         return {
             "min_ttc": f.cpu().numpy().astype(np.float64),
+            "ttc": self.ttc.cpu().numpy().astype(np.float64),
             "crash": c.crash.cpu().numpy(),
-            "x": self.x,
-            "seed": self.seeds,
+            "offroad": c.offroad.cpu().numpy(),
+            "reversing": c.reversing.cpu().numpy(),
+            "failed": (c.status != 0).cpu().numpy(),
+            "t": self.t.copy(),
+            "x": self.x.copy(),
+            "seed": self.seeds.copy(),
         }
 
 
@@ -272,10 +298,13 @@ class HighwayEnv(gymnasium.Env[np.ndarray, np.ndarray]):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Draw ``X`` (or take ``options["x"]``) and start a rollout."""
         super().reset(seed=seed)
-        x, seeds = self._batch.draw(1, self.np_random, options)
-        obs = self._batch.start(x, seeds)
+        options = options or {}
+        x, seeds = self._batch.draw(
+            self.np_random, options.get("proposal"), options.get("x")
+        )
+        self._batch.start(x, seeds)
         self._done = False
-        return obs[0], _row(self._batch.info_at_start(), 0)
+        return self._batch.observe()[0], _row(self._batch.info(), 0)
 
     def step(
         self, action: np.ndarray
@@ -283,31 +312,49 @@ class HighwayEnv(gymnasium.Env[np.ndarray, np.ndarray]):
         """Advance one ``dt`` with the ego taking ``action``."""
         if self._done:
             raise RuntimeError("call reset() first (the episode has ended)")
-        obs, reward, term, trunc, info = self._batch.step(action)
+        reward, term, trunc = self._batch.step(action)
         self._done = bool(term[0] or trunc[0])
-        return obs[0], float(reward[0]), bool(term[0]), bool(trunc[0]), _row(info, 0)
+        obs, info = self._batch.observe()[0], _row(self._batch.info(), 0)
+        return obs, float(reward[0]), bool(term[0]), bool(trunc[0]), info
 
 
 class HighwayVectorEnv(VectorEnv):
     """``num_envs`` rollouts of a scenario in one batch of the simulator.
 
-    The rollouts run in lockstep, one simulator call per step
-    (``autoreset_mode`` DISABLED): a rollout that terminates (crash) stays
-    frozen, and further steps report it terminated with reward 0, until
-    :meth:`reset` starts a new batch (every rollout; the horizon truncates
-    all of them at the same step). Rewards and ``info`` are as for
-    :class:`HighwayEnv`, as arrays of shape (num_envs,).
+    Each sub-environment ``i`` behaves as a :class:`HighwayEnv` of its own
+    (bit for bit: same seed, same actions, same observations, rewards and
+    crash step), while one simulator call steps them all. Autoreset is
+    Gymnasium's next-step mode (``metadata["autoreset_mode"]``
+    ``NEXT_STEP``, as :class:`gymnasium.vector.SyncVectorEnv`): the step after
+    a sub-environment terminates or truncates starts its next episode (its
+    action is ignored; reward 0, not terminated, not truncated, the new
+    episode's first observation and ``info``), while the others go on.
+
+    Seeds: ``reset(seed=s)`` seeds sub-environment ``i`` with ``s + i``,
+    ``reset(seed=[s_0, ...])`` with ``s_i`` (None: keep its generator); each
+    draws its episodes' ``X`` and rollout seeds from its own generator, so
+    sub-environment ``i`` gives the episodes a :class:`HighwayEnv` reset with
+    ``seed=s_i`` and then reset without a seed would give.
+    ``options={"x": x}`` gives the first episodes' ``X`` (shape (num_envs,
+    D)); ``options={"proposal": q}`` draws them, and the autoreset episodes
+    after them, from ``q`` instead of ``P0``.
+
+    Rewards, ``terminated`` and ``truncated`` are arrays of shape
+    (num_envs,); ``info`` has the keys of :class:`HighwayEnv` as arrays with
+    num_envs rows, and Gymnasium's ``"_key"`` masks (every sub-environment
+    has every key).
 
     Parameters
     ----------
     num_envs : int, default=1
     scenario : str, pathlib.Path or ScenarioSpec, default="highway_idm"
     device : str or torch.device, default="cpu"
+    render_mode : None
     """
 
     metadata: dict[str, Any] = {
         "render_modes": [],
-        "autoreset_mode": AutoresetMode.DISABLED,
+        "autoreset_mode": AutoresetMode.NEXT_STEP,
     }
 
     def __init__(
@@ -329,7 +376,10 @@ class HighwayVectorEnv(VectorEnv):
             self.single_action_space, num_envs
         )
         self.render_mode = render_mode
-        self._ended = np.ones(num_envs, dtype=bool)
+        self._rngs: list[np.random.Generator | None] = [None] * num_envs
+        self._proposal: Any | None = None
+        self._autoreset = np.zeros(num_envs, dtype=bool)
+        self._started = False
 
     def reset(
         self,
@@ -337,23 +387,71 @@ class HighwayVectorEnv(VectorEnv):
         seed: int | list[int | None] | None = None,
         options: dict[str, Any] | None = None,
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Draw ``X`` for every rollout (or take ``options["x"]``, (B, D))."""
-        if isinstance(seed, list):
-            raise ValueError("give one seed for the batch (or None)")
-        super().reset(seed=seed)
-        x, seeds = self._batch.draw(self.num_envs, self.np_random, options)
-        obs = self._batch.start(x, seeds)
-        self._ended = np.zeros(self.num_envs, dtype=bool)
-        return obs, self._batch.info_at_start()
+        """Start a new episode in every sub-environment (class docstring)."""
+        if seed is None:
+            seeds: list[int | None] = [None] * self.num_envs
+        elif isinstance(seed, int):
+            seeds = [seed + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+        if len(seeds) != self.num_envs:
+            raise ValueError(
+                f"give one seed per sub-environment ({self.num_envs}); got {len(seeds)}"
+            )
+        for i, s in enumerate(seeds):
+            if s is not None or self._rngs[i] is None:
+                self._rngs[i] = seeding.np_random(s)[0]
+        options = options or {}
+        self._proposal = options.get("proposal")
+        given = options.get("x")
+        if given is not None:
+            given = np.asarray(given, dtype=np.float64).reshape(self.num_envs, -1)
+        rows = np.arange(self.num_envs)
+        x, rollout_seeds = self._draw(rows, given)
+        self._batch.start(x, rollout_seeds)
+        self._autoreset[:] = False
+        self._started = True
+        return self._batch.observe(), self._vector_info()
 
     def step(
         self, actions: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """Advance every rollout one ``dt``; actions of shape (num_envs, 2)."""
-        obs, reward, term, trunc, info = self._batch.step(actions)
-        reward = np.where(self._ended, 0.0, reward)
-        self._ended = self._ended | term | trunc
-        return obs, reward, term, trunc, info
+        """Advance every sub-environment one ``dt``; actions (num_envs, 2).
+
+        Sub-environments whose episode ended at the previous step start their
+        next one instead (their actions are ignored).
+        """
+        if not self._started:
+            raise RuntimeError("call reset() first")
+        reward, terminated, truncated = self._batch.step(actions)
+        restart = self._autoreset.copy()
+        if restart.any():
+            x, rollout_seeds = self._draw(np.flatnonzero(restart), None)
+            self._batch.restart(restart, x, rollout_seeds)
+            reward[restart] = 0.0
+            terminated[restart] = truncated[restart] = False
+        self._autoreset = terminated | truncated
+        return self._batch.observe(), reward, terminated, truncated, self._vector_info()
+
+    def _draw(
+        self, rows: np.ndarray, given: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``X`` (n, D) and seeds (n,) of new episodes, each from its generator."""
+        draws = []
+        for k, i in enumerate(rows):
+            rng = self._rngs[i]
+            assert rng is not None
+            x_i = None if given is None else given[k]
+            draws.append(self._batch.draw(rng, self._proposal, x_i))
+        x, seeds = zip(*draws, strict=True)
+        return np.concatenate(x), np.concatenate(seeds)
+
+    def _vector_info(self) -> dict[str, Any]:
+        """The batch's ``info`` with Gymnasium's ``_key`` masks (all true)."""
+        info: dict[str, Any] = self._batch.info()
+        present = np.ones(self.num_envs, dtype=bool)
+        info.update({f"_{k}": present.copy() for k in list(info)})
+        return info
 
 
 def _row(info: dict[str, np.ndarray], i: int) -> dict[str, Any]:

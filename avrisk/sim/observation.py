@@ -106,10 +106,12 @@ class Observation:
         The vehicle moves against the road direction now.
     seeds : Tensor of int64, shape (B,)
         Per-rollout seeds, for counter-based noise (:mod:`avrisk.tensors.noise`).
-    step : int or Tensor of int64, shape ()
+    step : int or Tensor of int64, shape () or (B,)
         Index ``t`` of this step; the action applies from ``t`` to ``t + 1``.
         A Python int in eager mode; a 0-d tensor under ``torch.compile`` (one
-        graph for every step).
+        graph for every step); one per rollout, shape (B,), when the rollouts
+        of a batch are at different steps (some were restarted: the Gymnasium
+        vector environment).
     dt : float
         Time step [s].
     """

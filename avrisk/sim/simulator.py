@@ -89,6 +89,7 @@ from avrisk.sim.observation import LaneFeatures, Observation, lane_features
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
 from avrisk.tensors.noise import normal
+from avrisk.tensors.rows import replace_rows
 
 __all__ = [
     "COMPILE_ENV",
@@ -330,6 +331,31 @@ class RolloutCarry(NamedTuple):
     status: Tensor  # [B] int8
     partner: Tensor  # [B] int64
     contact: Tensor  # [B] int8
+
+    def with_rows(self, rows: Tensor, fresh: RolloutCarry) -> RolloutCarry:
+        """The carry with some rollouts restarted, the others untouched.
+
+        Parameters
+        ----------
+        rows : Tensor of bool, shape (B,)
+            The rollouts to restart; ``n`` of them are true.
+        fresh : RolloutCarry
+            ``n`` rollouts at ``t = 0`` (:meth:`Simulator.start`), in the order
+            of ``rows``, from the same actors' ``init``. Their steps count from
+            0 again: step the batch with a step index per rollout
+            (:meth:`Simulator.step` takes ``t`` of shape (B,)).
+
+        Returns
+        -------
+        RolloutCarry
+
+        Raises
+        ------
+        ValueError
+            If an actor's state has a tensor that is neither per rollout
+            (leading dimension ``B``) nor the same for every rollout.
+        """
+        return replace_rows(self, rows, fresh)
 
 
 def compile_requested(compile: bool | None) -> bool:
@@ -711,8 +737,10 @@ class Simulator:
         ----------
         carry : RolloutCarry
             At time ``t`` (from :meth:`start` or the previous step).
-        t : int or Tensor of int64, shape ()
+        t : int or Tensor of int64, shape () or (B,)
             Index of the step's start time; the actors see it as ``obs.step``.
+            One per rollout when they are at different steps (some were
+            restarted, :meth:`RolloutCarry.with_rows`).
         seeds : Tensor of int64, shape (B,)
         actors : sequence of Actor
         masks : sequence of Tensor of bool, shape (A,)

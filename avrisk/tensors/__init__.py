@@ -7,6 +7,8 @@ A leaf layer: it imports nothing from avrisk.
 * :mod:`~avrisk.tensors.noise` -- counter-based random numbers, a pure
   function of (seed, step, stream, index), so that a rollout gets the same
   noise alone or in any batch;
+* :mod:`~avrisk.tensors.rows` -- some rows of a batch replaced in nested
+  containers of tensors (rollouts restarted while the others go on);
 * :mod:`~avrisk.tensors.mathops` -- elementary functions from IEEE basic
   operations only, bit-identical on any batch, device or compiler.
 """

@@ -72,8 +72,9 @@ def random_bits(
     ----------
     seeds : Tensor of int64, shape (B,)
         One seed per rollout.
-    step : int or Tensor of int64, shape ()
-        Time step index (``>= 0``); a 0-d tensor gives the same numbers.
+    step : int or Tensor of int64, shape () or (B,)
+        Time step index (``>= 0``); a 0-d tensor gives the same numbers, a
+        tensor of shape (B,) one step per rollout.
     stream : int
         Independent stream within a step (``>= 0``).
     shape : tuple of int, default=()

@@ -65,3 +65,40 @@ def test_addresses_stay_on_this_machine_unless_allowed():
     with pytest.raises(ValueError, match="allow_remote"):
         ExternalParams(address="tcp://example.com:5555")
     ExternalParams(address="tcp://example.com:5555", allow_remote=True)
+
+
+def test_the_protocol_page_describes_the_handshake_avrisk_sends():
+    """docs/ego-protocol.md's observation table and dtype codes are the code's."""
+    import re
+    from pathlib import Path
+
+    import torch
+
+    from avrisk.agents.external.client import _REPLY_OVERHEAD
+    from avrisk.agents.external.protocol import DTYPES, PROTOCOL_VERSION
+    from avrisk.agents.external.spaces import hello_message, observation_arrays
+    from avrisk.assembly import ScenarioSimulator, base_distribution, initial_state
+    from avrisk.scenario import ScenarioParams, load_spec
+
+    page = (Path(__file__).parents[2] / "docs" / "ego-protocol.md").read_text()
+    sim = ScenarioSimulator(load_spec("highway_idm"))
+    x = base_distribution(sim.spec).sample(2, np.random.default_rng(0))
+    state = initial_state(ScenarioParams.from_flat(x, sim.layout), sim.spec)
+    obs = sim.simulator.observe(state, torch.zeros(2, dtype=torch.int64))
+    hello = hello_message(observation_arrays(obs), obs.dt)
+    n_beams = sim.config.n_lidar_beams
+    documented = {}
+    for names, dtype, shape, unit in re.findall(
+        r"^\| (`[^|]+`) \| (\w+) \| \[(R?)\] \| ([^|]+?) \|", page, flags=re.M
+    ):
+        for name in re.findall(r"`(\w+)`", names):
+            documented[name] = {
+                "dtype": dtype,
+                "shape": [n_beams] if shape else [],
+                "unit": unit,
+            }
+    assert documented == hello["observation"]
+    assert f"# The external-ego protocol, version {PROTOCOL_VERSION}" in page
+    codes = set(re.findall(r'`"(\w\d)"` \w', page.split("## Arrays")[1]))
+    assert codes == set(DTYPES)
+    assert f"{_REPLY_OVERHEAD // 1024} KiB + 32 bytes per rollout" in page

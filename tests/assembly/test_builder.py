@@ -135,3 +135,15 @@ def test_seeds_of_the_wrong_shape_are_refused(spec):
     sim = ScenarioSimulator(spec)
     with pytest.raises(ValueError, match="seeds"):
         sim.rollout(np.full((2, 8), 1.0), np.arange(3))
+
+
+def test_a_scenario_file_may_name_the_constant_ego(spec):
+    """``ego: {policy: constant}`` builds with the scenario's context and drives."""
+    raw = spec.model_dump(mode="json")
+    raw["ego"] = {"policy": "constant", "params": {"accel": 1.5}}
+    sim = ScenarioSimulator(spec_from_dict(raw))
+    x = base_distribution(sim.spec).sample(3, np.random.default_rng(0))
+    result = sim.rollout(x, np.arange(3), record_trace=True)
+    assert (result.status == 0).all() and not result.crash.any()
+    gained = result.trace.speed[:, -1, 0] - result.trace.speed[:, 0, 0]
+    torch.testing.assert_close(gained, torch.full((3,), 1.5), rtol=0, atol=1e-5)

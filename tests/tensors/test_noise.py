@@ -41,3 +41,12 @@ def test_normals_have_mean_zero_and_unit_variance():
     assert abs(z.mean().item()) < 5 / 316
     assert abs(z.var().item() - 1.0) < 5 * (2 / 1e5) ** 0.5
     assert ((z.abs() > 1.96).double().mean().item() - 0.05) < 0.004
+
+
+def test_a_step_per_rollout_gives_each_rollout_its_own_steps_numbers():
+    s = torch.tensor([5, 9, 11], dtype=torch.int64)
+    steps = torch.tensor([0, 7, 3])
+    mixed = normal(s, steps, stream=2, shape=(4,))
+    for b in range(3):
+        alone = normal(s[b : b + 1], int(steps[b]), stream=2, shape=(4,))
+        assert torch.equal(mixed[b], alone[0])

@@ -136,9 +136,10 @@ def ar1_noise(
         This step's standard-normal draw (the simulator's, counter-based).
     rho : Tensor of shape (2,)
         Autocorrelation per action in ``[0, 1)``.
-    start : bool or Tensor of bool, shape (), default=False
+    start : bool or Tensor of bool, shape () or (B,), default=False
         Start the process here (``z`` itself) whatever ``previous`` holds; a
-        tensor keeps the choice on the device (the simulator's compiled step).
+        tensor keeps the choice on the device (the simulator's compiled step),
+        one per rollout when the rollouts are at different steps.
 
     Returns
     -------
@@ -149,7 +150,9 @@ def ar1_noise(
         return z
     rho = rho.to(z.dtype)
     mixed = rho * previous + sqrt(1.0 - rho * rho) * z
-    return torch.where(start, z, mixed) if isinstance(start, Tensor) else mixed
+    if not isinstance(start, Tensor):
+        return mixed
+    return torch.where(start.reshape(start.shape + (1,) * (z.dim() - 1)), z, mixed)
 
 
 def sample_actions(
