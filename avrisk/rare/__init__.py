@@ -14,7 +14,13 @@ from avrisk.rare.estimator import (
     run_estimator,
 )
 from avrisk.rare.evaluation import EvalResult, EvalTask, Evaluator, LocalEvaluator
-from avrisk.rare.families import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
+from avrisk.rare.families import (
+    ExponentialFamily,
+    FixedCovNormal,
+    Product,
+    ScaledBeta,
+    StandardSpaceShift,
+)
 from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
 from avrisk.rare.mixture import MixtureCrossEntropy, MixtureProposal, mixture_ce
 from avrisk.rare.naive_mc import NaiveMC, naive_mc
@@ -45,6 +51,7 @@ __all__ = [
     "Product",
     "RareEventProblem",
     "ScaledBeta",
+    "StandardSpaceShift",
     "SplittingError",
     "StageBatch",
     "SubsetSimulation",

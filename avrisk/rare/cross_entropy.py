@@ -47,6 +47,7 @@ from avrisk.rare.estimator import (
 )
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
+from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.final_stage import weighted_stage_estimates
 from avrisk.rare.problem import (
     FINAL_STAGE,
@@ -230,9 +231,14 @@ class CESettings(EstimatorSettings):
         ``1 / lam``, so a proposal that misses part of the event, or has
         heavy-tailed weights, cannot make the estimate or its standard error
         collapse. 0 (the paper's): the proposal alone.
+    space : {"natural", "standard"}, default="natural"
+        Where the proposals live (:func:`search_structure`): the base's own
+        family at other parameters (the paper's), or mean shifts of the base's
+        standard normals (:class:`~avrisk.rare.families.StandardSpaceShift`),
+        whose weights have finite variance however far the search goes.
     """
 
-    OMIT_IF_DEFAULT = ("defensive",)
+    OMIT_IF_DEFAULT = ("defensive", "space")
 
     rho: EliteLevel = 0.01
     alpha: float = Field(0.8, gt=0.0, le=1.0, description="Smoothing of the update.")
@@ -245,6 +251,20 @@ class CESettings(EstimatorSettings):
     defensive: ShareOfP0 = Field(
         0.0, description="Share of the final stage drawn from P0 (weights <= 1/share)."
     )
+    space: Literal["natural", "standard"] = Field(
+        "natural",
+        description="Proposals: the base's family ('natural') or mean shifts of "
+        "its standard normals ('standard').",
+    )
+
+
+def search_structure(base: ExponentialFamily, space: str) -> ExponentialFamily:
+    """The family whose members a CE search proposes, at ``P0``.
+
+    ``"natural"``: ``base`` itself; ``"standard"``: ``StandardSpaceShift(base)``
+    (the same distribution, parametrised by a shift of its standard normals).
+    """
+    return StandardSpaceShift(base) if space == "standard" else base
 
 
 class DefensiveCESettings(CESettings):
@@ -359,8 +379,8 @@ class CrossEntropy:
 
     def init(self, problem: RareEventProblem) -> CEState:
         """Before the first iteration: the proposal is the base distribution."""
-        base = problem.base
-        return CEState(base, 0, base, (math.inf,), -1, 0)
+        start = search_structure(problem.base, self.settings.space)
+        return CEState(start, 0, start, (math.inf,), -1, 0)
 
     def done(self, state: CEState) -> bool:
         """After ``n_iter`` iterations."""

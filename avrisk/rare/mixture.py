@@ -95,6 +95,7 @@ from avrisk.rare.cross_entropy import (
     search_diagnostics,
     search_final_estimate,
     search_level,
+    search_structure,
 )
 from avrisk.rare.estimator import (
     DiagnosticTable,
@@ -132,7 +133,8 @@ class MixtureProposal:
     Parameters
     ----------
     components : sequence of ExponentialFamily
-        The ``q_k``, of the base's structure.
+        The ``q_k``, all of one structure (the base's, or its standard-space
+        shifts).
     weights : array_like of shape (K,)
         Their weights ``pi_k``, positive (normalised to sum to one).
     base : ExponentialFamily
@@ -221,7 +223,7 @@ class MixtureProposal:
 
     def sufficient_stat(self, x: FloatArray) -> FloatArray:
         """The components' common sufficient statistic ``T(x)``, shape (n, S)."""
-        return self.base.sufficient_stat(x)
+        return self.components[0].sufficient_stat(x)
 
     def to_dict(self) -> dict[str, Any]:
         """Weights, defensive share and the components' descriptions."""
@@ -496,7 +498,7 @@ class MixtureSettings(CESettings):
         Share of the elite weight below which a component dies.
     """
 
-    OMIT_IF_DEFAULT = ()
+    OMIT_IF_DEFAULT = ("space",)
 
     n_components: int = Field(
         4, ge=1, description="Components K at the start (they may die or merge)."
@@ -548,7 +550,8 @@ class MixtureCrossEntropy:
     def init(self, problem: RareEventProblem) -> CEState:
         """Before the first iteration: the proposal is the base distribution."""
         base = problem.base
-        start = MixtureProposal([base], [1.0], base, self.settings.defensive)
+        structure = search_structure(base, self.settings.space)
+        start = MixtureProposal([structure], [1.0], base, self.settings.defensive)
         return CEState(start, 0, start, (math.inf,), -1, 0)
 
     def done(self, state: CEState) -> bool:
@@ -578,14 +581,15 @@ class MixtureCrossEntropy:
             seeding = np.random.SeedSequence(
                 [context.seed, stage], spawn_key=(SEEDING_STREAM,)
             )
+            structure = search_structure(problem.base, s.space)
             start = seed_components(
-                problem.base,
+                structure,
                 stats,
                 elite_weights,
                 s.n_components,
                 np.random.default_rng(seeding),
             )
-            grew_from = [problem.base] * len(start[0])
+            grew_from = [structure] * len(start[0])
         else:
             start = sampled.components, sampled.weights
             grew_from = list(sampled.components)

@@ -14,6 +14,10 @@ mixture of such members with the base:
                   defensive share
 ================  ============================================================
 
+A record with ``"space": "standard"`` holds members that shift the base's
+standard normals (:class:`~avrisk.rare.families.StandardSpaceShift`) by
+their shift ``mu``.
+
 The record holds numbers only (floats written by ``json`` round-trip
 exactly); the structure (covariances, supports, search boxes) comes from the
 base the reader passes in. A record read from disk is untrusted: a malformed
@@ -28,6 +32,7 @@ import numpy as np
 
 from avrisk.rare.defensive import DefensiveMixture
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
+from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.mixture import MixtureProposal
 
 __all__ = ["Sampler", "proposal_from_record", "proposal_record"]
@@ -42,29 +47,53 @@ def proposal_record(
     """JSON-ready record of ``proposal`` relative to ``base``, or None.
 
     None for a sampler of another kind (its samples cannot be drawn again from
-    a record and must be stored).
+    a record and must be stored). Members that shift the base's standard
+    normals (:class:`StandardSpaceShift`) are recorded by their shift, with
+    ``"space": "standard"``.
     """
-    if isinstance(proposal, ExponentialFamily) and type(proposal) is type(base):
-        return {"kind": "family", "params": _floats(proposal.exact_params())}
-    if isinstance(proposal, DefensiveMixture) and proposal.base is base:
-        inner = proposal_record(proposal.proposal, base)
-        if inner is None:
+    if isinstance(proposal, DefensiveMixture | MixtureProposal):
+        if proposal.base is not base:
             return None
-        return {
-            "kind": "defensive",
-            "weight": proposal.weight,
-            "params": inner["params"],
-        }
-    if isinstance(proposal, MixtureProposal) and proposal.base is base:
-        members = [proposal_record(c, base) for c in proposal.components]
-        if any(m is None or m["kind"] != "family" for m in members):
+        members = (
+            [proposal.proposal]
+            if isinstance(proposal, DefensiveMixture)
+            else list(proposal.components)
+        )
+        records = [_member_record(m, base) for m in members]
+        spaces = {r[0] for r in records if r is not None}
+        if any(r is None for r in records) or len(spaces) != 1:
             return None
+        params = [r[1] for r in records if r is not None]
+        space = {"space": "standard"} if spaces == {"standard"} else {}
+        if isinstance(proposal, DefensiveMixture):
+            return {
+                "kind": "defensive",
+                "weight": proposal.weight,
+                "params": params[0],
+                **space,
+            }
         return {
             "kind": "mixture",
             "defensive": proposal.defensive,
             "weights": _floats(proposal.weights),
-            "components": [m["params"] for m in members if m is not None],
+            "components": params,
+            **space,
         }
+    record = _member_record(proposal, base)
+    if record is None:
+        return None
+    space = {"space": "standard"} if record[0] == "standard" else {}
+    return {"kind": "family", "params": record[1], **space}
+
+
+def _member_record(
+    member: Any, base: ExponentialFamily
+) -> tuple[str, list[float]] | None:
+    """``(space, params)`` of one member of ``base``'s families, or None."""
+    if isinstance(member, StandardSpaceShift) and member.base is base:
+        return "standard", _floats(member.mean)
+    if isinstance(member, ExponentialFamily) and type(member) is type(base):
+        return "natural", _floats(member.exact_params())
     return None
 
 
@@ -81,11 +110,16 @@ def proposal_from_record(record: Any, base: ExponentialFamily) -> Sampler:
             f"a proposal record is an object with a 'kind'; got {record!r:.80}"
         )
     kind = record["kind"]
+    space = record.get("space", "natural")
+    if space not in ("natural", "standard"):
+        raise ValueError(f"proposal record: unknown space {space!r:.40}")
     if kind == "family":
-        return _member(record.get("params"), base)
+        return _member(record.get("params"), base, space)
     if kind == "defensive":
         return DefensiveMixture(
-            _member(record.get("params"), base), base, _number(record, "weight")
+            _member(record.get("params"), base, space),
+            base,
+            _number(record, "weight"),
         )
     if kind == "mixture":
         components = record.get("components")
@@ -93,7 +127,7 @@ def proposal_from_record(record: Any, base: ExponentialFamily) -> Sampler:
             raise ValueError("a mixture record needs a non-empty list of components")
         weights = _vector(record.get("weights"), len(components), "weights")
         mixture = MixtureProposal(
-            [_member(c, base) for c in components],
+            [_member(c, base, space) for c in components],
             weights,
             base,
             _number(record, "defensive"),
@@ -103,7 +137,9 @@ def proposal_from_record(record: Any, base: ExponentialFamily) -> Sampler:
     raise ValueError(f"unknown proposal kind {kind!r} (family, defensive, mixture)")
 
 
-def _member(params: Any, base: ExponentialFamily) -> ExponentialFamily:
+def _member(params: Any, base: ExponentialFamily, space: str) -> ExponentialFamily:
+    if space == "standard":
+        return StandardSpaceShift(base, _vector(params, base.dim, "params"))
     return base.with_exact_params(_vector(params, base.n_stats, "params"))
 
 

@@ -137,6 +137,17 @@ class ExponentialFamily(abc.ABC):
         """The family of the same structure at ``params`` of :meth:`exact_params`."""
         return self.with_natural_params(params)
 
+    def searched_coordinates(self) -> np.ndarray:
+        """Which coordinates the CE search may move, bool array of shape (dim,).
+
+        All of them by default; a block whose search box is a single point
+        (:class:`~avrisk.rare.families.normal.FixedCovNormal` with
+        ``max_shift=0``) says False, and proposals in another
+        parametrisation (:mod:`avrisk.rare.families.standard_space`) keep
+        those coordinates as in the base.
+        """
+        return np.ones(self.dim, dtype=bool)
+
     def to_standard_normal(self, x: FloatArray) -> FloatArray:
         """Map samples to independent standard normals: ``T(X) ~ N(0, I_dim)``.
 

@@ -106,6 +106,12 @@ class FixedCovNormal(ExponentialFamily):
         new.max_shift = _as_shift(max_shift, self.dim)
         return new
 
+    def searched_coordinates(self) -> np.ndarray:
+        """False where the box ``max_shift`` is 0, shape (D,)."""
+        if self.max_shift is None:
+            return np.ones(self.dim, dtype=bool)
+        return self.max_shift > 0
+
     @property
     def std(self) -> FloatArray:
         """Marginal standard deviations ``sqrt(diag Sigma0)``, shape (D,).

@@ -138,6 +138,10 @@ class Product(ExponentialFamily):
         """Whether every block is in its search box."""
         return all(b.in_search_box() for b in self.blocks)
 
+    def searched_coordinates(self) -> np.ndarray:
+        """The blocks' searched coordinates, concatenated, shape (D,)."""
+        return np.concatenate([b.searched_coordinates() for b in self.blocks])
+
     def to_dict(self) -> dict[str, Any]:
         """Family name and the blocks' descriptions."""
         return {"family": "Product", "blocks": [b.to_dict() for b in self.blocks]}
