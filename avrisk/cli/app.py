@@ -58,7 +58,7 @@ scenarios = typer.Typer(
 
 @scenarios.callback()
 def _scenarios(ctx: typer.Context) -> None:
-    """List the bundled scenarios, one line each; 'show NAME' prints one."""
+    """List the bundled scenarios with their descriptions; 'show NAME' prints one."""
     if ctx.invoked_subcommand is None:
         list_scenarios()
 

@@ -146,7 +146,7 @@ class RichRunMonitor:
         self._last = 0.0
 
     def __enter__(self) -> RichRunMonitor:
-        self._status = Column(no_wrap=True, overflow="ellipsis")
+        self._status = Column(overflow="fold")  # wraps, never cut
         elapsed = [TimeElapsedColumn()] if self.console.width >= WIDE else []
         self._progress = Progress(
             TextColumn("[bold]{task.description}", table_column=Column(no_wrap=True)),

@@ -13,11 +13,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from rich import box
 from rich.markup import escape
-from rich.table import Table
 
 from avrisk.cli.common import err_console, out_console
+from avrisk.cli.tables import add_columns, compact_table
 from avrisk.pipeline import RunDirectory
 from avrisk.pipeline.files import json_text
 from avrisk.rare.estimator import estimator_class
@@ -30,32 +29,6 @@ from avrisk.scenario import ScenarioSpec
 RESULT_SCHEMA = "avrisk.result/1"
 
 Runs = list[tuple[str, RunDirectory]]
-
-
-def _table(title: str, caption: str | None = None) -> Table:
-    """A compact table (no vertical rules) that fits 80 columns."""
-    return Table(
-        title=escape(title),
-        caption=escape(caption) if caption else None,
-        box=box.SIMPLE_HEAD,
-        pad_edge=False,
-        collapse_padding=True,
-        title_justify="left",
-        caption_justify="left",
-    )
-
-
-def _columns(table: Table, names: list[str], wrap: str | None = None) -> None:
-    """Columns that never wrap, numbers right-aligned; text ``wrap`` may wrap.
-
-    A header wraps only where its name has a newline.
-    """
-    for name in names:
-        table.add_column(
-            escape(name),
-            justify="left" if name in (wrap, "trust") else "right",
-            no_wrap=name != wrap,
-        )
 
 
 def answer(runs: Runs, spec: ScenarioSpec) -> Headline:
@@ -74,12 +47,12 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
         summary = run_dir.summary()
         est = summary["estimate"]
         weighted = estimator_class(summary["method"]).weighted
-        table = _table(
+        table = compact_table(
             f"{label}, {est['n_evals']:,} rollouts: P(min TTC <= gamma) per rollout",
             f"95% interval: {_interval(est)}" if _interval(est) else None,
         )
         names = ["gamma [s]", "p", "stderr", "95% CI", "hits", "ESS", "Pareto k"]
-        _columns(table, [*names, "trust"])
+        add_columns(table, [*names, "trust"], text=["trust"])
         for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
             table.add_row(
                 f"{g['gamma']:g}",
@@ -120,8 +93,10 @@ def print_mechanisms(label: str, summary: dict[str, Any]) -> None:
     if not parts:
         return
     gamma = summary["estimate"]["gamma"]
-    table = _table(f"{label}: P(min TTC <= {gamma:g} s) by what happened")
-    _columns(table, ["what happened", "p", "95% CI", "share", "hits"], "what happened")
+    table = compact_table(f"{label}: P(min TTC <= {gamma:g} s) by what happened")
+    add_columns(
+        table, ["what happened", "p", "95% CI", "share", "hits"], text=["what happened"]
+    )
     for part in parts:
         share = part["share"]
         table.add_row(
@@ -193,11 +168,11 @@ def print_ratios(
     )
     if not all(row["reliable"] for row in rows):
         caption += " " + UNRELIABLE_NOTE + "."
-    table = _table(
+    table = compact_table(
         f"{label} against naive Monte Carlo, both with {n_rollouts:,} rollouts",
         caption,
     )
-    _columns(
+    add_columns(
         table,
         [
             "gamma\n[s]",

@@ -1,16 +1,20 @@
 """What a person and a script see: 80 columns, ``--json``, the cost, Ctrl-C."""
 
 import inspect
+import io
 import json
 import shlex
 
 import pytest
+from rich.console import Console
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
+from avrisk.cli.demo import analytic_table
 from avrisk.cli.run import COMPARE_DEFAULTS, compare, estimator_options
 from avrisk.pipeline.store import RunDirectory
-from avrisk.rare import get_estimator
+from avrisk.rare import cross_entropy, get_estimator, naive_mc
+from avrisk.testing import beta_sum_problem, gaussian_linear_problem
 from tests.scenario_files import shortened_scenario
 
 
@@ -34,11 +38,38 @@ def words(text):
     return " ".join(text.split())
 
 
+def assert_whole_at_80_columns(text):
+    """No line of ``text`` wider than 80 columns, no cell cut with an ellipsis."""
+    for line in text.splitlines():
+        assert len(line) <= 80, line
+    assert "…" not in text
+
+
+@pytest.mark.filterwarnings("ignore::avrisk.rare.final_stage.UnreliableEstimateWarning")
+def test_the_demo_table_is_whole_at_80_columns():
+    rows = []
+    for problem in (beta_sum_problem(6, p=1e-5), gaussian_linear_problem(100, p=1e-6)):
+        naive = naive_mc(problem.f, problem.base, problem.gamma, 2000, seed=0)
+        ce = cross_entropy(
+            problem.f, problem.base, problem.gamma, rho=0.1, n_per_iter=500,
+            n_iter=3, n_final=1000, seed=0,
+        )  # fmt: skip
+        rows.append((problem, [naive, ce]))
+    console = Console(width=80, record=True, file=io.StringIO())
+    console.print(analytic_table(2000, 0, rows))
+    text = console.export_text()
+    assert_whole_at_80_columns(text)
+    for problem, estimates in rows:
+        assert problem.name in text and f"{problem.p_exact:.3e}" in text
+        for est in estimates:  # every cell whole, on one line
+            lo, hi = est.ci
+            assert f"{est.p:.3e}" in text and f"{lo:.2e}..{hi:.2e}" in text
+
+
 def test_run_fits_80_columns_and_leads_with_the_answer(short_scenario, tmp_path):
     result = invoke("run", short_scenario, "--out", tmp_path / "run", *RUN_ARGS)
     assert result.exit_code == 0, result.output
-    for line in result.stdout.splitlines():
-        assert len(line) <= 80, line
+    assert_whole_at_80_columns(result.stdout)
     for line in result.stderr.splitlines():  # but the path of the report
         assert len(line) <= 80 or line.startswith("report: "), line
     first = result.stdout.lstrip().splitlines()[0]
@@ -47,7 +78,6 @@ def test_run_fits_80_columns_and_leads_with_the_answer(short_scenario, tmp_path)
     # every column of the table is there, none cut short
     for header in ("gamma [s]", "stderr", "95% CI", "hits", "ESS", "Pareto k"):
         assert header in result.stdout
-    assert "…" not in result.stdout
 
 
 def test_the_plan_and_the_measured_rate_come_before_the_results(
@@ -97,7 +127,10 @@ def test_compare_json_has_one_variance_ratio_per_threshold(short_scenario, tmp_p
         assert {"variance_ratio", "rare_event_ratio", "p_from"} <= set(row)
         assert "variance_reduction" not in row
     assert "plan: " in result.stderr and "590 rollouts in all" in words(result.stderr)
-    tables = words(invoke("report", out, "--failures", 0).stdout)
+    report = invoke("report", out, "--failures", 0)
+    assert_whole_at_80_columns(report.stdout)  # the tables of a comparison
+    assert "rare-event" in report.stdout  # the comparison table
+    tables = words(report.stdout)
     # the runs other than the answer's say why they are not trusted
     assert tables.count("trust at 1 s: caution (") == 2
 
