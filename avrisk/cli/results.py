@@ -21,7 +21,7 @@ from avrisk.pipeline import RunDirectory
 from avrisk.pipeline.files import json_text
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.results import jsonable
-from avrisk.report.answer import Headline, headline, run_trust, trust_at
+from avrisk.report.answer import Headline, headline, run_trust, threshold_trust
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
 from avrisk.scenario import ScenarioSpec
 
@@ -39,14 +39,18 @@ def answer(runs: Runs, spec: ScenarioSpec) -> Headline:
 
 
 def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
-    """The answer in one sentence, then every run's estimate at every threshold."""
+    """The answer in one sentence, then every run's estimate at every threshold.
+
+    After each run's table: that its search converged (a search that did not
+    is a reason of its trust), and its trust when not ok (the answer's
+    reasons are in the answer).
+    """
     lead = answer(runs, spec)
     out_console.print(f"[bold]{escape(lead.sentence())}[/]", highlight=False)
     out_console.print(escape(lead.time_base()), highlight=False)
     for label, run_dir in runs:
         summary = run_dir.summary()
         est = summary["estimate"]
-        weighted = estimator_class(summary["method"]).weighted
         table = compact_table(
             f"{label}, {est['n_evals']:,} rollouts: P(min TTC <= gamma) per rollout",
             f"95% interval: {_interval(est)}" if _interval(est) else None,
@@ -62,9 +66,12 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
                 str(g["n_hits"]),
                 f"{g['ess'] or 0:.1f}",
                 "-" if g.get("pareto_k") is None else f"{g['pareto_k']:.2f}",
-                trust_at(g, weighted).word,
+                threshold_trust(summary, g).word,
             )
         out_console.print(table)
+        search = estimator_class(summary["method"]).convergence(est, est["gamma"])
+        if search is not None and search.converged:  # else a reason of its trust
+            out_console.print(f"{escape(label)}: {search.sentence()}", highlight=False)
         trust = run_trust(summary)
         if not trust.ok and label != lead.label:  # the answer's reasons are above
             out_console.print(
@@ -270,7 +277,10 @@ def result_document(
         Schema :data:`RESULT_SCHEMA`; non-finite numbers are ``null``. Keys
         ``answer`` (:meth:`Headline.to_dict`), ``runs`` (per run: ``label``,
         ``path``, ``method``, ``n_rollouts``, ``rollouts_reused`` from an
-        earlier session, ``stopped_by``, ``by_gamma`` with ``trust`` and
+        earlier session, ``stopped_by``, ``search`` (whether the estimator's
+        search converged at the main threshold,
+        :meth:`~avrisk.rare.results.SearchConvergence.to_dict`; null for a
+        method without one), ``by_gamma`` with ``trust`` and
         ``reasons`` per threshold, ``mechanisms`` at the main threshold),
         ``comparison`` (or null) and ``report`` (or null).
     """
@@ -278,10 +288,11 @@ def result_document(
     for label, run_dir in runs:
         summary = run_dir.summary()
         est = summary["estimate"]
-        weighted = estimator_class(summary["method"]).weighted
+        estimator = estimator_class(summary["method"])
+        search = estimator.convergence(est, est["gamma"])
         by_gamma = []
         for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
-            trust = trust_at(g, weighted)
+            trust = threshold_trust(summary, g)
             by_gamma.append(
                 {
                     key: g.get(key)
@@ -308,6 +319,7 @@ def result_document(
                 "n_rollouts": est["n_evals"],
                 "rollouts_reused": summary["timing"]["rollouts_replayed"],
                 "stopped_by": est.get("stopped_by", "budget"),
+                "search": None if search is None else search.to_dict(),
                 "by_gamma": by_gamma,
                 "mechanisms": _mechanisms(summary),
             }

@@ -80,15 +80,51 @@ def test_run_fits_80_columns_and_leads_with_the_answer(short_scenario, tmp_path)
         assert header in result.stdout
 
 
+def test_a_search_that_converged_says_so(short_scenario, tmp_path):
+    out = tmp_path / "run"
+    args = [a if a != "1.0" else "1.5" for a in RUN_ARGS]  # --gamma 1.5: in reach
+    result = invoke("run", short_scenario, "--out", out, *args)
+    assert result.exit_code == 0, result.output
+    doc = json.loads(invoke("report", out, "--failures", 0, "--json").stdout)
+    search = doc["runs"][0]["search"]
+    assert search["converged"] and search["n_iter"] == 2
+    assert search["gamma"] == 1.5 and search["last_quantile"] <= 1.5
+    assert f"cross-entropy: {search['sentence']}" in words(result.stdout)
+    assert search["sentence"].endswith("and held it (converged)")
+    assert not any("search" in r for r in doc["answer"]["reasons"])
+
+
 def test_the_plan_and_the_measured_rate_come_before_the_results(
     short_scenario, tmp_path
 ):
     result = invoke("run", short_scenario, "--out", tmp_path / "run", *RUN_ARGS)
     err = words(result.stderr)
     assert "plan: cross-entropy (CE 2x60 + 100): 220 rollouts; samples take" in err
-    assert "about 60 kB on disk (275 B a rollout)" in err
+    # 24 parameters of highway_idm: 24 x 9.5 + 45 B
+    assert "about 60 kB on disk (an estimate: 273 B a rollout)" in err
     assert "rate: " in err and "rollouts/s on the first 60: about" in err
     assert err.index("plan:") < err.index("rate:")
+    assert disk_figures(err)[0] == pytest.approx(273, rel=0.15)  # as estimated
+
+
+def disk_figures(err):
+    """The disk a rollout takes [B] as the plan estimates it, and as measured."""
+    estimate = err.split("(an estimate: ")[1].split(" B a rollout")[0]
+    measured = err.split("; disk: ")[1].split(" B a rollout")[0]
+    return [float(x.replace(",", "")) for x in (measured, estimate)]
+
+
+def test_the_plan_measures_the_disk_of_a_scenario_that_records_more(tmp_path):
+    """The learned drivers' 404-d xi, stored: ten times the disk of the default."""
+    scenario = shortened_scenario(tmp_path, 0.3, scenario="highway_default")
+    args = ("--n-per-iter", 50, "--n-iter", 1, "--n-final", 50, "--failures", 0)
+    result = invoke(
+        "run", scenario, "--out", tmp_path / "run", *args, "--store-full-samples"
+    )
+    assert result.exit_code == 0, result.output
+    measured, estimate = disk_figures(words(result.stderr))
+    assert estimate > 2000 and measured > 2000  # against 273 B without xi
+    assert measured == pytest.approx(estimate, rel=0.15)
 
 
 def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
@@ -105,6 +141,10 @@ def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
     assert run["n_rollouts"] == 220 and run["path"] == str(out)
     assert [g["gamma"] for g in run["by_gamma"]] == [0.5, 1.0, 2.0]
     assert {"p", "ci", "pareto_k", "trust", "reasons"} <= set(run["by_gamma"][0])
+    # 2 iterations of 60 do not take CE's level down to 1 s: said, and not trusted
+    assert run["search"]["converged"] is False and run["search"]["reached_at"] is None
+    assert answer["trust"] == "caution"
+    assert answer["reasons"][0].startswith("the search did not reach f <= 1: its ")
     assert doc["comparison"] is None
     again = invoke("report", out, "--failures", 0, "--json")
     assert json.loads(again.stdout)["answer"] == answer
