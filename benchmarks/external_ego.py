@@ -82,7 +82,7 @@ def main() -> None:
     parser.add_argument("--batches", default="1,64,1024")
     parser.add_argument("--seconds", type=float, default=5.0)
     args = parser.parse_args()
-    cli = "from avrisk.cli.app import main; main()"
+    cli = "from avrisk.cli import main; main()"
     servers = {"python": [sys.executable, "-c", cli, "serve-ego", "--address"]}
     if args.cpp:
         servers["c++"] = [args.cpp]

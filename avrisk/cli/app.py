@@ -65,8 +65,3 @@ def _scenarios(ctx: typer.Context) -> None:
 
 scenarios.command("show")(show_scenario)
 app.add_typer(scenarios, name="scenarios")
-
-
-def main() -> None:
-    """Entry point of the ``avrisk`` console script."""
-    app()

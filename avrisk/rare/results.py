@@ -198,16 +198,14 @@ class SearchConvergence:
                 f"{self.n_iter} iterations was {self.lowest:.3g}, so its proposal aims "
                 "at a less rare event (raise n_iter or rho)"
             )
+        after = f"after {self.reached_at + 1} of its {self.n_iter} iterations"
         if not self.converged:
             return (
-                f"the search reached {g} at iteration {self.reached_at} but its last "
-                f"iteration's rho-quantile of f was back at {self.last:.3g}: the "
-                "proposal had not settled (raise n_per_iter)"
+                f"the search reached {g} {after} but its last iteration's "
+                f"rho-quantile of f was back at {self.last:.3g}: the proposal had "
+                "not settled (raise n_per_iter)"
             )
-        return (
-            f"the search reached {g} at iteration {self.reached_at} of "
-            f"{self.n_iter} and held it (converged)"
-        )
+        return f"the search reached {g} {after} and held it (converged)"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready, with ``converged`` and the ``sentence``."""

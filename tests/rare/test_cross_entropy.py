@@ -343,7 +343,10 @@ def test_a_search_long_enough_converges_and_a_short_one_says_it_did_not(
     first = next(k for k, q in enumerate(quantiles) if q <= problem.gamma)
     assert long.converged and long.reached_at == first and 2 <= first < 7
     assert long.n_iter == 8 and long.last == quantiles[-1] <= problem.gamma
-    assert "held it (converged)" in long.sentence()
+    assert long.sentence() == (
+        f"the search reached f <= {problem.gamma:g} after {first + 1} of its 8 "
+        "iterations and held it (converged)"
+    )
     assert not short.converged and short.reached_at is None
     assert short.lowest == min(short_quantiles) > problem.gamma
     assert short.sentence().startswith(
@@ -357,7 +360,10 @@ def test_a_search_that_left_gamma_again_has_not_converged():
     history = [{"quantile": q} for q in (3.0, 0.8, 1.4)]
     search = CrossEntropy.convergence({"history": history}, 1.0)
     assert search.reached_at == 1 and search.last == 1.4 and not search.converged
-    assert "reached f <= 1 at iteration 1 but its last iteration's" in search.sentence()
+    assert search.sentence().startswith(
+        "the search reached f <= 1 after 2 of its 3 iterations but its last "
+        "iteration's rho-quantile of f was back at 1.4"
+    )
     # the same search at a threshold it never left, and at one it never reached
     assert CrossEntropy.convergence({"history": history}, 1.5).converged
     assert CrossEntropy.convergence({"history": history}, 0.5).reached_at is None
