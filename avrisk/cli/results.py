@@ -21,7 +21,13 @@ from avrisk.pipeline import RunDirectory
 from avrisk.pipeline.files import json_text
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.results import jsonable
-from avrisk.report.answer import Headline, headline, run_trust, threshold_trust
+from avrisk.report.answer import (
+    Headline,
+    headline,
+    run_trust,
+    search_sentence,
+    threshold_trust,
+)
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
 from avrisk.scenario import ScenarioSpec
 
@@ -71,7 +77,9 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
         out_console.print(table)
         search = estimator_class(summary["method"]).convergence(est, est["gamma"])
         if search is not None and search.converged:  # else a reason of its trust
-            out_console.print(f"{escape(label)}: {search.sentence()}", highlight=False)
+            out_console.print(
+                f"{escape(label)}: {escape(search_sentence(search))}", highlight=False
+            )
         trust = run_trust(summary)
         if not trust.ok and label != lead.label:  # the answer's reasons are above
             out_console.print(
@@ -279,8 +287,9 @@ def result_document(
         ``path``, ``method``, ``n_rollouts``, ``rollouts_reused`` from an
         earlier session, ``stopped_by``, ``search`` (whether the estimator's
         search converged at the main threshold,
-        :meth:`~avrisk.rare.results.SearchConvergence.to_dict`; null for a
-        method without one), ``by_gamma`` with ``trust`` and
+        :meth:`~avrisk.rare.results.SearchConvergence.to_dict` and its
+        ``sentence``; null for a method without one), ``by_gamma`` with
+        ``trust`` and
         ``reasons`` per threshold, ``mechanisms`` at the main threshold),
         ``comparison`` (or null) and ``report`` (or null).
     """
@@ -319,7 +328,9 @@ def result_document(
                 "n_rollouts": est["n_evals"],
                 "rollouts_reused": summary["timing"]["rollouts_replayed"],
                 "stopped_by": est.get("stopped_by", "budget"),
-                "search": None if search is None else search.to_dict(),
+                "search": None
+                if search is None
+                else search.to_dict() | {"sentence": search_sentence(search)},
                 "by_gamma": by_gamma,
                 "mechanisms": _mechanisms(summary),
             }

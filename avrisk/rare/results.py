@@ -189,26 +189,30 @@ class SearchConvergence:
         """Reached ``gamma``, and held it at the last iteration."""
         return self.reached_at is not None and self.last <= self.gamma
 
-    def sentence(self) -> str:
-        """What the search did, in one clause (a reason when not converged)."""
-        g = f"f <= {self.gamma:g}"
+    def sentence(self, measure: str = "f", unit: str = "") -> str:
+        """What the search did, in one clause (a reason when not converged).
+
+        ``measure`` names ``f`` and ``unit`` follows its values (``"min TTC"``
+        and ``" s"`` say it of a time to collision).
+        """
+        g = f"{measure} <= {self.gamma:g}{unit}"
         if self.reached_at is None:
             return (
-                f"the search did not reach {g}: its lowest rho-quantile of f in "
-                f"{self.n_iter} iterations was {self.lowest:.3g}, so its proposal aims "
-                "at a less rare event (raise n_iter or rho)"
+                f"the search did not reach {g}: its lowest rho-quantile of {measure} "
+                f"in {self.n_iter} iterations was {self.lowest:.3g}{unit}, so its "
+                "proposal aims at a less rare event (raise n_iter or rho)"
             )
         after = f"after {self.reached_at + 1} of its {self.n_iter} iterations"
         if not self.converged:
             return (
                 f"the search reached {g} {after} but its last iteration's "
-                f"rho-quantile of f was back at {self.last:.3g}: the proposal had "
-                "not settled (raise n_per_iter)"
+                f"rho-quantile of {measure} was back at {self.last:.3g}{unit}: the "
+                "proposal had not settled (raise n_per_iter)"
             )
         return f"the search reached {g} {after} and held it (converged)"
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready, with ``converged`` and the ``sentence``."""
+        """JSON-ready, with ``converged``."""
         return jsonable(
             {
                 "gamma": self.gamma,
@@ -217,7 +221,6 @@ class SearchConvergence:
                 "reached_at": self.reached_at,
                 "lowest_quantile": self.lowest,
                 "last_quantile": self.last,
-                "sentence": self.sentence(),
             }
         )
 

@@ -22,7 +22,7 @@ from typing import Any
 
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS
-from avrisk.rare.results import jsonable
+from avrisk.rare.results import SearchConvergence, jsonable
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 
 SECONDS_PER_HOUR = 3600.0
@@ -83,7 +83,8 @@ def trust_at(threshold: Mapping[str, Any], weighted: bool) -> Trust:
         reasons.append("no rollout reached the threshold: the interval is a bound only")
     elif not weighted and hits < MIN_RELIABLE_ESS:
         reasons.append(
-            f"only {hits} hits: relative standard error about {1 / math.sqrt(hits):.0%}"
+            f"only {hits} {'hit' if hits == 1 else 'hits'}: relative standard error "
+            f"about {1 / math.sqrt(hits):.0%}"
         )
     elif weighted and ess < MIN_RELIABLE_ESS:
         reasons.append(
@@ -133,7 +134,12 @@ def threshold_trust(summary: Mapping[str, Any], threshold: Mapping[str, Any]) ->
     search = estimator.convergence(summary["estimate"], threshold["gamma"])
     if search is None or search.converged:
         return own
-    return Trust((search.sentence(), *own.reasons))
+    return Trust((search_sentence(search), *own.reasons))
+
+
+def search_sentence(search: SearchConvergence) -> str:
+    """:meth:`SearchConvergence.sentence` of a search on the minimum TTC [s]."""
+    return search.sentence("min TTC", " s")
 
 
 def run_trust(summary: Mapping[str, Any]) -> Trust:

@@ -21,7 +21,12 @@ import pyarrow.compute as pc
 from avrisk.pipeline.files import write_atomic
 from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
 from avrisk.rare.estimator import estimator_class
-from avrisk.report.answer import headline, run_trust, threshold_trust
+from avrisk.report.answer import (
+    headline,
+    run_trust,
+    search_sentence,
+    threshold_trust,
+)
 from avrisk.report.failures import failure_view, p0_log_density_sample
 from avrisk.report.plots import (
     UNRELIABLE_MARK,
@@ -90,7 +95,8 @@ def _run_view(
             )
         ),
         "diagnostics": diagnostics,
-        "search": None if search is None else search.sentence(),
+        # a search that did not converge is a reason of the run's trust
+        "search": search_sentence(search) if search and search.converged else None,
         "mechanisms": next(
             (
                 m["by_label"]

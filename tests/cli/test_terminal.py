@@ -144,7 +144,7 @@ def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
     # 2 iterations of 60 do not take CE's level down to 1 s: said, and not trusted
     assert run["search"]["converged"] is False and run["search"]["reached_at"] is None
     assert answer["trust"] == "caution"
-    assert answer["reasons"][0].startswith("the search did not reach f <= 1: its ")
+    assert answer["reasons"][0].startswith("the search did not reach min TTC <= 1 s")
     assert doc["comparison"] is None
     again = invoke("report", out, "--failures", 0, "--json")
     assert json.loads(again.stdout)["answer"] == answer

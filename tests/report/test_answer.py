@@ -66,8 +66,8 @@ def test_a_search_that_did_not_converge_is_the_first_reason_for_caution():
     stalled = summary(quantiles=(1.9, 1.2, 0.8), pareto_k=0.9)
     trust = run_trust(stalled)
     assert trust.reasons[0].startswith(
-        "the search did not reach f <= 0.1: its lowest rho-quantile of f in 3 "
-        "iterations was 0.8"
+        "the search did not reach min TTC <= 0.1 s: its lowest rho-quantile of min "
+        "TTC in 3 iterations was 0.8 s, so its proposal aims at a less rare event"
     )
     assert "Pareto k = 0.90" in trust.reasons[1]  # the final stage's own, after
     converged = summary(quantiles=(1.9, 0.05, 0.02))
