@@ -220,7 +220,7 @@ class ProcessPoolEvaluator:
             return
         # Python 3.14 has ProcessPoolExecutor.terminate_workers; before, its
         # processes are only reachable through this attribute.
-        for process in list(getattr(self._pool, "_processes", {}).values()):
+        for process in list((getattr(self._pool, "_processes", None) or {}).values()):
             process.terminate()
         self.close()
 
