@@ -2,16 +2,16 @@
 
 :func:`main` loads the commands itself: loading takes seconds (torch), and a
 Ctrl-C meanwhile ends the command as one later would, with exit status 130
-and one line, not a traceback.
+and one line, not a traceback. The Typer application is
+:data:`avrisk.cli.app.app`.
 """
 
 import sys
-from typing import Any
 
 #: Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells give it).
 INTERRUPTED = 130
 
-__all__ = ["INTERRUPTED", "app", "main"]
+__all__ = ["INTERRUPTED", "main"]
 
 
 def main() -> None:
@@ -22,12 +22,3 @@ def main() -> None:
         sys.stderr.write("interrupted while loading: nothing was run\n")
         raise SystemExit(INTERRUPTED) from None
     app()
-
-
-def __getattr__(name: str) -> Any:
-    """``avrisk.cli.app``, the Typer application, loaded when first asked for."""
-    if name == "app":
-        from avrisk.cli.app import app
-
-        return app
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -194,7 +194,7 @@ def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(
         calls.append(1)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        record(self, batch)
+        return record(self, batch)
 
     monkeypatch.setattr(RunDirectory, "record", interrupted)
     result = invoke("run", short_scenario, "--out", out, *RUN_ARGS)

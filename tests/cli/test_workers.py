@@ -131,6 +131,20 @@ def assert_stopped_cleanly(process, err):
     return shlex.split(line.split("Resume with: ")[1])
 
 
+def test_ctrl_c_while_the_command_loads_is_one_line(tiny_scenario, tmp_path):
+    """Loading takes seconds (torch): a Ctrl-C then is no traceback either."""
+    out = tmp_path / "run"
+    process = start_avrisk("run", tiny_scenario, "--out", out, *CE_ARGS, "--workers", 2)
+    time.sleep(0.5)
+    os.killpg(process.pid, signal.SIGINT)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    # while loading (on a slow machine), or else the run's own line
+    assert "interrupted while loading: nothing was run" in err or "Resume with" in err
+    assert not out.exists()
+
+
 def test_ctrl_c_while_the_workers_start_is_one_line_from_the_parent(
     tiny_scenario, tmp_path
 ):
