@@ -130,7 +130,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0, help="of wire only")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
-    cli = "from avrisk.cli.app import main; main()"
+    cli = "from avrisk.cli import main; main()"
     servers = {"python server": [sys.executable, "-c", cli, "serve-ego", "--address"]}
     if args.cpp:
         servers["c++ server"] = [args.cpp]

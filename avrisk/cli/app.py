@@ -58,15 +58,10 @@ scenarios = typer.Typer(
 
 @scenarios.callback()
 def _scenarios(ctx: typer.Context) -> None:
-    """List the bundled scenarios, one line each; 'show NAME' prints one."""
+    """List the bundled scenarios with their descriptions; 'show NAME' prints one."""
     if ctx.invoked_subcommand is None:
         list_scenarios()
 
 
 scenarios.command("show")(show_scenario)
 app.add_typer(scenarios, name="scenarios")
-
-
-def main() -> None:
-    """Entry point of the ``avrisk`` console script."""
-    app()

@@ -16,6 +16,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from avrisk.cli import INTERRUPTED
 from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
 
 #: Diagnostics and progress go to stderr; results to stdout (so that a
@@ -23,9 +24,6 @@ from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
 #: ``$COLUMNS`` (80 when unset) when piped: the tables fit 80 columns.
 err_console = Console(stderr=True)
 out_console = Console()
-
-#: Exit status of a command stopped by Ctrl-C (128 + SIGINT, as shells give it).
-INTERRUPTED = 130
 
 
 class CliError(Exception):

@@ -25,6 +25,7 @@ from avrisk.cli.common import (
     user_errors,
 )
 from avrisk.cli.progress import RichRunMonitor
+from avrisk.cli.tables import add_columns, compact_table
 from avrisk.cli.workflow import EXPECTED, compare_runs, settings
 from avrisk.rare import CrossEntropy, Estimate, cross_entropy, naive_mc
 from avrisk.rare.cross_entropy import CESettings
@@ -33,18 +34,35 @@ from avrisk.testing import AnalyticProblem, beta_sum_problem, gaussian_linear_pr
 METHOD_LABELS = {"naive_mc": "naive MC", "cross_entropy": "CE"}
 
 
-def _row(table: Table, problem: AnalyticProblem, est: Estimate) -> None:
-    lo, hi = est.ci
-    rel = (est.p - problem.p_exact) / problem.p_exact
-    table.add_row(
-        problem.name,
-        METHOD_LABELS[est.method],
-        f"{problem.p_exact:.2e}",
-        f"{est.p:.3e}",
-        f"{lo:.2e}..{hi:.2e}",
-        f"{rel:+.1%}",
-        str(est.n_hits),
+def analytic_table(
+    budget: int, seed: int, results: list[tuple[AnalyticProblem, list[Estimate]]]
+) -> Table:
+    """Each problem's estimates against its exact ``p``; fits 80 columns.
+
+    One section per problem: a row with its name and exact ``p``, then a
+    row per method.
+    """
+    table = compact_table(f"Equal budget: {budget:,} calls of f each (seed {seed})")
+    add_columns(
+        table,
+        ["problem", "method", "estimate", "95% CI", "error", "hits"],
+        text=["problem", "method"],
     )
+    for problem, estimates in results:
+        table.add_row(problem.name, "exact", f"{problem.p_exact:.3e}")
+        for est in estimates:
+            lo, hi = est.ci
+            rel = (est.p - problem.p_exact) / problem.p_exact
+            table.add_row(
+                "",
+                METHOD_LABELS[est.method],
+                f"{est.p:.3e}",
+                f"{lo:.2e}..{hi:.2e}",
+                f"{rel:+.1%}",
+                str(est.n_hits),
+            )
+        table.add_section()
+    return table
 
 
 def demo(
@@ -89,21 +107,17 @@ def demo(
     problems = [beta_sum_problem(6, p=1e-5), gaussian_linear_problem(100, p=1e-6)]
     n_iter, n_per_iter = 8, max(100, budget // 25)
     n_final = budget - n_iter * n_per_iter
-    table = Table(title=f"Equal budget: {budget:,} calls of f each (seed {seed})")
-    for col in ("problem", "method", "exact p", "estimate", "95% CI", "error", "hits"):
-        table.add_column(col, justify="right" if col != "problem" else "left")
-    results = {}
+    results, rows = {}, []
     for problem in problems:
         naive = naive_mc(problem.f, problem.base, problem.gamma, budget, seed=seed)
         ce = _cross_entropy(console, problem, n_iter, n_per_iter, n_final, seed)
-        _row(table, problem, naive)
-        _row(table, problem, ce)
+        rows.append((problem, [naive, ce]))
         results[problem.name] = {
             "p_exact": problem.p_exact,
             "naive_mc": naive.to_dict(),
             "cross_entropy": ce.to_dict(),
         }
-    console.print(table)
+    console.print(analytic_table(budget, seed, rows))
     console.print(
         "Naive Monte Carlo needs about 1/(p eps^2) calls for relative error eps; "
         "cross-entropy importance sampling reaches a few percent with the same budget."

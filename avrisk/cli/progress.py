@@ -1,9 +1,10 @@
 """Rich progress display of an estimation run, and what the work will cost.
 
 A :class:`CostMeter` is shared by the runs of one command (a ``compare`` has
-three): before the first rollout it prints the plan (rollouts and disk), and
-once the first chunk has been simulated, the rate measured on it and the time
-the rest will take. A run that resumes says so when it ends: how many
+three): before the first rollout it prints the plan (rollouts, and disk as
+estimated from the scenario's parameters), and once the first chunk has been
+simulated, the rate measured on it and the time the rest will take, and the
+disk a rollout took in it. A run that resumes says so when it ends: how many
 rollouts it reused from the earlier session.
 """
 
@@ -60,14 +61,22 @@ class CostMeter:
         Each run of the command: its label, what it does (the estimator's
         ``describe()``) and the rollouts it plans.
     bytes_per_rollout : float
-        Disk a rollout takes in ``samples.parquet`` [B]; the chunk files hold
-        as much again until they are gathered at the end of a run.
+        Disk a rollout will take in ``samples.parquet`` [B], as estimated
+        before any is written
+        (:func:`~avrisk.pipeline.store.estimated_row_bytes`); the chunk files
+        hold as much again until they are gathered at the end of a run.
+
+    Attributes
+    ----------
+    measured_bytes : float or None
+        Disk a rollout took in the first chunk written [B] (:meth:`disk`).
     """
 
     console: Console
     plan: Sequence[tuple[str, str, int]]
     bytes_per_rollout: float
     done: int = 0
+    measured_bytes: float | None = None
     _announced: bool = False
     _measured: bool = False
 
@@ -86,15 +95,20 @@ class CostMeter:
         self.console.print(
             f"plan: {escape(runs)}: {self.total:,} rollouts{in_all}; samples take "
             f"about {megabytes(self.total * self.bytes_per_rollout)} on disk "
-            f"({self.bytes_per_rollout:,.0f} B a rollout)",
+            f"(an estimate: {self.bytes_per_rollout:,.0f} B a rollout)",
             highlight=False,
         )
+
+    def disk(self, row_bytes: float) -> None:
+        """The disk a rollout took in a chunk just written [B]: the first counts."""
+        if self.measured_bytes is None:
+            self.measured_bytes = row_bytes
 
     def count(self, n: int, seconds: float | None) -> None:
         """``n`` rollouts are done: simulated in ``seconds``, or replayed (None).
 
         The first simulated chunk gives the rate, and with it the time left
-        (said when some is).
+        (said when some is), and the disk measured on it (:meth:`disk`).
         """
         self.done += n
         if seconds is None or self._measured or seconds <= 0:
@@ -104,9 +118,16 @@ class CostMeter:
         left = max(self.total - self.done, 0)
         if not left:
             return
+        disk = self.measured_bytes
         self.console.print(
             f"rate: {rate:,.0f} rollouts/s on the first {n:,}: about "
-            f"{duration(left / rate)} for the {left:,} left",
+            f"{duration(left / rate)} for the {left:,} left"
+            + (
+                ""
+                if disk is None
+                else f"; disk: {disk:,.0f} B a rollout, about "
+                f"{megabytes(self.total * disk)} in all"
+            ),
             highlight=False,
         )
 
@@ -146,7 +167,7 @@ class RichRunMonitor:
         self._last = 0.0
 
     def __enter__(self) -> RichRunMonitor:
-        self._status = Column(no_wrap=True, overflow="ellipsis")
+        self._status = Column(overflow="fold")  # wraps, never cut
         elapsed = [TimeElapsedColumn()] if self.console.width >= WIDE else []
         self._progress = Progress(
             TextColumn("[bold]{task.description}", table_column=Column(no_wrap=True)),
@@ -201,3 +222,8 @@ class RichRunMonitor:
         """Show the estimator's status line after a step."""
         assert self._progress is not None
         self._progress.update(self._task, status=text)
+
+    def disk(self, row_bytes: float) -> None:
+        """Tell the cost meter the disk a rollout took in the first chunk [B]."""
+        if self.cost is not None:
+            self.cost.disk(row_bytes)

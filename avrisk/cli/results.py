@@ -13,16 +13,21 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from rich import box
 from rich.markup import escape
-from rich.table import Table
 
 from avrisk.cli.common import err_console, out_console
+from avrisk.cli.tables import add_columns, compact_table
 from avrisk.pipeline import RunDirectory
 from avrisk.pipeline.files import json_text
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.results import jsonable
-from avrisk.report.answer import Headline, headline, run_trust, trust_at
+from avrisk.report.answer import (
+    Headline,
+    headline,
+    run_trust,
+    search_sentence,
+    threshold_trust,
+)
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
 from avrisk.scenario import ScenarioSpec
 
@@ -30,32 +35,6 @@ from avrisk.scenario import ScenarioSpec
 RESULT_SCHEMA = "avrisk.result/1"
 
 Runs = list[tuple[str, RunDirectory]]
-
-
-def _table(title: str, caption: str | None = None) -> Table:
-    """A compact table (no vertical rules) that fits 80 columns."""
-    return Table(
-        title=escape(title),
-        caption=escape(caption) if caption else None,
-        box=box.SIMPLE_HEAD,
-        pad_edge=False,
-        collapse_padding=True,
-        title_justify="left",
-        caption_justify="left",
-    )
-
-
-def _columns(table: Table, names: list[str], wrap: str | None = None) -> None:
-    """Columns that never wrap, numbers right-aligned; text ``wrap`` may wrap.
-
-    A header wraps only where its name has a newline.
-    """
-    for name in names:
-        table.add_column(
-            escape(name),
-            justify="left" if name in (wrap, "trust") else "right",
-            no_wrap=name != wrap,
-        )
 
 
 def answer(runs: Runs, spec: ScenarioSpec) -> Headline:
@@ -66,20 +45,24 @@ def answer(runs: Runs, spec: ScenarioSpec) -> Headline:
 
 
 def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
-    """The answer in one sentence, then every run's estimate at every threshold."""
+    """The answer in one sentence, then every run's estimate at every threshold.
+
+    After each run's table: that its search converged (a search that did not
+    is a reason of its trust), and its trust when not ok (the answer's
+    reasons are in the answer).
+    """
     lead = answer(runs, spec)
     out_console.print(f"[bold]{escape(lead.sentence())}[/]", highlight=False)
     out_console.print(escape(lead.time_base()), highlight=False)
     for label, run_dir in runs:
         summary = run_dir.summary()
         est = summary["estimate"]
-        weighted = estimator_class(summary["method"]).weighted
-        table = _table(
+        table = compact_table(
             f"{label}, {est['n_evals']:,} rollouts: P(min TTC <= gamma) per rollout",
             f"95% interval: {_interval(est)}" if _interval(est) else None,
         )
         names = ["gamma [s]", "p", "stderr", "95% CI", "hits", "ESS", "Pareto k"]
-        _columns(table, [*names, "trust"])
+        add_columns(table, [*names, "trust"], text=["trust"])
         for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
             table.add_row(
                 f"{g['gamma']:g}",
@@ -89,9 +72,14 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
                 str(g["n_hits"]),
                 f"{g['ess'] or 0:.1f}",
                 "-" if g.get("pareto_k") is None else f"{g['pareto_k']:.2f}",
-                trust_at(g, weighted).word,
+                threshold_trust(summary, g).word,
             )
         out_console.print(table)
+        search = estimator_class(summary["method"]).convergence(est, est["gamma"])
+        if search is not None and search.converged:  # else a reason of its trust
+            out_console.print(
+                f"{escape(label)}: {escape(search_sentence(search))}", highlight=False
+            )
         trust = run_trust(summary)
         if not trust.ok and label != lead.label:  # the answer's reasons are above
             out_console.print(
@@ -120,8 +108,10 @@ def print_mechanisms(label: str, summary: dict[str, Any]) -> None:
     if not parts:
         return
     gamma = summary["estimate"]["gamma"]
-    table = _table(f"{label}: P(min TTC <= {gamma:g} s) by what happened")
-    _columns(table, ["what happened", "p", "95% CI", "share", "hits"], "what happened")
+    table = compact_table(f"{label}: P(min TTC <= {gamma:g} s) by what happened")
+    add_columns(
+        table, ["what happened", "p", "95% CI", "share", "hits"], text=["what happened"]
+    )
     for part in parts:
         share = part["share"]
         table.add_row(
@@ -193,11 +183,11 @@ def print_ratios(
     )
     if not all(row["reliable"] for row in rows):
         caption += " " + UNRELIABLE_NOTE + "."
-    table = _table(
+    table = compact_table(
         f"{label} against naive Monte Carlo, both with {n_rollouts:,} rollouts",
         caption,
     )
-    _columns(
+    add_columns(
         table,
         [
             "gamma\n[s]",
@@ -295,7 +285,11 @@ def result_document(
         Schema :data:`RESULT_SCHEMA`; non-finite numbers are ``null``. Keys
         ``answer`` (:meth:`Headline.to_dict`), ``runs`` (per run: ``label``,
         ``path``, ``method``, ``n_rollouts``, ``rollouts_reused`` from an
-        earlier session, ``stopped_by``, ``by_gamma`` with ``trust`` and
+        earlier session, ``stopped_by``, ``search`` (whether the estimator's
+        search converged at the main threshold,
+        :meth:`~avrisk.rare.results.SearchConvergence.to_dict` and its
+        ``sentence``; null for a method without one), ``by_gamma`` with
+        ``trust`` and
         ``reasons`` per threshold, ``mechanisms`` at the main threshold),
         ``comparison`` (or null) and ``report`` (or null).
     """
@@ -303,10 +297,11 @@ def result_document(
     for label, run_dir in runs:
         summary = run_dir.summary()
         est = summary["estimate"]
-        weighted = estimator_class(summary["method"]).weighted
+        estimator = estimator_class(summary["method"])
+        search = estimator.convergence(est, est["gamma"])
         by_gamma = []
         for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
-            trust = trust_at(g, weighted)
+            trust = threshold_trust(summary, g)
             by_gamma.append(
                 {
                     key: g.get(key)
@@ -333,6 +328,9 @@ def result_document(
                 "n_rollouts": est["n_evals"],
                 "rollouts_reused": summary["timing"]["rollouts_replayed"],
                 "stopped_by": est.get("stopped_by", "budget"),
+                "search": None
+                if search is None
+                else search.to_dict() | {"sentence": search_sentence(search)},
                 "by_gamma": by_gamma,
                 "mechanisms": _mechanisms(summary),
             }

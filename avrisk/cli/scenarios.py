@@ -2,9 +2,10 @@
 
 The bundled scenarios are YAML files inside the package
 (``avrisk/data/scenarios/``); ``avrisk run NAME`` takes them by name.
-``avrisk scenarios`` lists them one line each; ``avrisk scenarios show NAME``
-prints one (comments included) and ``--write FILE`` writes it as a starting
-file to edit, never over an existing file unless ``--force``.
+``avrisk scenarios`` lists them, a line of facts each and its description
+below; ``avrisk scenarios show NAME`` prints one (comments included) and
+``--write FILE`` writes it as a starting file to edit, never over an existing
+file unless ``--force``.
 """
 
 from __future__ import annotations
@@ -13,9 +14,8 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich import box
 from rich.markup import escape
-from rich.table import Table
+from rich.padding import Padding
 
 from avrisk.cli.common import (
     CliError,
@@ -35,25 +35,23 @@ from avrisk.scenario import (
 
 
 def list_scenarios() -> None:
-    """List the bundled scenarios, one line each (name, size, horizon, ego, what)."""
+    """List the bundled scenarios: a line of facts each, its description below.
+
+    The description wraps at the console's width, indented under its name.
+    """
     with user_errors(ScenarioSpecError):
-        table = Table(
-            box=box.SIMPLE_HEAD, pad_edge=False, collapse_padding=True, expand=True
+        specs = {name: load_spec(name) for name in bundled_scenarios()}
+    width = max(map(len, specs))
+    for name, spec in specs.items():
+        out_console.print(
+            f"[bold]{escape(f'{name:{width}}')}[/]  {spec.n_vehicles} vehicles, "
+            f"{spec.simulation.horizon:g} s, ego {escape(spec.ego.policy)}",
+            highlight=False,
         )
-        for name in ("name", "vehicles", "horizon", "ego"):
-            table.add_column(name, no_wrap=True)
-        # What is left of the line; cut with an ellipsis: one line each.
-        table.add_column("description", no_wrap=True, overflow="ellipsis", ratio=1)
-        for name in bundled_scenarios():
-            spec = load_spec(name)
-            table.add_row(
-                name,
-                str(spec.n_vehicles),
-                f"{spec.simulation.horizon:g} s",
-                spec.ego.policy,
-                escape(" ".join((spec.description or "").split())),
-            )
-    out_console.print(table)
+        out_console.print(
+            Padding(escape(" ".join((spec.description or "").split())), (0, 0, 1, 4)),
+            highlight=False,
+        )
     err_console.print(
         f"bundled in {escape(str(bundled_folder()))}; start your own with: avrisk "
         "scenarios show NAME --write my_scenario.yaml",

@@ -62,6 +62,7 @@ from avrisk.cli.readback import (
     read_table,
     stored_params,
 )
+from avrisk.cli.tables import add_columns, compact_table
 from avrisk.pipeline.files import write_parquet_atomic
 from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE, RunDirectory, samples_table
@@ -217,12 +218,10 @@ def _out_path(out: Path | None, default: Path, suffixes: Sequence[str]) -> Path:
 def _summary_table(table: pa.Table, wall_s: float) -> Table:
     n = table.num_rows
     f = table.column("f").to_numpy()
-    summary = Table(
-        title=f"{n} rollouts in {wall_s:.1f} s ({n / max(wall_s, 1e-9):.0f}/s)"
+    summary = compact_table(
+        f"{n} rollouts in {wall_s:.1f} s ({n / max(wall_s, 1e-9):.0f}/s)"
     )
-    summary.add_column("event")
-    summary.add_column("count", justify="right")
-    summary.add_column("fraction", justify="right")
+    add_columns(summary, ["event", "count", "fraction"], text=["event"])
     rows = [(f"min TTC <= {g:g} s", int(np.sum(f <= g))) for g in SUMMARY_GAMMAS]
     rows += [
         (k, int(np.sum(table.column(k).to_numpy())))

@@ -36,6 +36,7 @@ from avrisk.pipeline.provenance import (
 )
 from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.pipeline.repeatability import NotRepeatableError
+from avrisk.pipeline.store import estimated_row_bytes
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.rare.evaluation import Evaluator
@@ -161,24 +162,23 @@ def execute(
     return run_dir
 
 
-#: Disk a rollout takes in ``samples.parquet`` [B], measured on the bundled
-#: six-vehicle scenarios: with the learned drivers' ``xi`` left out (drawn
-#: again when read), and stored (``--store-full-samples``).
-SAMPLE_BYTES, SAMPLE_BYTES_WITH_XI = 275, 2600
-
-
 def cost_meter(
     spec: ScenarioSpec,
     plan: list[tuple[str, RunSettings]],
     *,
     store_full: bool = False,
 ) -> CostMeter:
-    """The cost of ``plan`` (label and settings of each run), printed on stderr."""
-    with_xi = store_full and spec.has_learned_drivers
+    """The cost of ``plan`` (label and settings of each run), printed on stderr.
+
+    The disk a rollout takes is estimated from the scenario's parameters
+    until the first chunk written measures it.
+    """
     return CostMeter(
         err_console,
         [(label, s.estimator.describe(), s.total_rollouts) for label, s in plan],
-        SAMPLE_BYTES_WITH_XI if with_xi else SAMPLE_BYTES,
+        estimated_row_bytes(
+            param_layout(spec).columns, base_distribution(spec), store_full=store_full
+        ),
     )
 
 

@@ -22,7 +22,7 @@ from avrisk.pipeline.lock import run_lock
 from avrisk.pipeline.manifest import RecordIntegrityWarning
 from avrisk.pipeline.mechanisms import decompose
 from avrisk.pipeline.repeatability import check_repeatable
-from avrisk.pipeline.store import RunDirectory
+from avrisk.pipeline.store import RunDirectory, marginal_row_bytes
 from avrisk.rare import (
     Estimate,
     EstimationContext,
@@ -147,6 +147,14 @@ class RunMonitor(Protocol):
     def status(self, text: str) -> None:
         """The estimator finished a step (a CE iteration): its status line."""
 
+    def disk(self, row_bytes: float) -> None:
+        """Disk a rollout takes in the samples [B], measured once per session.
+
+        On the first chunk of two or more rows that this session writes
+        (:func:`~avrisk.pipeline.store.marginal_row_bytes`), before its
+        :meth:`advance`.
+        """
+
 
 class SilentMonitor:
     """A monitor that shows nothing."""
@@ -158,6 +166,9 @@ class SilentMonitor:
         pass
 
     def status(self, text: str) -> None:  # noqa: D102
+        pass
+
+    def disk(self, row_bytes: float) -> None:  # noqa: D102
         pass
 
 
@@ -289,8 +300,16 @@ def _estimate(
     monitor: RunMonitor,
     evaluator: Evaluator,
 ) -> Estimate:
+    measured = False
+
     def on_batch(batch: StageBatch) -> None:
-        run_dir.record(batch)
+        nonlocal measured
+        table = run_dir.record(batch)
+        if not measured:
+            row_bytes = marginal_row_bytes(table)
+            if row_bytes is not None:
+                measured = True
+                monitor.disk(row_bytes)
         monitor.advance(len(batch.values), replayed=False)
 
     def cache(stage: int, chunk: int) -> StageBatch | None:

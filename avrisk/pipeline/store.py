@@ -65,8 +65,9 @@ from avrisk.pipeline.regenerate import (
     RegenerationError,
     Regenerator,
     chunk_meta,
+    large_block_columns,
 )
-from avrisk.rare import ExponentialFamily, StageBatch
+from avrisk.rare import ExponentialFamily, Product, StageBatch
 from avrisk.rare.problem import FINAL_STAGE
 
 SUMMARY_SCHEMA = "avrisk.summary/1"
@@ -80,6 +81,16 @@ LOCK_FILE = ".lock"
 #: Columns of the samples table besides the scenario parameters and extras.
 BOOKKEEPING = ("phase", "stage", "iteration", "chunk", "sample_id", "seed")
 DENSITIES = ("log_p0", "log_p_proposal", "log_weight", "weight", "f")
+
+#: Disk a stored parameter takes per rollout in a samples table [B]: a float64
+#: draw does not compress, and Parquet's dictionary encoding adds an index to
+#: its 8 bytes; a float32-rounded one (a learned driver's ``xi``) takes 4 and
+#: its index (measured on ``highway_default``'s stored ``xi``).
+PARAM_ROW_BYTES, FLOAT32_PARAM_ROW_BYTES = 9.5, 5.0
+#: Disk the other columns take per rollout (bookkeeping, densities, ``f`` and
+#: a simulator's outcomes) [B]: with ``highway_idm``'s 24 parameters, 272 B a
+#: rollout (:func:`marginal_row_bytes` of a naive run's samples table).
+OTHER_ROW_BYTES = 45
 
 
 class RunDirectoryError(ValueError):
@@ -243,11 +254,16 @@ class RunDirectory:
     def _chunk_path(self, stage: int, chunk: int) -> Path:
         return self.path / CHUNKS_DIR / f"stage{stage:04d}-chunk{chunk:06d}.parquet"
 
-    def record(self, batch: StageBatch) -> None:
+    def record(self, batch: StageBatch) -> pa.Table:
         """Store one evaluated chunk (atomically), large blocks left out if it can.
 
         The chunk is written first, then its manifest entry: a chunk that a
         kill left unlisted is evaluated again (see :meth:`cached`).
+
+        Returns
+        -------
+        pyarrow.Table
+            The rows as written (for :func:`marginal_row_bytes`).
         """
         table = samples_table(batch, self.param_names, self.units)
         if self._regenerator is not None and not self.store_full:
@@ -255,6 +271,7 @@ class RunDirectory:
             if meta is not None:
                 table = _leaving_out(table, meta)
         self._write_chunk(table, batch.stage, batch.chunk)
+        return table
 
     def _write_chunk(self, table: pa.Table, stage: int, chunk: int) -> None:
         path = self._chunk_path(stage, chunk)
@@ -674,6 +691,52 @@ def samples_table(
         for f in table.schema
     ]
     return table.cast(pa.schema(fields))
+
+
+def estimated_row_bytes(
+    param_names: Sequence[str],
+    base: ExponentialFamily | None = None,
+    *,
+    store_full: bool = False,
+) -> float:
+    """Disk a rollout will take in a run's samples, before any is written [B].
+
+    :data:`PARAM_ROW_BYTES` for each parameter stored
+    (:data:`FLOAT32_PARAM_ROW_BYTES` for the blocks of ``base`` that draw
+    float32-rounded samples), plus :data:`OTHER_ROW_BYTES`. A run directory
+    with ``base`` leaves its large blocks out unless ``store_full`` (see
+    :class:`RunDirectory`). Compression and further outputs of ``f`` make the
+    real figure differ: :func:`marginal_row_bytes` measures it on a chunk.
+    """
+    if base is None:
+        return PARAM_ROW_BYTES * len(param_names) + OTHER_ROW_BYTES
+    left_out = set() if store_full else set(large_block_columns(base, param_names))
+    total, start = float(OTHER_ROW_BYTES), 0
+    for block in base.blocks if isinstance(base, Product) else (base,):
+        names = param_names[start : start + block.dim]
+        start += block.dim
+        each = (
+            FLOAT32_PARAM_ROW_BYTES
+            if getattr(block, "float32_samples", False)
+            else PARAM_ROW_BYTES
+        )
+        total += each * sum(name not in left_out for name in names)
+    return total
+
+
+def marginal_row_bytes(table: pa.Table) -> float | None:
+    """Disk one more row of ``table`` takes in a Parquet file [B]; None under 2 rows.
+
+    The slope between the file of its first half and the file of the whole:
+    the file's fixed part (schema, metadata, footer) cancels, so a chunk of a
+    few rows gives what a rollout adds to a large samples table.
+    """
+    half = table.num_rows // 2
+    if half == 0:
+        return None
+    whole = len(parquet_bytes(table))
+    first = len(parquet_bytes(table.slice(0, half)))
+    return (whole - first) / (table.num_rows - half)
 
 
 def _narrowest(column: np.ndarray) -> np.ndarray:

@@ -54,7 +54,7 @@ from avrisk.rare.problem import (
     BatchFunction,
     RareEventProblem,
 )
-from avrisk.rare.results import CEInfo, Estimate
+from avrisk.rare.results import CEInfo, Estimate, SearchConvergence
 from avrisk.rare.stages import BatchCache, BatchRecorder, StageResult
 from avrisk.rare.stopping import StoppingRule
 from avrisk.rare.weights import (
@@ -353,6 +353,34 @@ def search_diagnostics(
     ]
 
 
+def search_convergence(
+    estimate: dict[str, Any], gamma: float
+) -> SearchConvergence | None:
+    """Whether a CE search reached ``gamma`` and held it (:class:`SearchConvergence`).
+
+    Parameters
+    ----------
+    estimate : dict
+        A summary's ``estimate`` (:meth:`Estimate.to_dict`): its ``history``
+        holds each iteration's ``quantile``.
+    gamma : float
+        The threshold asked about (the run's, or a test threshold).
+
+    Returns
+    -------
+    SearchConvergence or None
+        None without iterations (``n_iter = 0``: the final stage samples
+        ``P0``; nothing was searched).
+    """
+    quantiles = [h["quantile"] for h in estimate.get("history") or []]
+    if not quantiles:
+        return None
+    # A quantile recorded as null was not finite (every sample failed): inf.
+    levels = [math.inf if q is None else float(q) for q in quantiles]
+    reached = next((k for k, q in enumerate(levels) if q <= gamma), None)
+    return SearchConvergence(gamma, len(levels), reached, min(levels), levels[-1])
+
+
 @register_estimator
 class CrossEntropy:
     """Cross-entropy importance sampling (module docstring) as an Estimator."""
@@ -456,6 +484,9 @@ class CrossEntropy:
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
         """The search trajectory: levels, quantiles, hits and ESS per iteration."""
         return search_diagnostics("Cross-entropy search", estimate, "CE iteration")
+
+    #: Whether the search reached a threshold and held it.
+    convergence = staticmethod(search_convergence)
 
 
 @register_estimator

@@ -42,7 +42,7 @@ from avrisk.rare.problem import (
     sample_seeds,
     threshold_list,
 )
-from avrisk.rare.results import Estimate
+from avrisk.rare.results import Estimate, SearchConvergence
 from avrisk.rare.stages import (
     BatchCache,
     BatchRecorder,
@@ -405,6 +405,15 @@ class Estimator(Protocol, Generic[State, Info]):
     @staticmethod
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
         """Tables for a report, from a summary's ``estimate`` dictionary."""
+        ...
+
+    @staticmethod
+    def convergence(estimate: dict[str, Any], gamma: float) -> SearchConvergence | None:
+        """Whether its search reached ``gamma`` and held it, from a summary's estimate.
+
+        None for an estimator whose steps do not search for the event (naive
+        Monte Carlo) or always end at ``gamma`` (subset simulation).
+        """
         ...
 
 

@@ -92,6 +92,7 @@ from avrisk.rare.cross_entropy import (
     SearchIterations,
     ShareOfP0,
     search_checkpoint,
+    search_convergence,
     search_diagnostics,
     search_final_estimate,
     search_level,
@@ -656,6 +657,9 @@ class MixtureCrossEntropy:
             estimate,
             extra=(("live components", "n_components"),),
         )
+
+    #: Whether the search reached a threshold and held it.
+    convergence = staticmethod(search_convergence)
 
 
 def mixture_ce(

@@ -30,7 +30,7 @@ from avrisk.rare.problem import (
     BatchFunction,
     RareEventProblem,
 )
-from avrisk.rare.results import Estimate
+from avrisk.rare.results import Estimate, SearchConvergence
 from avrisk.rare.stages import BatchCache, BatchRecorder
 from avrisk.rare.stopping import StoppingRule
 
@@ -114,6 +114,11 @@ class NaiveMC:
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
         """No per-step tables."""
         return []
+
+    @staticmethod
+    def convergence(estimate: dict[str, Any], gamma: float) -> SearchConvergence | None:
+        """None: nothing is searched."""
+        return None
 
 
 def naive_mc(

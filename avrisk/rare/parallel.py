@@ -15,6 +15,12 @@ that evaluated its chunk), which the run directory records like any other.
 A worker that dies is never a silently wrong number: the process pool raises
 :class:`WorkerError` naming the chunk (the chunks recorded so far are kept, so
 rerunning resumes); Ray evaluates the lost chunk again elsewhere.
+
+Ctrl-C is the parent's alone: the workers are started with SIGINT blocked
+(a terminal sends it to every process of the command) and then ignore it, so
+none of them prints a traceback; the parent raises KeyboardInterrupt, and a
+pool left by an exception stops its workers at once rather than finishing
+chunks whose results nobody will record (:meth:`ProcessPoolEvaluator.terminate`).
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from multiprocessing import get_context
 from typing import Any
 
@@ -182,13 +189,14 @@ class ProcessPoolEvaluator:
         pool = self._pool
 
         def submit(task: EvalTask) -> Future[Outputs]:
-            return pool.submit(
-                evaluate_in_worker,
-                self.factory,
-                problem.batch_size,
-                self.backend,
-                task,
-            )
+            with _sigint_blocked():  # a worker it starts inherits the mask
+                return pool.submit(
+                    evaluate_in_worker,
+                    self.factory,
+                    problem.batch_size,
+                    self.backend,
+                    task,
+                )
 
         try:
             yield from in_flight(submit, tasks, 2 * self.workers, (BrokenProcessPool,))
@@ -202,8 +210,38 @@ class ProcessPoolEvaluator:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 
+    def terminate(self) -> None:
+        """Stop the worker processes now: the chunks under way are lost.
+
+        For a run that stops (Ctrl-C, an error): their results would not be
+        recorded, so waiting for them only delays the stop.
+        """
+        if self._pool is None:
+            return
+        # Python 3.14 has ProcessPoolExecutor.terminate_workers; before, its
+        # processes are only reachable through this attribute.
+        for process in list((getattr(self._pool, "_processes", None) or {}).values()):
+            process.terminate()
+        self.close()
+
     def __enter__(self) -> ProcessPoolEvaluator:
         return self
 
     def __exit__(self, *exc: Any) -> None:
-        self.close()
+        if exc[0] is None:
+            self.close()
+        else:
+            self.terminate()
+
+
+@contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """SIGINT held back in this thread meanwhile (delivered after, not lost)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)

@@ -152,6 +152,79 @@ class CEInfo(NamedTuple):
         return jsonable(self._asdict())
 
 
+@dataclass(frozen=True)
+class SearchConvergence:
+    """Whether an adaptive search reached a threshold and stayed there.
+
+    A cross-entropy search lowers its level ``gamma_k`` (the ``rho``-quantile
+    of ``f`` under the proposal of iteration ``k``) towards ``gamma``. It has
+    converged for ``gamma`` when some iteration's quantile reached it (at
+    least a share ``rho`` of that proposal's samples were hits, so the
+    updates were fitted to the event itself) and the last iteration's still
+    did (the proposal settled there rather than drifting away again).
+
+    Attributes
+    ----------
+    gamma : float
+        The threshold, in the unit of ``f``.
+    n_iter : int
+        Iterations of the search.
+    reached_at : int or None
+        First iteration (from 0) whose quantile was at most ``gamma``; None
+        if none was.
+    lowest : float
+        Lowest quantile of any iteration.
+    last : float
+        Quantile of the last iteration.
+    """
+
+    gamma: float
+    n_iter: int
+    reached_at: int | None
+    lowest: float
+    last: float
+
+    @property
+    def converged(self) -> bool:
+        """Reached ``gamma``, and held it at the last iteration."""
+        return self.reached_at is not None and self.last <= self.gamma
+
+    def sentence(self, measure: str = "f", unit: str = "") -> str:
+        """What the search did, in one clause (a reason when not converged).
+
+        ``measure`` names ``f`` and ``unit`` follows its values (``"min TTC"``
+        and ``" s"`` say it of a time to collision).
+        """
+        g = f"{measure} <= {self.gamma:g}{unit}"
+        if self.reached_at is None:
+            return (
+                f"the search did not reach {g}: its lowest rho-quantile of {measure} "
+                f"in {self.n_iter} iterations was {self.lowest:.3g}{unit}, so its "
+                "proposal aims at a less rare event (raise n_iter or rho)"
+            )
+        after = f"after {self.reached_at + 1} of its {self.n_iter} iterations"
+        if not self.converged:
+            return (
+                f"the search reached {g} {after} but its last iteration's "
+                f"rho-quantile of {measure} was back at {self.last:.3g}{unit}: the "
+                "proposal had not settled (raise n_per_iter)"
+            )
+        return f"the search reached {g} {after} and held it (converged)"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready, with ``converged``."""
+        return jsonable(
+            {
+                "gamma": self.gamma,
+                "converged": self.converged,
+                "n_iter": self.n_iter,
+                "reached_at": self.reached_at,
+                "lowest_quantile": self.lowest,
+                "last_quantile": self.last,
+            }
+        )
+
+
 class MixtureInfo(NamedTuple):
     """Diagnostics of one mixture cross-entropy iteration (:mod:`avrisk.rare.mixture`).
 

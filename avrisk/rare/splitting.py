@@ -123,7 +123,7 @@ from avrisk.rare.problem import (
     BatchFunction,
     RareEventProblem,
 )
-from avrisk.rare.results import Estimate, GammaEstimate
+from avrisk.rare.results import Estimate, GammaEstimate, SearchConvergence
 from avrisk.rare.stages import BatchCache, BatchRecorder
 
 #: Acceptance rate the pCN step ``beta`` is adapted towards.
@@ -474,6 +474,11 @@ class SubsetSimulation:
                 bars="survivors",
             )
         ]
+
+    @staticmethod
+    def convergence(estimate: dict[str, Any], gamma: float) -> SearchConvergence | None:
+        """None: its levels end at ``gamma``, or the run fails (SplittingError)."""
+        return None
 
 
 def next_level(

@@ -4,10 +4,13 @@ A run's ``summary.json`` holds an estimate at every threshold with the
 estimator's own diagnostics: hits, effective hits (ESS), the Pareto tail index
 of the hits' weights, rollouts that failed to evaluate. :func:`trust_at` reads
 them into ``ok`` or ``caution`` with the reasons (the rules of
-:func:`avrisk.rare.final_stage.is_reliable`, no other);
-:func:`headline` picks the answer among one or more runs and says it in one
-sentence, with its time base: ``p`` is per rollout, one rollout being
-``horizon`` seconds of driving from a situation drawn from P0.
+:func:`avrisk.rare.final_stage.is_reliable`, no other), and
+:func:`threshold_trust` adds whether the estimator's search converged there
+(a cross-entropy search that never reached the threshold, or did not hold
+it: :class:`avrisk.rare.results.SearchConvergence`); :func:`headline` picks
+the answer among one or more runs and says it in one sentence, with its time
+base: ``p`` is per rollout, one rollout being ``horizon`` seconds of driving
+from a situation drawn from P0.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from typing import Any
 
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS
-from avrisk.rare.results import jsonable
+from avrisk.rare.results import SearchConvergence, jsonable
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 
 SECONDS_PER_HOUR = 3600.0
@@ -80,7 +83,8 @@ def trust_at(threshold: Mapping[str, Any], weighted: bool) -> Trust:
         reasons.append("no rollout reached the threshold: the interval is a bound only")
     elif not weighted and hits < MIN_RELIABLE_ESS:
         reasons.append(
-            f"only {hits} hits: relative standard error about {1 / math.sqrt(hits):.0%}"
+            f"only {hits} {'hit' if hits == 1 else 'hits'}: relative standard error "
+            f"about {1 / math.sqrt(hits):.0%}"
         )
     elif weighted and ess < MIN_RELIABLE_ESS:
         reasons.append(
@@ -108,10 +112,39 @@ def main_threshold(summary: Mapping[str, Any]) -> dict[str, Any]:
     return next(g for g in est["by_gamma"] if g["gamma"] == est["gamma"])
 
 
+def threshold_trust(summary: Mapping[str, Any], threshold: Mapping[str, Any]) -> Trust:
+    """:func:`trust_at` one threshold of a run, and whether its search converged there.
+
+    Parameters
+    ----------
+    summary : mapping
+        The run's ``summary.json``.
+    threshold : mapping
+        One entry of its ``estimate.by_gamma``.
+
+    Returns
+    -------
+    Trust
+        The search's failure to converge first (:meth:`Estimator.convergence
+        <avrisk.rare.estimator.Estimator.convergence>`), then the final
+        stage's own reasons.
+    """
+    estimator = estimator_class(summary["method"])
+    own = trust_at(threshold, estimator.weighted)
+    search = estimator.convergence(summary["estimate"], threshold["gamma"])
+    if search is None or search.converged:
+        return own
+    return Trust((search_sentence(search), *own.reasons))
+
+
+def search_sentence(search: SearchConvergence) -> str:
+    """:meth:`SearchConvergence.sentence` of a search on the minimum TTC [s]."""
+    return search.sentence("min TTC", " s")
+
+
 def run_trust(summary: Mapping[str, Any]) -> Trust:
-    """:func:`trust_at` a run's main threshold."""
-    weighted = estimator_class(summary["method"]).weighted
-    return trust_at(main_threshold(summary), weighted)
+    """:func:`threshold_trust` at a run's main threshold."""
+    return threshold_trust(summary, main_threshold(summary))
 
 
 @dataclass(frozen=True)

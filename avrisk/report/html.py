@@ -21,7 +21,12 @@ import pyarrow.compute as pc
 from avrisk.pipeline.files import write_atomic
 from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
 from avrisk.rare.estimator import estimator_class
-from avrisk.report.answer import headline, run_trust, trust_at
+from avrisk.report.answer import (
+    headline,
+    run_trust,
+    search_sentence,
+    threshold_trust,
+)
 from avrisk.report.failures import failure_view, p0_log_density_sample
 from avrisk.report.plots import (
     UNRELIABLE_MARK,
@@ -60,9 +65,9 @@ def _run_view(
     est = summary["estimate"]
     timing = summary["timing"]
     rate = timing.get("rollouts_per_second")
-    weighted = estimator_class(summary["method"]).weighted
-    by_gamma = [
-        {"pareto_k": None, **g, "trust": trust_at(g, weighted)}  # older: no pareto_k
+    search = estimator_class(summary["method"]).convergence(est, est["gamma"])
+    by_gamma = [  # older summaries have no pareto_k
+        {"pareto_k": None, **g, "trust": threshold_trust(summary, g)}
         for g in sorted(est["by_gamma"], key=lambda g: g["gamma"])
     ]
     return {
@@ -90,6 +95,8 @@ def _run_view(
             )
         ),
         "diagnostics": diagnostics,
+        # a search that did not converge is a reason of the run's trust
+        "search": search_sentence(search) if search and search.converged else None,
         "mechanisms": next(
             (
                 m["by_label"]

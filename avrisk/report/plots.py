@@ -23,6 +23,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from avrisk.rare.estimator import DiagnosticTable  # noqa: E402
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable  # noqa: E402
@@ -166,8 +167,10 @@ def plot_diagnostic(
         below = axes[1, 0]
         below.bar(steps, table.column(table.bars), color="tab:orange")
         below.set_ylabel(table.bars)
+        below.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts
         below.grid(True, alpha=0.3)
     axes[-1, 0].set_xlabel(table.columns[0])
+    axes[-1, 0].xaxis.set_major_locator(MaxNLocator(integer=True))  # step numbers
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

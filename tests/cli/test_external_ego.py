@@ -91,7 +91,7 @@ def assert_same_rollouts(table, reference):
 def test_the_python_server_gives_the_in_process_samples(tmp_path, in_process):
     address = free_address()
     server = process(
-        sys.executable, "-c", "from avrisk.cli.app import main; main()",
+        sys.executable, "-c", "from avrisk.cli import main; main()",
         "serve-ego", "--address", address, "--noise", 0.3,
     )  # fmt: skip
     try:

@@ -11,10 +11,10 @@ def invoke(*args):
     return CliRunner().invoke(app, [str(a) for a in args], env={"COLUMNS": "80"})
 
 
-def test_scenarios_lists_every_bundled_scenario_one_line_each():
+def test_scenarios_lists_every_bundled_scenario_with_its_whole_description():
     result = invoke("scenarios")
     assert result.exit_code == 0, result.output
-    lines = result.stdout.strip().splitlines()
+    lines = result.stdout.splitlines()
     rows = [ln for ln in lines if ln.split() and ln.split()[0] in bundled_scenarios()]
     assert (
         [r.split()[0] for r in rows]
@@ -26,9 +26,12 @@ def test_scenarios_lists_every_bundled_scenario_one_line_each():
             "highway_rare",
         ]
     )
-    assert all(len(line) <= 80 for line in lines)
+    assert all(len(line) <= 80 for line in lines) and "…" not in result.stdout
     idm = next(r for r in rows if r.split()[0] == "highway_idm")
-    assert "6" in idm.split() and "10 s" in idm and "idm_mobil" in idm
+    assert "6 vehicles, 10 s, ego idm_mobil" in idm
+    text = " ".join(result.stdout.split())
+    for name in bundled_scenarios():  # each description whole, wrapped
+        assert " ".join(load_spec(name).description.split()) in text
     assert "avrisk/data/scenarios" in result.stderr  # where they live
 
 

@@ -1,16 +1,20 @@
 """What a person and a script see: 80 columns, ``--json``, the cost, Ctrl-C."""
 
 import inspect
+import io
 import json
 import shlex
 
 import pytest
+from rich.console import Console
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
+from avrisk.cli.demo import analytic_table
 from avrisk.cli.run import COMPARE_DEFAULTS, compare, estimator_options
 from avrisk.pipeline.store import RunDirectory
-from avrisk.rare import get_estimator
+from avrisk.rare import cross_entropy, get_estimator, naive_mc
+from avrisk.testing import beta_sum_problem, gaussian_linear_problem
 from tests.scenario_files import shortened_scenario
 
 
@@ -34,11 +38,38 @@ def words(text):
     return " ".join(text.split())
 
 
+def assert_whole_at_80_columns(text):
+    """No line of ``text`` wider than 80 columns, no cell cut with an ellipsis."""
+    for line in text.splitlines():
+        assert len(line) <= 80, line
+    assert "…" not in text
+
+
+@pytest.mark.filterwarnings("ignore::avrisk.rare.final_stage.UnreliableEstimateWarning")
+def test_the_demo_table_is_whole_at_80_columns():
+    rows = []
+    for problem in (beta_sum_problem(6, p=1e-5), gaussian_linear_problem(100, p=1e-6)):
+        naive = naive_mc(problem.f, problem.base, problem.gamma, 2000, seed=0)
+        ce = cross_entropy(
+            problem.f, problem.base, problem.gamma, rho=0.1, n_per_iter=500,
+            n_iter=3, n_final=1000, seed=0,
+        )  # fmt: skip
+        rows.append((problem, [naive, ce]))
+    console = Console(width=80, record=True, file=io.StringIO())
+    console.print(analytic_table(2000, 0, rows))
+    text = console.export_text()
+    assert_whole_at_80_columns(text)
+    for problem, estimates in rows:
+        assert problem.name in text and f"{problem.p_exact:.3e}" in text
+        for est in estimates:  # every cell whole, on one line
+            lo, hi = est.ci
+            assert f"{est.p:.3e}" in text and f"{lo:.2e}..{hi:.2e}" in text
+
+
 def test_run_fits_80_columns_and_leads_with_the_answer(short_scenario, tmp_path):
     result = invoke("run", short_scenario, "--out", tmp_path / "run", *RUN_ARGS)
     assert result.exit_code == 0, result.output
-    for line in result.stdout.splitlines():
-        assert len(line) <= 80, line
+    assert_whole_at_80_columns(result.stdout)
     for line in result.stderr.splitlines():  # but the path of the report
         assert len(line) <= 80 or line.startswith("report: "), line
     first = result.stdout.lstrip().splitlines()[0]
@@ -47,7 +78,20 @@ def test_run_fits_80_columns_and_leads_with_the_answer(short_scenario, tmp_path)
     # every column of the table is there, none cut short
     for header in ("gamma [s]", "stderr", "95% CI", "hits", "ESS", "Pareto k"):
         assert header in result.stdout
-    assert "…" not in result.stdout
+
+
+def test_a_search_that_converged_says_so(short_scenario, tmp_path):
+    out = tmp_path / "run"
+    args = [a if a != "1.0" else "1.5" for a in RUN_ARGS]  # --gamma 1.5: in reach
+    result = invoke("run", short_scenario, "--out", out, *args)
+    assert result.exit_code == 0, result.output
+    doc = json.loads(invoke("report", out, "--failures", 0, "--json").stdout)
+    search = doc["runs"][0]["search"]
+    assert search["converged"] and search["n_iter"] == 2
+    assert search["gamma"] == 1.5 and search["last_quantile"] <= 1.5
+    assert f"cross-entropy: {search['sentence']}" in words(result.stdout)
+    assert search["sentence"].endswith("and held it (converged)")
+    assert not any("search" in r for r in doc["answer"]["reasons"])
 
 
 def test_the_plan_and_the_measured_rate_come_before_the_results(
@@ -56,9 +100,31 @@ def test_the_plan_and_the_measured_rate_come_before_the_results(
     result = invoke("run", short_scenario, "--out", tmp_path / "run", *RUN_ARGS)
     err = words(result.stderr)
     assert "plan: cross-entropy (CE 2x60 + 100): 220 rollouts; samples take" in err
-    assert "about 60 kB on disk (275 B a rollout)" in err
+    # 24 parameters of highway_idm: 24 x 9.5 + 45 B
+    assert "about 60 kB on disk (an estimate: 273 B a rollout)" in err
     assert "rate: " in err and "rollouts/s on the first 60: about" in err
     assert err.index("plan:") < err.index("rate:")
+    assert disk_figures(err)[0] == pytest.approx(273, rel=0.15)  # as estimated
+
+
+def disk_figures(err):
+    """The disk a rollout takes [B] as the plan estimates it, and as measured."""
+    estimate = err.split("(an estimate: ")[1].split(" B a rollout")[0]
+    measured = err.split("; disk: ")[1].split(" B a rollout")[0]
+    return [float(x.replace(",", "")) for x in (measured, estimate)]
+
+
+def test_the_plan_measures_the_disk_of_a_scenario_that_records_more(tmp_path):
+    """The learned drivers' 404-d xi, stored: ten times the disk of the default."""
+    scenario = shortened_scenario(tmp_path, 0.3, scenario="highway_default")
+    args = ("--n-per-iter", 50, "--n-iter", 1, "--n-final", 50, "--failures", 0)
+    result = invoke(
+        "run", scenario, "--out", tmp_path / "run", *args, "--store-full-samples"
+    )
+    assert result.exit_code == 0, result.output
+    measured, estimate = disk_figures(words(result.stderr))
+    assert estimate > 2000 and measured > 2000  # against 273 B without xi
+    assert measured == pytest.approx(estimate, rel=0.15)
 
 
 def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
@@ -75,6 +141,10 @@ def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
     assert run["n_rollouts"] == 220 and run["path"] == str(out)
     assert [g["gamma"] for g in run["by_gamma"]] == [0.5, 1.0, 2.0]
     assert {"p", "ci", "pareto_k", "trust", "reasons"} <= set(run["by_gamma"][0])
+    # 2 iterations of 60 do not take CE's level down to 1 s: said, and not trusted
+    assert run["search"]["converged"] is False and run["search"]["reached_at"] is None
+    assert answer["trust"] == "caution"
+    assert answer["reasons"][0].startswith("the search did not reach min TTC <= 1 s")
     assert doc["comparison"] is None
     again = invoke("report", out, "--failures", 0, "--json")
     assert json.loads(again.stdout)["answer"] == answer
@@ -97,7 +167,10 @@ def test_compare_json_has_one_variance_ratio_per_threshold(short_scenario, tmp_p
         assert {"variance_ratio", "rare_event_ratio", "p_from"} <= set(row)
         assert "variance_reduction" not in row
     assert "plan: " in result.stderr and "590 rollouts in all" in words(result.stderr)
-    tables = words(invoke("report", out, "--failures", 0).stdout)
+    report = invoke("report", out, "--failures", 0)
+    assert_whole_at_80_columns(report.stdout)  # the tables of a comparison
+    assert "rare-event" in report.stdout  # the comparison table
+    tables = words(report.stdout)
     # the runs other than the answer's say why they are not trusted
     assert tables.count("trust at 1 s: caution (") == 2
 
@@ -121,7 +194,7 @@ def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(
         calls.append(1)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        record(self, batch)
+        return record(self, batch)
 
     monkeypatch.setattr(RunDirectory, "record", interrupted)
     result = invoke("run", short_scenario, "--out", out, *RUN_ARGS)

@@ -1,7 +1,13 @@
 """``avrisk run --workers N``: the numbers of one worker, bit for bit."""
 
 import json
+import os
+import shlex
+import signal
+import subprocess
 import sys
+import time
+from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
@@ -77,3 +83,112 @@ def test_the_ray_backend_without_ray_installed_says_how_to_install_it(
     assert result.exit_code == 2
     assert "the ray backend needs Ray: pip install 'avrisk[ray]'" in result.output
     assert "Traceback" not in result.output and not out.exists()
+
+
+#: A CE run of seven one-chunk stages: Ctrl-C lands with most of them to come.
+CE_ARGS = ("--rho", 0.1, "--n-per-iter", 200, "--n-iter", 6, "--n-final", 400)
+CE_ARGS += ("--gamma", 0.5, "--failures", 0)
+
+
+def live_processes(group):
+    """Pids of the processes of process group ``group`` that are not zombies.
+
+    From Linux's /proc (empty elsewhere).
+    """
+    pids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            state, _, pgrp = stat.read_text().rsplit(")", 1)[1].split()[:3]
+        except (OSError, ValueError):
+            continue  # gone meanwhile
+        if int(pgrp) == group and state != "Z":
+            pids.append(int(stat.parent.name))
+    return pids
+
+
+def start_avrisk(*args, stderr=subprocess.PIPE):
+    """``avrisk ARGS`` in a process group of its own, as a terminal runs it."""
+    return subprocess.Popen(
+        [sys.executable, "-c", "from avrisk.cli import main; main()", *map(str, args)],
+        stdout=subprocess.PIPE,
+        stderr=stderr,
+        text=True,
+        start_new_session=True,
+        env={**os.environ, "COLUMNS": "80"},
+    )
+
+
+def assert_stopped_cleanly(process, err):
+    """Exit status 130, the resume line, no traceback, no process left running."""
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    (line,) = [ln for ln in err.splitlines() if "Resume with: " in ln]
+    for _ in range(100):  # the workers are stopped, not left running
+        if not live_processes(process.pid):
+            break
+        time.sleep(0.1)
+    assert not live_processes(process.pid)
+    return shlex.split(line.split("Resume with: ")[1])
+
+
+def test_ctrl_c_while_the_command_loads_is_one_line(tiny_scenario, tmp_path):
+    """Loading takes seconds (torch): a Ctrl-C then is no traceback either."""
+    out = tmp_path / "run"
+    process = start_avrisk("run", tiny_scenario, "--out", out, *CE_ARGS, "--workers", 2)
+    time.sleep(0.5)
+    os.killpg(process.pid, signal.SIGINT)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    # while loading (on a slow machine), or else the run's own line
+    assert "interrupted while loading: nothing was run" in err or "Resume with" in err
+    assert not out.exists()
+
+
+def test_ctrl_c_while_the_workers_start_is_one_line_from_the_parent(
+    tiny_scenario, tmp_path
+):
+    """A terminal's Ctrl-C reaches workers still loading: they never print it."""
+    out = tmp_path / "run"
+    process = start_avrisk(
+        "run", tiny_scenario, "--out", out, *CE_ARGS, "--workers", 2,
+        stderr=subprocess.STDOUT,
+    )  # fmt: skip
+    lines = []
+    for line in process.stdout:  # the plan comes just before the workers start
+        lines.append(line)
+        if line.startswith("plan: "):
+            break
+    time.sleep(1.0)  # they are importing torch
+    os.killpg(process.pid, signal.SIGINT)
+    rest, _ = process.communicate(timeout=120)
+    assert_stopped_cleanly(process, "".join(lines) + rest)
+    assert not out.exists()  # nothing recorded, nothing left
+
+
+def test_ctrl_c_stops_the_workers_and_the_resumed_run_gives_the_same_estimate(
+    tiny_scenario, tmp_path
+):
+    out = tmp_path / "run"
+    process = start_avrisk("run", tiny_scenario, "--out", out, *CE_ARGS, "--workers", 2)
+    deadline = time.monotonic() + 300
+    while not list((out / "chunks").glob("*.parquet")):
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline, "no chunk recorded in 5 minutes"
+        time.sleep(0.05)
+    os.killpg(process.pid, signal.SIGINT)  # Ctrl-C: to every process of the group
+    _, err = process.communicate(timeout=120)
+    resume = assert_stopped_cleanly(process, err)
+    assert resume[:2] == ["avrisk", "run"] and "--workers" in resume
+    assert not list(out.rglob("*.tmp-*"))  # no half-written temporary file
+    recorded = len(list((out / "chunks").glob("*.parquet")))
+    assert 1 <= recorded < 7 and not (out / "summary.json").exists()
+
+    resumed = invoke(*resume[1:])
+    assert resumed.exit_code == 0, resumed.output
+    reused = f"resumed: {200 * recorded:,} rollouts reused from the earlier session"
+    assert reused in " ".join(resumed.stderr.split())
+    reference = tmp_path / "uninterrupted"
+    assert invoke("run", tiny_scenario, "--out", reference, *CE_ARGS).exit_code == 0
+    (_, estimate), (_, expected) = run_table(out), run_table(reference)
+    assert estimate == expected

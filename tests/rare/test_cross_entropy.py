@@ -9,12 +9,14 @@ from avrisk.rare import (
     CrossEntropy,
     EstimationContext,
     FixedCovNormal,
+    NaiveMC,
     RareEventProblem,
     ScaledBeta,
     UnreliableEstimateWarning,
     ZeroHitsWarning,
     cross_entropy,
     mixture_ce,
+    naive_mc,
     subset_simulation,
 )
 from avrisk.rare.cross_entropy import CESettings
@@ -317,3 +319,60 @@ def test_a_keyword_that_is_no_setting_is_a_type_error_naming_it(estimate):
         estimate(lambda x: x[:, 0], base, 0.0, n_iters=3)
     with pytest.raises(TypeError, match=rf"{name}\(\) takes settings of"):
         estimate(lambda x: x[:, 0], base, 0.0, settings=NaiveSettings())
+
+
+@pytest.mark.filterwarnings("ignore::avrisk.rare.UnreliableEstimateWarning")
+@pytest.mark.parametrize("search", [cross_entropy, mixture_ce], ids=["ce", "mixture"])
+@pytest.mark.parametrize(
+    "problem", [gaussian_linear_problem(2, p=1e-6), beta_sum_problem(6, p=1e-5)]
+)
+def test_a_search_long_enough_converges_and_a_short_one_says_it_did_not(
+    search, problem
+):
+    """rho 0.1 lowers the level about tenfold per iteration: ~6 to reach 1e-6."""
+    runs = {}
+    for n_iter in (8, 3):
+        est = search(
+            problem.f, problem.base, problem.gamma, seed=0, rho=0.1,
+            n_per_iter=2000, n_iter=n_iter, n_final=2000,
+        )  # fmt: skip
+        record = json.loads(json.dumps(est.to_dict()))  # as a summary holds it
+        quantiles = [h.quantile for h in est.history]
+        runs[n_iter] = (CrossEntropy.convergence(record, problem.gamma), quantiles)
+    (long, quantiles), (short, short_quantiles) = runs[8], runs[3]
+    first = next(k for k, q in enumerate(quantiles) if q <= problem.gamma)
+    assert long.converged and long.reached_at == first and 2 <= first < 7
+    assert long.n_iter == 8 and long.last == quantiles[-1] <= problem.gamma
+    assert long.sentence() == (
+        f"the search reached f <= {problem.gamma:g} after {first + 1} of its 8 "
+        "iterations and held it (converged)"
+    )
+    assert not short.converged and short.reached_at is None
+    assert short.lowest == min(short_quantiles) > problem.gamma
+    assert short.sentence().startswith(
+        f"the search did not reach f <= {problem.gamma:g}: its lowest rho-quantile "
+        f"of f in 3 iterations was {min(short_quantiles):.3g}"
+    )
+    assert short.to_dict()["converged"] is False
+
+
+def test_a_search_that_left_gamma_again_has_not_converged():
+    history = [{"quantile": q} for q in (3.0, 0.8, 1.4)]
+    search = CrossEntropy.convergence({"history": history}, 1.0)
+    assert search.reached_at == 1 and search.last == 1.4 and not search.converged
+    assert search.sentence().startswith(
+        "the search reached f <= 1 after 2 of its 3 iterations but its last "
+        "iteration's rho-quantile of f was back at 1.4"
+    )
+    # the same search at a threshold it never left, and at one it never reached
+    assert CrossEntropy.convergence({"history": history}, 1.5).converged
+    assert CrossEntropy.convergence({"history": history}, 0.5).reached_at is None
+
+
+def test_without_iterations_or_a_search_there_is_no_convergence_to_judge():
+    est = cross_entropy(
+        lambda x: x[:, 0], ScaledBeta(2.0, 2.0), 0.3, n_iter=0, n_final=100
+    )
+    assert CrossEntropy.convergence(est.to_dict(), 0.3) is None
+    naive = naive_mc(lambda x: x[:, 0], ScaledBeta(2.0, 2.0), 0.3, 100)
+    assert NaiveMC.convergence(naive.to_dict(), 0.3) is None

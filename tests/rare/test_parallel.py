@@ -1,6 +1,7 @@
 """Worker processes: the local result bit for bit, and a dead worker is an error."""
 
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -119,3 +120,43 @@ def test_a_factory_that_fails_in_the_workers_raises_its_own_error():
     with ProcessPoolEvaluator(BrokenFactory(), workers=1) as pool:
         with pytest.raises(ValueError, match="no component named 'nope'"):
             naive_mc(PROBLEM.f, PROBLEM.base, 0.0, 100, evaluator=pool)
+
+
+@dataclass(frozen=True)
+class SlowAfterFirstFactory:
+    """Builds PROBLEM.f; every chunk but the first to start sleeps 60 s."""
+
+    marker: str
+
+    def __call__(self):
+        f = gaussian_linear_problem(3, p=1e-4).f
+
+        def slow(x):
+            try:
+                os.close(os.open(self.marker, os.O_CREAT | os.O_EXCL))
+            except FileExistsError:
+                time.sleep(60)
+            return f(x)
+
+        return slow
+
+
+def test_a_run_stopped_by_an_exception_stops_its_workers_at_once(tmp_path):
+    """Ctrl-C: the chunks under way would not be recorded; nobody waits for them."""
+
+    def interrupt(batch):
+        raise KeyboardInterrupt
+
+    slow = SlowAfterFirstFactory(str(tmp_path / "first"))
+    with pytest.raises(KeyboardInterrupt):
+        with ProcessPoolEvaluator(slow, workers=2) as pool:
+            try:
+                naive_mc(
+                    PROBLEM.f, PROBLEM.base, PROBLEM.gamma, 30_000,
+                    on_batch=interrupt, evaluator=pool,
+                )  # fmt: skip
+            finally:
+                processes = list(pool._pool._processes.values())
+                start = time.monotonic()
+    assert time.monotonic() - start < 20  # not the 60 s of the chunks under way
+    assert processes and not any(p.is_alive() for p in processes)

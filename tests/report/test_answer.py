@@ -1,12 +1,14 @@
 import pytest
 
-from avrisk.report.answer import Trust, headline, run_trust, trust_at
+from avrisk.report.answer import Trust, headline, run_trust, threshold_trust, trust_at
 
 
-def summary(method="ce", p=1e-4, ci=(0.5e-4, 1.5e-4), **main):
+def summary(method="ce", p=1e-4, ci=(0.5e-4, 1.5e-4), quantiles=(), **main):
+    """A run's summary at gamma 0.1 s; ``quantiles``: its search's, per iteration."""
     g = {"gamma": 0.1, "p": p, "ci": list(ci), "n_hits": 50, "ess": 40.0}
     g.update(main)
     est = {"gamma": 0.1, "p": p, "ci": list(ci), "n_evals": 1000, "by_gamma": [g]}
+    est["history"] = [{"iteration": k, "quantile": q} for k, q in enumerate(quantiles)]
     return {"method": method, "estimate": est}
 
 
@@ -58,3 +60,22 @@ def test_the_headline_states_its_time_base_and_per_hour_approximation():
     unknown = headline([("ce", summary())], horizon_s=None)
     assert unknown.event == "P(min TTC <= 0.1 s) per rollout from P0"
     assert unknown.per_hour is None and unknown.to_dict()["per_hour_approx"] is None
+
+
+def test_a_search_that_did_not_converge_is_the_first_reason_for_caution():
+    stalled = summary(quantiles=(1.9, 1.2, 0.8), pareto_k=0.9)
+    trust = run_trust(stalled)
+    assert trust.reasons[0].startswith(
+        "the search did not reach min TTC <= 0.1 s: its lowest rho-quantile of min "
+        "TTC in 3 iterations was 0.8 s, so its proposal aims at a less rare event"
+    )
+    assert "Pareto k = 0.90" in trust.reasons[1]  # the final stage's own, after
+    converged = summary(quantiles=(1.9, 0.05, 0.02))
+    assert run_trust(converged).ok
+    # each threshold is judged on its own: the same search reached 1 s
+    at_one = {"gamma": 1.0, "n_hits": 80, "ess": 60.0}
+    assert threshold_trust(summary(quantiles=(1.9, 1.2, 0.8)), at_one).ok
+    # naive Monte Carlo searches nothing
+    assert run_trust(summary("naive", quantiles=())).ok
+    lead = headline([("cross-entropy", stalled)], horizon_s=10.0)
+    assert lead.to_dict()["reasons"][0].startswith("the search did not reach")
