@@ -83,11 +83,12 @@ forward model is the simulator's own differentiable step:
 ``ClosedLoopConfig(adversarial_weight > 0)`` back-propagates the
 discriminator's reward (:mod:`~avrisk.learning.mgail`) through replays of
 human car following into every weight of the network, with a gap and a TTC
-barrier as RAIL's collision penalty. On held-out windows it did not beat the
-default closed-loop stage, trajectory imitation plus the gap barrier, which
-the shipped files use (BENCHMARKS.md, "Learned drivers"). Model-free GAIL with
-PPO (:func:`~avrisk.learning.gail.gail_finetune`, the acceleration rows of the
-shared head only) is not run by ``train_drivers`` either; it did not reduce
-the rear-end collisions. The ensemble is one trunk with ``m`` bootstrap heads
+barrier as RAIL's collision penalty. The shipped files add it to trajectory
+imitation (the default ``ClosedLoopConfig``): on held-out windows that had
+fewer rear-end collisions than imitation or MGAIL with the same barriers
+(BENCHMARKS.md, "Learned drivers"). Model-free GAIL with PPO
+(:func:`~avrisk.learning.gail.gail_finetune`, the acceleration rows of the
+shared head only) is not run by ``train_drivers``; it did not reduce the
+rear-end collisions. The ensemble is one trunk with ``m`` bootstrap heads
 (DESIGN.md §4), not ``m`` independently trained generators.
 """

@@ -42,12 +42,12 @@ class ClosedLoopConfig:
         of the gap in the training windows is about 2.6 m).
     safety_weight : float, default=1.0
         Weight of the barrier [1/m^2].
-    ttc_margin : float, default=0.0
+    ttc_margin : float, default=2.0
         Time to collision below which a second barrier acts [s]: ``(closing
         speed - gap / ttc_margin)_+^2`` [m^2/s^2] per step while in line. It
         grows while the follower closes in fast, before the gap is short (0:
         off).
-    ttc_weight : float, default=1.0
+    ttc_weight : float, default=10.0
         Weight of the TTC barrier [s^2/m^2].
     imitation_weight : float, default=1.0
         Weight of the speed and gap imitation terms (0: the recorded
@@ -55,7 +55,7 @@ class ClosedLoopConfig:
         ``adversarial_weight``).
     offset_weight : float, default=1.0
         Weight of the lane-offset imitation term (lateral windows).
-    adversarial_weight : float, default=0.0
+    adversarial_weight : float, default=1.0
         Weight of MGAIL's reward (:mod:`avrisk.learning.mgail`): the loss
         gets ``-adversarial_weight`` times the mean discriminator reward of the
         simulated transitions (0: no discriminator).
@@ -84,11 +84,11 @@ class ClosedLoopConfig:
     hard_brake_oversample: float = 1.0
     gap_margin: float = 2.0
     safety_weight: float = 1.0
-    ttc_margin: float = 0.0
-    ttc_weight: float = 1.0
+    ttc_margin: float = 2.0
+    ttc_weight: float = 10.0
     imitation_weight: float = 1.0
     offset_weight: float = 1.0
-    adversarial_weight: float = 0.0
+    adversarial_weight: float = 1.0
     disc_hidden: int = 64
     disc_lr: float = 1e-3
     disc_epochs: int = 2

@@ -148,7 +148,8 @@ def test_the_ttc_barrier_acts_on_fast_closing_in_line_and_not_on_slow():
     above = ClosedLoopConfig(ttc_margin=float(ttc.min()) * 0.99)
     assert closed_loop_loss(trace, win, below)[1]["ttc"] > 0.0
     assert closed_loop_loss(trace, win, above)[1]["ttc"] == 0.0
-    assert closed_loop_loss(trace, win, ClosedLoopConfig())[1]["ttc"] == 0.0
+    off = ClosedLoopConfig(ttc_margin=0.0)
+    assert closed_loop_loss(trace, win, off)[1]["ttc"] == 0.0
     passed = type(trace)(**{**trace.__dict__, "in_line": torch.zeros_like(trace.alive)})
     assert closed_loop_loss(passed, win, below)[1]["ttc"] == 0.0
     # Its value is the mean squared excess closing speed over the alive steps.
@@ -166,6 +167,7 @@ def test_mgail_reward_gradient_reaches_every_weight_and_not_the_discriminator():
         imitation_weight=0.0,
         offset_weight=0.0,
         safety_weight=0.0,
+        ttc_margin=0.0,
         adversarial_weight=1.0,
     )
     loss, parts = closed_loop_loss(trace, win, config, disc)
