@@ -120,6 +120,70 @@ def hard_brake_events(a, ok):
     return int(onset.sum() + hard[:, 0].sum())
 
 
+def poisson_rate_ci(k: int, hours: float, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Garwood) confidence interval of a Poisson rate, ``k`` events [1/h]."""
+    tail = (1.0 - level) / 2.0
+    lo = stats.chi2.ppf(tail, 2 * k) / 2.0 if k > 0 else 0.0
+    hi = stats.chi2.ppf(1.0 - tail, 2 * k + 2) / 2.0
+    return float(lo) / hours, float(hi) / hours
+
+
+def impacts(res, win_index: np.ndarray, human_win: CarFollowingWindows) -> np.ndarray:
+    """One row per replay that hit its leader, for :func:`collision_table`.
+
+    Columns: held-out window index, impact step, follower and leader speed at
+    impact [m/s], hardest simulated deceleration before it [m/s^2], the
+    human's hardest deceleration in the same window [m/s^2], and whether the
+    leader came to a near stop (< 0.5 m/s) in the window.
+    """
+    rows = []
+    for k in np.flatnonzero(res.crash):
+        t = int(res.alive[k].sum()) - 1
+        w = win_index[k]
+        a = np.diff(res.v[k, : t + 1]) / DT
+        rows.append(
+            (
+                w,
+                t,
+                res.v[k, t],
+                res.v_l[k, t],
+                a.min() if a.size else 0.0,
+                (np.diff(human_win.v_f[w]) / DT).min(),
+                human_win.v_l[w].min() < 0.5,
+            )
+        )
+    return np.asarray(rows, dtype=float).reshape(-1, 7)
+
+
+def collision_table(results: dict) -> str:
+    """Where part A's collisions with the leader happen, per model."""
+    lines = [
+        "**Collisions of part A, per model** (medians over the collisions; "
+        "windows by held-out index, with their number of collisions)",
+        "",
+        "| model | collisions | windows | speed at impact [m/s] | leader speed "
+        "[m/s] | hardest decel before [m/s^2] | human's in the same windows "
+        "[m/s^2] | leader near stop [-] |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for name, r in results.items():
+        rows = r["impacts"]
+        if not len(rows):
+            lines.append(f"| {name} | 0 | - | - | - | - | - | - |")
+            continue
+        w, count = np.unique(rows[:, 0].astype(int), return_counts=True)
+        top = ", ".join(
+            f"{i}: {c}"
+            for i, c in sorted(zip(w, count, strict=True), key=lambda p: -p[1])[:6]
+        )
+        med = np.median(rows, axis=0)
+        lines.append(
+            f"| {name} | {len(rows)} | {len(w)} ({top}) | {med[2]:.1f} | "
+            f"{med[3]:.1f} | {med[4]:.2f} | {med[5]:.2f} | {rows[:, 6].mean():.2f} |"
+        )
+    return "\n".join(lines)
+
+
 def lane_changes(lane_pos: np.ndarray, alive: np.ndarray, margin: float = 0.3) -> int:
     """Lane-index changes with hysteresis; ``lane_pos`` in lane units, (N, T)."""
     count = 0
@@ -184,7 +248,8 @@ def part_a(
     road = Road()
     human_win = held_out_windows(n_steps, road)
     human_hours = len(human_win) * n_steps * DT / 3600
-    win = human_win.take(np.tile(np.arange(len(human_win)), replicates))
+    win_index = np.tile(np.arange(len(human_win)), replicates)
+    win = human_win.take(win_index)
     n = len(win)
     hours = n * n_steps * DT / 3600
     human_alive = np.ones_like(human_win.v_f, bool)
@@ -224,6 +289,7 @@ def part_a(
         )
         lat = win.has_lateral
         results[name] = {
+            "impacts": impacts(res, win_index, human_win),
             "speed": v,
             "accel": a,
             "jerk": j,
@@ -234,6 +300,7 @@ def part_a(
             "lc": lane_changes(lane_pos, out["alive"]) / hours,
             "crash": out["crash"].sum() / hours,
             "crash_windows": int(out["crash"].sum()),
+            "crash_ci": poisson_rate_ci(int(out["crash"].sum()), hours),
             "offroad": out["offroad"].sum() / hours,
             "gap_rmse": float(
                 np.sqrt(np.mean((out["gap"][:, -1] - win.gap[:, -1]) ** 2))
@@ -283,9 +350,11 @@ def part_a(
         + " |"
     )
     lines.append(
-        "| collisions with the leader [1/veh-h] (windows) | 0 | "
+        "| collisions with the leader [1/veh-h] [95% CI] (windows) | 0 | "
         + " | ".join(
-            f"{r['crash']:.2f} ({r['crash_windows']})" for r in results.values()
+            f"{r['crash']:.2f} [{r['crash_ci'][0]:.2f}, {r['crash_ci'][1]:.2f}] "
+            f"({r['crash_windows']})"
+            for r in results.values()
         )
         + " |"
     )
@@ -626,6 +695,8 @@ def main() -> None:
     print(table_a)
     print()
     print(targets_table(human, results))
+    print()
+    print(collision_table(results))
     if args.figure:
         draw_part_a(human, results, args.figure)
         print(f"\nwrote {args.figure}")

@@ -38,6 +38,10 @@ order, with the settings of :mod:`~avrisk.learning.train_config`)
   residuals and its scale by replays;
 * :mod:`~avrisk.learning.dagger` -- expert labels on the states the learned
   drivers visit, and the DAgger rounds;
+* :mod:`~avrisk.learning.closed_loop` -- back-propagation through replays of
+  training windows in the simulator's own step: trajectory imitation, gap and
+  TTC barriers, and (optional) MGAIL's discriminator reward;
+* :mod:`~avrisk.learning.mgail` -- the discriminator of that reward;
 * :mod:`~avrisk.learning.bootstrap_heads` -- the bootstrap ensemble of heads;
 * :mod:`~avrisk.learning.xi_prior_fit` -- ``P0(xi)`` fitted to the heads, and
   the validation NLLs;
@@ -49,8 +53,8 @@ order, with the settings of :mod:`~avrisk.learning.train_config`)
 Not part of :func:`~avrisk.learning.train.train_drivers`
 
 * :mod:`~avrisk.learning.gail` -- GAIL with PPO: fine-tunes the acceleration
-  head of a trained network in replays of human car following (the shipped
-  weights are BC + DAgger).
+  head of a trained network in replays of human car following (not used by
+  the shipped weights).
 
 What the data can and cannot teach
 ----------------------------------
@@ -70,19 +74,21 @@ changes it drifted half-way into the next lane and sideswiped), so lane
 changes are not demonstrated. The human rate (US-101, about 50 per
 vehicle-hour) is not matched.
 
-Not done (the paper's method)
------------------------------
+The paper's method
+------------------
 The paper trains its generators with model-based GAIL (Baram et al. 2017): a
-discriminator reward made differentiable through a learned forward model.
-Model-based GAIL is not implemented. The shipped generators are trained by
-behaviour cloning with DAgger. Model-free GAIL with PPO exists as an optional
-fine-tuning stage (:func:`~avrisk.learning.gail.gail_finetune`), limited to
-car following behind replayed human leaders and to the acceleration rows of
-the shared head (its shift is carried over to the ``xi`` prior by
-translation); it is not run by ``train_drivers`` and the shipped files do not
-use it. Measured on held-out windows (``benchmarks/gail_realism.py``) it brings
-the speed, acceleration, jerk, gap and TTC distributions closer to the human
-ones but does not reduce the rear-end collisions. The ensemble is one trunk
-with ``m`` bootstrap heads (DESIGN.md §4), not ``m`` independently trained
-generators.
+discriminator reward made differentiable through a forward model. Here the
+forward model is the simulator's own differentiable step:
+:func:`~avrisk.learning.closed_loop.closed_loop_finetune` with
+``ClosedLoopConfig(adversarial_weight > 0)`` back-propagates the
+discriminator's reward (:mod:`~avrisk.learning.mgail`) through replays of
+human car following into every weight of the network, with a gap and a TTC
+barrier as RAIL's collision penalty. The shipped files add it to trajectory
+imitation (the default ``ClosedLoopConfig``): on held-out windows that had
+fewer rear-end collisions than imitation or MGAIL with the same barriers
+(BENCHMARKS.md, "Learned drivers"). Model-free GAIL with PPO
+(:func:`~avrisk.learning.gail.gail_finetune`, the acceleration rows of the
+shared head only) is not run by ``train_drivers``; it did not reduce the
+rear-end collisions. The ensemble is one trunk with ``m`` bootstrap heads
+(DESIGN.md §4), not ``m`` independently trained generators.
 """

@@ -13,19 +13,31 @@ and as differentiable-simulation imitation does (e.g. Scheel et al. 2021,
         follower (the network, actions sampled with the deployed AR(1) noise,
         reparameterised) starts from the recorded state; the leader replays
         its recorded speed profile (:mod:`avrisk.learning.replay`)
-    loss = imitation + safety
+    loss = imitation + safety - adversarial
         imitation: Huber distance of the simulated follower's speed, gap and
             (lateral windows) lane offset to the human's, per step, each
             divided by a scale (1 m/s, 2 m, 0.3 m)
         safety: (gap_margin - gap)_+^2 per step [m^2] while the two overlap
             laterally: a barrier that grows before contact (a crash stops the
-            rollout, and no gradient flows through the steps after it)
+            rollout, and no gradient flows through the steps after it); and,
+            if ttc_margin > 0, (closing speed - gap / ttc_margin)_+^2
+            [m^2/s^2]: a barrier on a time to collision under ttc_margin,
+            which acts while the follower closes in fast, before the gap is
+            short
+        adversarial (MGAIL, if adversarial_weight > 0): the mean reward
+            -log(1 - D(x_t)) of a discriminator D of human vs simulated
+            transitions x_t (:mod:`avrisk.learning.mgail`), updated on the
+            same minibatch just before; its gradient flows through the
+            simulated transitions into the policy, as in model-based GAIL
+            (Baram et al. 2017) with the simulator as the model, and the
+            barriers play the part of RAIL's collision penalty
     one Adam step on every weight of the network (trunk and shared head)
 
 Early stopping on validation windows (a fixed part of the training windows,
 chosen by seed): the weights of the iteration with the lowest validation
-loss are kept. The noise buffers (``noise_correlation``, ``noise_scale``)
-are kept as calibrated before.
+loss are kept; the adversarial term is left out of it, as its discriminator
+moves from one iteration to the next. The noise buffers
+(``noise_correlation``, ``noise_scale``) are kept as calibrated before.
 """
 
 from __future__ import annotations
@@ -40,12 +52,19 @@ from torch import Tensor
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import pack_xi
+from avrisk.learning.gail import transition_features
+from avrisk.learning.mgail import Discriminator
 from avrisk.learning.ngsim_demonstrations import DEFAULT_WIDTH
-from avrisk.learning.replay import CarFollowingWindows, replay_setup
+from avrisk.learning.replay import DT, CarFollowingWindows, replay_setup
 from avrisk.learning.train_config import ClosedLoopConfig, Progress, TrainEvent
 from avrisk.sim import Road
 
-__all__ = ["closed_loop_finetune", "closed_loop_loss", "differentiable_replay"]
+__all__ = [
+    "closed_loop_finetune",
+    "closed_loop_loss",
+    "differentiable_replay",
+    "simulated_transitions",
+]
 
 
 #: Scales of the imitation terms: speed [m/s], gap [m], lane offset [m].
@@ -61,6 +80,8 @@ class ClosedLoopTrace:
     v, gap, offset : Tensor of shape (W, T)
         Speed [m/s], gap to the leader [m], offset from the lane centre [m]
         at steps ``1 .. T``.
+    v_l : Tensor of shape (W, T)
+        The leader's speed [m/s] at steps ``1 .. T`` (replayed).
     alive : Tensor of bool, shape (W, T)
         The follower had not hit its leader before the step.
     in_line : Tensor of bool, shape (W, T)
@@ -70,6 +91,7 @@ class ClosedLoopTrace:
     """
 
     v: Tensor
+    v_l: Tensor
     gap: Tensor
     offset: Tensor
     alive: Tensor
@@ -106,17 +128,19 @@ def differentiable_replay(
     centre = torch.as_tensor(road.lane_center_y(windows.lane))
     half_lengths = torch.as_tensor(0.5 * (windows.len_f + windows.len_l))
     half_widths = torch.as_tensor(0.5 * windows.width_f + 0.5 * DEFAULT_WIDTH)
-    v, gap, offset, alive, in_line = [], [], [], [], []
+    v, v_l, gap, offset, alive, in_line = [], [], [], [], [], []
     for t in range(windows.n_steps):
         alive.append(carry.alive)
         carry, _ = sim.step(carry, t, seeds, actors, masks)
         s = carry.state
         v.append(s.speed[:, 0])
+        v_l.append(s.speed[:, 1])
         gap.append(s.x[:, 1] - s.x[:, 0] - half_lengths.to(s.x))
         offset.append(s.y[:, 0] - centre.to(s.y))
         in_line.append((s.y[:, 1] - s.y[:, 0]).abs() < half_widths.to(s.y))
     return ClosedLoopTrace(
         v=torch.stack(v, 1),
+        v_l=torch.stack(v_l, 1),
         gap=torch.stack(gap, 1),
         offset=torch.stack(offset, 1),
         alive=torch.stack(alive, 1),
@@ -125,10 +149,44 @@ def differentiable_replay(
     )
 
 
+def simulated_transitions(
+    trace: ClosedLoopTrace, windows: CarFollowingWindows
+) -> tuple[Tensor, Tensor]:
+    """MGAIL's discriminator inputs of the simulated follower, with gradient.
+
+    Parameters
+    ----------
+    trace : ClosedLoopTrace
+        Of ``windows`` (``T`` steps).
+    windows : CarFollowingWindows
+        Give the initial state (step 0).
+
+    Returns
+    -------
+    x : Tensor of shape (W, T - 1, 5)
+        :func:`~avrisk.learning.gail.transition_features` of steps ``1 .. T-1``.
+    valid : Tensor of bool, shape (W, T - 1)
+        The step was simulated (its first state had not crashed).
+    """
+
+    def track(first: np.ndarray, rest: Tensor) -> Tensor:
+        return torch.cat([torch.as_tensor(first, dtype=rest.dtype)[:, None], rest], 1)
+
+    x = transition_features(
+        track(windows.v_f[:, 0], trace.v),
+        track(windows.v_l[:, 0], trace.v_l),
+        track(windows.gap[:, 0], trace.gap),
+    )
+    return x[:, 1:], trace.alive[:, 1:]
+
+
 def closed_loop_loss(
-    trace: ClosedLoopTrace, windows: CarFollowingWindows, config: ClosedLoopConfig
+    trace: ClosedLoopTrace,
+    windows: CarFollowingWindows,
+    config: ClosedLoopConfig,
+    discriminator: Discriminator | None = None,
 ) -> tuple[Tensor, dict[str, float]]:
-    """Imitation of the recorded follower plus the gap barrier.
+    """Imitation of the recorded follower, the barriers, and MGAIL's reward.
 
     Parameters
     ----------
@@ -136,14 +194,20 @@ def closed_loop_loss(
         Of ``windows``.
     windows : CarFollowingWindows
     config : ClosedLoopConfig
+        The terms' weights; ``ttc_margin = 0`` leaves out the TTC barrier.
+    discriminator : Discriminator, optional
+        With it (and ``config.adversarial_weight``), the loss gets minus the
+        weighted mean discriminator reward of the simulated transitions.
 
     Returns
     -------
     loss : Tensor of shape ()
         Mean over the windows' alive steps.
     parts : dict of str to float
-        The imitation terms ``"speed"``, ``"gap"``, ``"offset"``, and
-        ``"safety"``, ``"crash_rate"``.
+        The imitation terms ``"speed"``, ``"gap"``, ``"offset"``, the
+        barriers ``"safety"`` (gap) and ``"ttc"`` (0 when off),
+        ``"crash_rate"``, and ``"reward"`` (mean discriminator reward; with a
+        discriminator only).
     """
     dtype = trace.v.dtype
     alive = trace.alive.to(dtype)
@@ -160,17 +224,29 @@ def closed_loop_loss(
     speed = imitate(trace.v, windows.v_f, SPEED_SCALE, every)
     gap = imitate(trace.gap, windows.gap, GAP_SCALE, every)
     offset = imitate(trace.offset, windows.offset, OFFSET_SCALE, lateral)
-    imitation = speed + gap + config.offset_weight * offset
-    barrier = torch.relu(config.gap_margin - trace.gap) ** 2
-    safety = (barrier * alive * trace.in_line.to(dtype)).sum() / n
-    loss = imitation + config.safety_weight * safety
+    imitation = config.imitation_weight * (speed + gap) + config.offset_weight * offset
+    in_line = alive * trace.in_line.to(dtype)
+    safety = (torch.relu(config.gap_margin - trace.gap) ** 2 * in_line).sum() / n
+    ttc = torch.zeros((), dtype=dtype)
+    if config.ttc_margin > 0:
+        closing = trace.v - trace.v_l
+        excess = torch.relu(closing - trace.gap / config.ttc_margin)
+        ttc = (excess**2 * in_line).sum() / n
+    loss = imitation + config.safety_weight * safety + config.ttc_weight * ttc
     parts = {
         "speed": float(speed.detach()),
         "gap": float(gap.detach()),
         "offset": float(offset.detach()),
         "safety": float(safety.detach()),
+        "ttc": float(ttc.detach()),
         "crash_rate": float(trace.crash.to(dtype).mean()),
     }
+    if discriminator is not None:
+        x, valid = simulated_transitions(trace, windows)
+        valid = valid.to(dtype)
+        reward = (discriminator.reward(x) * valid).sum() / valid.sum().clamp_min(1.0)
+        loss = loss - config.adversarial_weight * reward
+        parts["reward"] = float(reward.detach())
     return loss, parts
 
 
@@ -178,6 +254,22 @@ def _split(n: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     order = np.random.default_rng(seed).permutation(n)
     n_val = max(1, int(round(fraction * n)))
     return np.sort(order[n_val:]), np.sort(order[:n_val])
+
+
+def _minibatch_weights(
+    windows: CarFollowingWindows, config: ClosedLoopConfig
+) -> np.ndarray | None:
+    """Draw probabilities of ``windows``: hard-braking ones oversampled.
+
+    None (uniform draws, as ``rng.choice`` without ``p``) when
+    ``hard_brake_oversample`` is 1.
+    """
+    if config.hard_brake_oversample == 1.0:
+        return None
+    leader_decel = np.diff(windows.v_l, axis=1).min(axis=1) / DT
+    hard = leader_decel < config.hard_brake_decel
+    weight = np.where(hard, config.hard_brake_oversample, 1.0)
+    return weight / weight.sum()
 
 
 def closed_loop_finetune(
@@ -218,6 +310,10 @@ def closed_loop_finetune(
     val_seeds = torch.arange(len(val), dtype=torch.int64) + 1_000_003 * (seed + 1)
     rng = np.random.default_rng(seed)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
+    disc = None
+    if config.adversarial_weight > 0:
+        human = windows.take(train_idx)
+        disc = Discriminator(human, config.disc_hidden, config.disc_lr, seed)
 
     def validate() -> dict[str, float]:
         with torch.no_grad():
@@ -230,20 +326,28 @@ def closed_loop_finetune(
     best = copy.deepcopy(net.state_dict())
     history: list[dict[str, float]] = [{"iteration": 0.0, **first}]
     net.train()
+    draw = _minibatch_weights(windows.take(train_idx), config)
     for it in range(config.iterations):
-        batch = rng.choice(train_idx, size=min(config.batch_windows, len(train_idx)))
+        size = min(config.batch_windows, len(train_idx))
+        batch = rng.choice(train_idx, size=size, p=draw)
         seeds = torch.as_tensor(
             seed * 1_000_003 + it * config.batch_windows + np.arange(len(batch)),
             dtype=torch.int64,
         )
         part = windows.take(batch)
         trace = differentiable_replay(part, net, road, seeds)
-        loss, parts = closed_loop_loss(trace, part, config)
+        disc_row = {}
+        if disc is not None:
+            x, valid = simulated_transitions(trace, part)
+            accuracy = disc.update(x[valid], config.disc_epochs, config.disc_batch)
+            disc_row = {"disc_accuracy": accuracy}
+        loss, parts = closed_loop_loss(trace, part, config, disc)
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), config.grad_clip)
         opt.step()
         row = {"iteration": float(it + 1), "loss": float(loss.detach()), **parts}
+        row |= disc_row
         if (it + 1) % config.validate_every == 0 or it + 1 == config.iterations:
             row |= validate()
             history.append(row)

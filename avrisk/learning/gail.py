@@ -37,10 +37,12 @@ the ``xi`` prior; the change of the head is carried over to the prior by a
 translation (:func:`translate_prior`). The noise buffers
 (``noise_correlation``, ``noise_scale``) are kept.
 
-Not done: model-based GAIL (the paper's MGAIL, Baram et al. 2017, which
-differentiates the discriminator through a learned forward model) is out of
-scope; this is model-free GAIL with PPO, on car following only (no lane
-changes, no multi-vehicle traffic).
+This is model-free GAIL with PPO, on car following only (no lane changes, no
+multi-vehicle traffic). Model-based GAIL (the paper's MGAIL, Baram et al.
+2017), whose policy gradient is the discriminator's reward differentiated
+through the dynamics, reuses :func:`transition_features` and
+:func:`train_discriminator` in :mod:`avrisk.learning.mgail` and
+:mod:`avrisk.learning.closed_loop`, through the simulator's own step.
 """
 
 from __future__ import annotations
@@ -48,12 +50,10 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import torch
 import torch.nn.functional as F
-from numpy.typing import NDArray
 from torch import Tensor, nn
 
 from avrisk.agents.drivers.driver import LearnedDriver, LearnedState
@@ -73,6 +73,7 @@ __all__ = [
     "accel_log_prob",
     "gae",
     "gail_finetune",
+    "human_transitions",
     "mlp",
     "ppo_update",
     "train_discriminator",
@@ -163,33 +164,40 @@ def mlp(n_in: int, hidden: int, n_out: int = 1) -> nn.Sequential:
 
 
 # ------------------------------------------------------------ transitions
-def transition_features(
-    v: NDArray[Any], v_l: NDArray[Any], gap: NDArray[Any]
-) -> NDArray[np.float32]:
+def transition_features(v: Tensor, v_l: Tensor, gap: Tensor) -> Tensor:
     """Discriminator inputs of every step of car-following tracks.
+
+    Differentiable: MGAIL (:mod:`avrisk.learning.mgail`) back-propagates the
+    discriminator's reward through them into a simulated follower.
 
     Parameters
     ----------
-    v, v_l : ndarray of shape (W, T+1)
+    v, v_l : Tensor of shape (W, T+1)
         Follower and leader speed [m/s].
-    gap : ndarray of shape (W, T+1)
+    gap : Tensor of shape (W, T+1)
         Bumper-to-bumper gap [m].
 
     Returns
     -------
-    ndarray of float32, shape (W, T, 5)
+    Tensor of shape (W, T, 5), the dtype of ``v``
         ``(v_t, gap_t, v_l,t - v_t, a_{t-1}, a_t)`` per step ``t``; row ``t = 0``
         has ``a_{-1} = 0`` and is not used (see the module docstring).
     """
-    a = np.diff(v, axis=1) / DT  # (W, T)
-    a_prev = np.concatenate([np.zeros_like(a[:, :1]), a[:, :-1]], axis=1)
-    x = np.stack([v[:, :-1], gap[:, :-1], (v_l - v)[:, :-1], a_prev, a], axis=-1)
-    return x.astype(np.float32)
+    a = torch.diff(v, dim=1) / DT  # (W, T)
+    a_prev = torch.cat([torch.zeros_like(a[:, :1]), a[:, :-1]], dim=1)
+    return torch.stack([v[:, :-1], gap[:, :-1], (v_l - v)[:, :-1], a_prev, a], dim=-1)
 
 
-def _human_transitions(windows: CarFollowingWindows) -> Tensor:
-    x = transition_features(windows.v_f, windows.v_l, windows.gap)[:, 1:]
-    return torch.from_numpy(x.reshape(-1, x.shape[-1]))
+def human_transitions(windows: CarFollowingWindows) -> Tensor:
+    """Discriminator inputs of the recorded followers, steps ``t >= 1``.
+
+    Returns
+    -------
+    Tensor of float32, shape (W * (T - 1), 5)
+    """
+    tracks = (torch.as_tensor(a) for a in (windows.v_f, windows.v_l, windows.gap))
+    x = transition_features(*tracks)[:, 1:].float()
+    return x.reshape(-1, x.shape[-1])
 
 
 class _Recorder:
@@ -240,7 +248,8 @@ def _rollouts(
         hidden = net.trunk(feats)
         mean, std = _accel_gaussian(net, hidden)
     valid = torch.from_numpy(res.alive[:, 1:].copy())
-    x = torch.from_numpy(transition_features(res.v, res.v_l, res.gap))
+    tracks = (torch.as_tensor(a) for a in (res.v, res.v_l, res.gap))
+    x = transition_features(*tracks).float()
     time = torch.arange(t, dtype=torch.float32).expand(n, t) / t
     return _Rollouts(
         hidden=hidden,
@@ -554,7 +563,7 @@ def gail_finetune(
         torch.manual_seed(seed)
         disc = mlp(5, config.disc_hidden)
         value_net = mlp(4, config.value_hidden)
-    human = _human_transitions(windows)
+    human = human_transitions(windows)
     x_mean, x_scale = _standardiser(human)
     human = (human - x_mean) / x_scale
     s_mean = torch.cat([x_mean[:3], torch.tensor([0.5])])

@@ -14,8 +14,9 @@ Pipeline of :func:`train_drivers` (DESIGN.md §4), one module a stage::
                       visited states; refit on the aggregate    (dagger.py)
     sampling noise  = again, for the final network
     closed loop     = back-propagation through replays of       closed-loop
-                      training windows: imitation + gap barrier  realism
-                                                        (closed_loop.py)
+                      training windows: imitation + MGAIL        realism
+                      reward + gap and TTC barriers
+                                              (closed_loop.py, mgail.py)
     heads 1..m      = the head refitted on m bootstrap resamples of the
                       episodes (trunk frozen, so the heads are comparable),
                       then moved together so that their mean is the
@@ -34,8 +35,9 @@ fixed thread count).
 
 The paper trains its generators with model-based GAIL (a discriminator's
 reward back-propagated through a model); the closed-loop stage here
-back-propagates an imitation loss of the recorded trajectories plus a gap
-barrier through the simulator itself (BENCHMARKS.md compares it with GAIL).
+back-propagates that reward, an imitation loss of the recorded trajectories
+and gap and TTC barriers through the simulator itself (BENCHMARKS.md compares
+it with each part alone and with GAIL).
 """
 
 from __future__ import annotations

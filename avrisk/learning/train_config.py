@@ -29,15 +29,47 @@ class ClosedLoopConfig:
         Steps per window (15 s), back-propagated through in full.
     lr : float, default=3e-4
         Adam learning rate.
+    hard_brake_decel : float, default=-2.0
+        A training window whose leader brakes harder than this at some step
+        [m/s^2] is a hard-braking window (about 8% of the I-80 training
+        windows; 6 of 1,067 also stop the leader after braking harder than
+        -2.5 m/s^2).
+    hard_brake_oversample : float, default=1.0
+        Hard-braking windows are drawn this many times as often as the others
+        into the minibatches (1: uniform draws).
     gap_margin : float, default=2.0
         Gap below which the safety barrier acts [m] (humans' 5th percentile
         of the gap in the training windows is about 2.6 m).
     safety_weight : float, default=1.0
         Weight of the barrier [1/m^2].
+    ttc_margin : float, default=2.0
+        Time to collision below which a second barrier acts [s]: ``(closing
+        speed - gap / ttc_margin)_+^2`` [m^2/s^2] per step while in line. It
+        grows while the follower closes in fast, before the gap is short (0:
+        off).
+    ttc_weight : float, default=10.0
+        Weight of the TTC barrier [s^2/m^2].
+    imitation_weight : float, default=1.0
+        Weight of the speed and gap imitation terms (0: the recorded
+        trajectories are not imitated, only matched in distribution through
+        ``adversarial_weight``).
     offset_weight : float, default=1.0
         Weight of the lane-offset imitation term (lateral windows).
+    adversarial_weight : float, default=1.0
+        Weight of MGAIL's reward (:mod:`avrisk.learning.mgail`): the loss
+        gets ``-adversarial_weight`` times the mean discriminator reward of the
+        simulated transitions (0: no discriminator).
+    disc_hidden : int, default=64
+        Width of the discriminator's hidden layers.
+    disc_lr : float, default=1e-3
+        Adam learning rate of the discriminator.
+    disc_epochs : int, default=2
+        Passes of the discriminator over the minibatch's transitions per step.
+    disc_batch : int, default=2048
+        Transitions of each class per discriminator step.
     validation_fraction : float, default=0.2
-        Training windows held out for early stopping.
+        Training windows held out for early stopping (on the loss without
+        its adversarial term, whose discriminator moves).
     validate_every : int, default=10
         Steps between validations.
     grad_clip : float, default=1.0
@@ -48,9 +80,19 @@ class ClosedLoopConfig:
     batch_windows: int = 64
     window_steps: int = 150
     lr: float = 3e-4
+    hard_brake_decel: float = -2.0
+    hard_brake_oversample: float = 1.0
     gap_margin: float = 2.0
     safety_weight: float = 1.0
+    ttc_margin: float = 2.0
+    ttc_weight: float = 10.0
+    imitation_weight: float = 1.0
     offset_weight: float = 1.0
+    adversarial_weight: float = 1.0
+    disc_hidden: int = 64
+    disc_lr: float = 1e-3
+    disc_epochs: int = 2
+    disc_batch: int = 2048
     validation_fraction: float = 0.2
     validate_every: int = 10
     grad_clip: float = 1.0
@@ -58,12 +100,28 @@ class ClosedLoopConfig:
     def __post_init__(self) -> None:
         if (
             self.iterations < 0
-            or min(self.batch_windows, self.window_steps, self.validate_every) < 1
+            or min(
+                self.batch_windows,
+                self.window_steps,
+                self.validate_every,
+                self.disc_hidden,
+                self.disc_epochs,
+                self.disc_batch,
+            )
+            < 1
         ):
             raise ValueError(
                 "iterations must be >= 0 and batch_windows, window_steps, "
-                "validate_every >= 1"
+                "validate_every and the disc_ sizes >= 1"
             )
+        if self.hard_brake_oversample < 1.0:
+            raise ValueError(
+                f"hard_brake_oversample must be >= 1; got {self.hard_brake_oversample}"
+            )
+        weights = ("ttc_margin", "ttc_weight", "imitation_weight", "adversarial_weight")
+        for name in weights:
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0; got {getattr(self, name)}")
         if not 0.0 < self.validation_fraction < 1.0:
             raise ValueError(
                 f"validation_fraction must be in (0, 1); got {self.validation_fraction}"

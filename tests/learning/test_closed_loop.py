@@ -6,10 +6,14 @@ from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.store import load_driver_net
 from avrisk.learning.bootstrap_heads import centre_heads
 from avrisk.learning.closed_loop import (
+    _minibatch_weights,
     closed_loop_finetune,
     closed_loop_loss,
     differentiable_replay,
+    simulated_transitions,
 )
+from avrisk.learning.gail import human_transitions
+from avrisk.learning.mgail import Discriminator
 from avrisk.learning.replay import replay
 from avrisk.learning.train_config import ClosedLoopConfig
 from avrisk.sim import Road
@@ -123,8 +127,114 @@ def test_centred_heads_keep_their_spread_around_the_network_head():
         {"batch_windows": 0},
         {"window_steps": 0},
         {"validation_fraction": 1.0},
+        {"ttc_margin": -1.0},
+        {"adversarial_weight": -0.5},
+        {"disc_batch": 0},
+        {"hard_brake_oversample": 0.5},
     ],
 )
 def test_closed_loop_config_refuses_bad_settings(kwargs):
     with pytest.raises(ValueError):
         ClosedLoopConfig(**kwargs)
+
+
+def test_the_ttc_barrier_acts_on_fast_closing_in_line_and_not_on_slow():
+    win = queue_windows(n=2, steps=3)
+    trace = differentiable_replay(win, load_driver_net(), Road(), torch.arange(2))
+    closing = (trace.v - trace.v_l).detach()
+    ttc = trace.gap.detach() / closing
+    assert (closing > 0).all()  # the leaders brake harder than the followers
+    below = ClosedLoopConfig(ttc_margin=float(ttc.max()) * 1.01)
+    above = ClosedLoopConfig(ttc_margin=float(ttc.min()) * 0.99)
+    assert closed_loop_loss(trace, win, below)[1]["ttc"] > 0.0
+    assert closed_loop_loss(trace, win, above)[1]["ttc"] == 0.0
+    off = ClosedLoopConfig(ttc_margin=0.0)
+    assert closed_loop_loss(trace, win, off)[1]["ttc"] == 0.0
+    passed = type(trace)(**{**trace.__dict__, "in_line": torch.zeros_like(trace.alive)})
+    assert closed_loop_loss(passed, win, below)[1]["ttc"] == 0.0
+    # Its value is the mean squared excess closing speed over the alive steps.
+    excess = torch.relu(closing - trace.gap.detach() / below.ttc_margin)
+    expected = float((excess**2).mean())
+    assert closed_loop_loss(trace, win, below)[1]["ttc"] == pytest.approx(expected)
+
+
+def test_mgail_reward_gradient_reaches_every_weight_and_not_the_discriminator():
+    win = queue_windows(n=4, steps=20)
+    net = load_driver_net()
+    trace = differentiable_replay(win, net, Road(), torch.arange(4))
+    disc = Discriminator(queue_windows(n=6, steps=20, gap0=8.0), 16, 1e-3, seed=0)
+    config = ClosedLoopConfig(
+        imitation_weight=0.0,
+        offset_weight=0.0,
+        safety_weight=0.0,
+        ttc_margin=0.0,
+        adversarial_weight=1.0,
+    )
+    loss, parts = closed_loop_loss(trace, win, config, disc)
+    assert loss.item() == pytest.approx(-parts["reward"])
+    loss.backward()
+    for name, p in net.named_parameters():
+        assert p.grad is not None and p.grad.abs().sum() > 0, name
+    assert all(p.grad is None for p in disc.net.parameters())
+
+
+def test_simulated_transitions_of_a_perfect_replay_are_the_human_transitions():
+    win = queue_windows(n=3, steps=10)
+    t = torch.as_tensor
+    trace = type(
+        differentiable_replay(win, load_driver_net(), Road(), torch.arange(3))
+    )(
+        v=t(win.v_f[:, 1:]),
+        v_l=t(win.v_l[:, 1:]),
+        gap=t(win.gap[:, 1:]),
+        offset=t(win.offset[:, 1:]),
+        alive=torch.ones(3, 10, dtype=torch.bool),
+        in_line=torch.ones(3, 10, dtype=torch.bool),
+        crash=torch.zeros(3, dtype=torch.bool),
+    )
+    x, valid = simulated_transitions(trace, win)
+    assert valid.all()
+    torch.testing.assert_close(x.reshape(-1, 5).float(), human_transitions(win))
+
+
+def test_mgail_training_is_reproducible_and_trains_its_discriminator():
+    win = queue_windows(n=10, steps=30)
+    config = ClosedLoopConfig(
+        iterations=3,
+        batch_windows=4,
+        validate_every=3,
+        validation_fraction=0.3,
+        imitation_weight=0.0,
+        adversarial_weight=1.0,
+        ttc_margin=3.0,
+        disc_hidden=16,
+        disc_batch=64,
+    )
+    runs = []
+    for _ in range(2):
+        net = load_driver_net()
+        events = []
+        closed_loop_finetune(net, win, config, seed=5, progress=events.append)
+        runs.append(([e.metrics for e in events], net.state_dict()))
+    (rows, weights), (rows2, weights2) = runs
+    assert rows == rows2
+    assert all(torch.equal(weights[k], weights2[k]) for k in weights)
+    assert all(0.0 <= row["disc_accuracy"] <= 1.0 for row in rows)
+    assert all("reward" in row and "ttc" in row for row in rows)
+
+
+def test_hard_braking_windows_are_drawn_as_often_as_asked():
+    steady = queue_windows(n=4, steps=10)
+    steady = type(steady)(**{**steady.__dict__, "v_l": np.full((4, 11), 8.0)})
+    braking = queue_windows(n=2, steps=10)  # leaders brake at 2-4 m/s^2
+    win = type(steady)(
+        **{
+            k: np.concatenate([getattr(steady, k), getattr(braking, k)])
+            for k in steady.__dict__
+        }
+    )
+    assert _minibatch_weights(win, ClosedLoopConfig()) is None
+    p = _minibatch_weights(win, ClosedLoopConfig(hard_brake_oversample=5.0))
+    np.testing.assert_allclose(p, np.array([1, 1, 1, 1, 5, 5]) / 14)
+    gentle = ClosedLoopConfig(hard_brake_oversample=5.0, hard_brake_decel=-5.0)
+    np.testing.assert_allclose(_minibatch_weights(win, gentle), np.full(6, 1 / 6))
