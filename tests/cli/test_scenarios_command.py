@@ -15,7 +15,9 @@ def test_scenarios_lists_every_bundled_scenario_with_its_whole_description():
     result = invoke("scenarios")
     assert result.exit_code == 0, result.output
     lines = result.stdout.splitlines()
-    rows = [ln for ln in lines if ln.split() and ln.split()[0] in bundled_scenarios()]
+    rows = [  # a scenario's line starts at column 0; its description is indented
+        ln for ln in lines if ln[:1].strip() and ln.split()[0] in bundled_scenarios()
+    ]
     assert (
         [r.split()[0] for r in rows]
         == bundled_scenarios()
