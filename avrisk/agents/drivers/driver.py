@@ -256,8 +256,9 @@ class LearnedDriver:
         (``params`` None in :meth:`init`): per rollout, or one for all;
         default ``net.default_xi``.
     controlled : Tensor of bool, shape (A,)
-        The vehicles it drives. The network acts for every vehicle of the
-        batch (one batched pass); the others' actions are not used.
+        The vehicles it drives. The network runs on these vehicles alone (one
+        batched pass over their ``C`` columns); the others' actions it returns
+        are zeros, to be replaced by their own actors'.
     stochastic : bool, default=True
         Sample the actions (the paper's generative model), with noise of
         shape (B, A, 2) drawn by the simulator; False drives with the mean
@@ -283,6 +284,9 @@ class LearnedDriver:
         self.net = net
         self.xi = _as_xi(net, xi)
         self.controlled = controlled
+        # Columns of the controlled vehicles, or None for all of them (kept as
+        # an index so the compiled step selects them without a host sync).
+        self.columns = None if bool(controlled.all()) else controlled.nonzero()[:, 0]
         self.stochastic = stochastic
         self.allow_reverse = allow_reverse
         self.noise = (
@@ -308,8 +312,22 @@ class LearnedDriver:
         )
 
     def distribution(self, obs: Observation, xi: Tensor) -> ActionDistribution:
-        """Every vehicle's action distribution, fields of shape (B, A)."""
-        return self.net(features_from_observation(obs), xi)
+        """The controlled vehicles' action distributions, fields of shape (B, C).
+
+        Their columns in vehicle order; ``C = A`` when it drives every vehicle.
+        """
+        return self.net(self._mine(features_from_observation(obs)), xi)
+
+    def _mine(self, t: Tensor) -> Tensor:
+        """The controlled vehicles' columns of ``t``, shape (B, C, ...)."""
+        return t if self.columns is None else t.index_select(1, self.columns)
+
+    def _spread(self, t: Tensor) -> Tensor:
+        """(B, C) values put in their columns of a (B, A) tensor, zeros elsewhere."""
+        if self.columns is None:
+            return t
+        full = t.new_zeros(t.shape[0], self.controlled.shape[0])
+        return full.index_copy(1, self.columns, t)
 
     def act(
         self, obs: Observation, state: LearnedState, noise: Tensor | None
@@ -320,12 +338,14 @@ class LearnedDriver:
         if noise is not None:
             rho = self.net.noise_correlation
             eps = ar1_noise(state.eps, noise, rho, start=obs.step == 0)
-        accel, steer = sample_actions(dist, eps, self.net.noise_scale)
+        mine = None if eps is None else self._mine(eps)
+        accel, steer = sample_actions(dist, mine, self.net.noise_scale)
         dtype = obs.state.x.dtype
         accel, steer = accel.to(dtype), steer.to(dtype)
         if not self.allow_reverse:
-            accel = _no_reverse(accel, obs.state.speed, obs.dt)
-        return Action(accel=accel, steer=steer), LearnedState(state.xi, eps)
+            accel = _no_reverse(accel, self._mine(obs.state.speed), obs.dt)
+        action = Action(accel=self._spread(accel), steer=self._spread(steer))
+        return action, LearnedState(state.xi, eps)
 
 
 class LearnedEgoPolicy:

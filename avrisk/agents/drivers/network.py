@@ -270,8 +270,10 @@ class DriverNet(nn.Module):
         Tensor of shape (..., 100)
         """
         z = (features.to(self.input_mean.dtype) - self.input_mean) / self.input_scale
-        h = torch.relu(row_linear(z, self.fc1.weight, self.fc1.bias))
-        return torch.relu(row_linear(h, self.fc2.weight, self.fc2.bias))
+        # In place: each product's output is fresh, so the ReLU writes no new
+        # buffer (at large batches a new one costs more than the ReLU itself).
+        h = torch.relu_(row_linear(z, self.fc1.weight, self.fc1.bias))
+        return torch.relu_(row_linear(h, self.fc2.weight, self.fc2.bias))
 
     def head(self, hidden: Tensor, xi: Tensor | None = None) -> Tensor:
         """Last layer: raw outputs from hidden units.
