@@ -47,7 +47,8 @@ def train_vision_command(
     """
     with user_errors(OSError):
         _check_writable(out)
-        if os.path.samefile(out, default_vision_dir()):
+        shipped = default_vision_dir()
+        if shipped.is_dir() and os.path.samefile(out, shipped):
             err_console.print(
                 f"[yellow]warning:[/] replacing the shipped PilotNet in "
                 f"{escape(str(out))}",

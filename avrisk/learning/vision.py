@@ -2,12 +2,14 @@
 
 Pipeline of :func:`train_vision`::
 
-    round 0   the lidar ego drives P0's scenes; every few steps the camera image
-              and the lidar ego's steering are recorded     (behaviour cloning)
-    round k   PilotNet steers (the lidar net throttles); the lidar ego labels
-              the images of the states PilotNet visits      (DAgger, k = 1..K)
-    fit       after every round, Adam on the mean squared error of the
-              standardised steering, over all rounds' frames
+    round 0   the lidar ego drives P0's scenes, its steering perturbed; every
+              few steps the camera image and the lidar ego's steering are
+              recorded                           (behaviour cloning with DART)
+    round k   PilotNet steers (perturbed alike; the lidar net throttles); the
+              lidar ego labels the images of the states PilotNet visits
+                                                           (DAgger, k = 1..K)
+    fit       after every round, Adam on the Huber loss of the standardised
+              steering, over all rounds' frames
     report    steering error on held-out scenes (the lidar ego drives), and
               closed-loop lane keeping, road departures and crashes from P0,
               PilotNet ego next to the lidar ego on the same scenes
@@ -52,6 +54,8 @@ __all__ = ["VisionTrainConfig", "collect_frames", "train_vision"]
 
 #: The report written next to the weights.
 REPORT_FILE = "training_report.json"
+#: Step-to-step correlation of the steering perturbation during data collection.
+NOISE_CORRELATION = 0.9
 
 
 @dataclass(frozen=True)
@@ -66,12 +70,17 @@ class VisionTrainConfig:
         Scenes per round of data.
     frame_every : int, default=4
         Record one frame every this many steps.
+    steer_noise : float, default=0.03
+        Standard deviation of the steering perturbation while collecting
+        [rad] (:func:`collect_frames`). Without it the lidar ego keeps the lane
+        centre to a few centimetres and a degree, and its images hold almost
+        nothing to learn from (the fit stays at the labels' mean).
     dagger_rounds : int, default=2
         Rounds in which PilotNet drives and the lidar ego labels.
-    epochs : int, default=4
+    epochs : int, default=6
         Passes over all frames gathered so far, after every round.
     batch_size : int, default=32
-    lr : float, default=3e-4
+    lr : float, default=1e-3
         Adam's step size.
     val_rollouts : int, default=16
         Held-out scenes for the steering error.
@@ -84,10 +93,11 @@ class VisionTrainConfig:
     scenario: str = "highway_vision"
     rollouts: int = 48
     frame_every: int = 4
+    steer_noise: float = 0.03
     dagger_rounds: int = 2
-    epochs: int = 4
+    epochs: int = 6
     batch_size: int = 32
-    lr: float = 3e-4
+    lr: float = 1e-3
     val_rollouts: int = 16
     eval_rollouts: int = 64
     horizon: float | None = None
@@ -105,14 +115,24 @@ class _Recorder:
     noise = None
 
     def __init__(
-        self, expert: LearnedEgoPolicy, learner: PilotNet | None, every: int
+        self,
+        expert: LearnedEgoPolicy,
+        learner: PilotNet | None,
+        every: int,
+        steer_noise: float,
+        gen: torch.Generator,
+        max_steer: float,
     ) -> None:
         self.expert = expert
+        self.max_steer = max_steer
         self.learner = learner
         self.every = every
+        self.steer_noise = steer_noise
+        self.gen = gen
         self.controlled = expert.controlled
         self.images: list[Tensor] = []
         self.labels: list[Tensor] = []
+        self._noise: Tensor | None = None
 
     def init(self, obs: Observation, params: Tensor | None) -> LearnedState:
         return self.expert.init(obs, params)
@@ -125,11 +145,23 @@ class _Recorder:
         rgb = obs.camera.rgb
         if int(obs.step) % self.every == 0:
             self.images.append(_to_bytes(rgb))
-            self.labels.append(action.steer[:, 0].float().cpu())
-        if self.learner is None:
-            return action, state
-        steer = self.learner.steer(rgb).to(action.steer.dtype)
+            label = action.steer[:, 0].clamp(-self.max_steer, self.max_steer)
+            self.labels.append(label.float().cpu())
+        steer = action.steer[:, 0]
+        if self.learner is not None:
+            steer = self.learner.steer(rgb).to(steer.dtype)
+        steer = steer + self._perturbation(steer)
         return Action(action.accel, steer.unsqueeze(-1).expand_as(action.steer)), state
+
+    def _perturbation(self, steer: Tensor) -> Tensor:
+        """AR(1) steering noise, sd ``steer_noise`` [rad], per rollout (B,)."""
+        z = torch.randn(steer.shape, generator=self.gen).to(steer)
+        if self._noise is None or self._noise.shape != steer.shape:
+            self._noise = self.steer_noise * z
+        else:
+            rho = NOISE_CORRELATION
+            self._noise = rho * self._noise + (1 - rho**2) ** 0.5 * self.steer_noise * z
+        return self._noise
 
 
 def _to_bytes(rgb: Tensor) -> Tensor:
@@ -158,6 +190,9 @@ def collect_frames(
     seeds: np.ndarray,
     learner: PilotNet | None,
     every: int,
+    *,
+    steer_noise: float = 0.0,
+    seed: int = 0,
 ) -> tuple[Tensor, Tensor]:
     """Camera images and the lidar ego's steering along rollouts of a scenario.
 
@@ -172,17 +207,27 @@ def collect_frames(
         Steers the ego when given (DAgger); None lets the expert drive.
     every : int
         Record every ``every``-th step, ``t = 0, every, ...``.
+    steer_noise : float, default=0.0
+        Standard deviation [rad] of an AR(1) perturbation (step correlation
+        :data:`NOISE_CORRELATION`) added to the steering that is carried out,
+        not to the labels (DART, Laskey et al. 2017): the ego leaves the lane
+        centre and the labels show how to come back.
+    seed : int, default=0
+        Seeds the perturbation.
 
     Returns
     -------
     images : Tensor of uint8, shape (N, 3, H, W)
     labels : Tensor of shape (N,)
-        The expert's steering [rad] at each image.
+        The expert's steering [rad] at each image, clipped to the simulator's
+        steering limit (what would be carried out).
     """
     expert = sim.ego_policy
     if not isinstance(expert, LearnedEgoPolicy):
         raise TypeError("collect_frames needs a scenario built with the lidar ego")
-    recorder = _Recorder(expert, learner, every)
+    gen = torch.Generator().manual_seed(seed)
+    max_steer = sim.config.max_steer
+    recorder = _Recorder(expert, learner, every, steer_noise, gen, max_steer)
     sim.ego_policy = recorder
     try:
         sim.rollout(x, seeds)
@@ -201,7 +246,12 @@ def _fit(
     progress: Progress | None,
     round_: int,
 ) -> list[float]:
-    """Epochs of Adam on the standardised steering; mean loss per epoch."""
+    """Epochs of Adam on the standardised steering; mean loss per epoch.
+
+    The loss is Huber's (quadratic within one label standard deviation, linear
+    beyond): the labels of the states a poor learner visits in DAgger can be
+    tens of standard deviations out, and would dominate a squared error.
+    """
     net.train()
     target = (labels - net.steer_mean) / net.steer_scale
     history = []
@@ -209,7 +259,7 @@ def _fit(
         order = torch.randperm(len(labels), generator=gen)
         total = 0.0
         for batch in order.split(config.batch_size):
-            loss = F.mse_loss(net(_from_bytes(images[batch])), target[batch])
+            loss = F.huber_loss(net(_from_bytes(images[batch])), target[batch])
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
@@ -235,7 +285,7 @@ def _steering_error(net: PilotNet, images: Tensor, labels: Tensor) -> dict[str, 
     pred = torch.cat([net.steer(_from_bytes(part)) for part in images.split(256)])
     return {
         "rmse_rad": float(torch.sqrt(torch.mean((pred - labels) ** 2))),
-        "label_sd_rad": float(labels.std()),
+        "label_sd_rad": float(labels.std(correction=0)),
         "frames": float(len(labels)),
     }
 
@@ -311,21 +361,27 @@ def _train_vision(
     def scenes(n: int) -> tuple[np.ndarray, np.ndarray]:
         return base.sample(n, rng), rng.integers(0, 2**62, size=n)
 
-    val_images, val_labels = collect_frames(
-        sim, *scenes(config.val_rollouts), None, config.frame_every
+    def frames(n: int, learner: PilotNet | None, k: int) -> tuple[Tensor, Tensor]:
+        return collect_frames(
+            sim,
+            *scenes(n),
+            learner,
+            config.frame_every,
+            steer_noise=config.steer_noise,
+            seed=seed * 1000 + k,
+        )
+
+    val_images, val_labels = frames(config.val_rollouts, None, 999)
+    images, labels = frames(config.rollouts, None, 0)
+    net = PilotNet(
+        float(labels.mean()), float(labels.std(correction=0).clamp_min(1e-6))
     )
-    images, labels = collect_frames(
-        sim, *scenes(config.rollouts), None, config.frame_every
-    )
-    net = PilotNet(float(labels.mean()), float(labels.std().clamp_min(1e-6)))
     optimizer = torch.optim.Adam(net.parameters(), lr=config.lr)
     gen = torch.Generator().manual_seed(seed)
     rounds = []
     for k in range(config.dagger_rounds + 1):
         if k > 0:
-            new_images, new_labels = collect_frames(
-                sim, *scenes(config.rollouts), net, config.frame_every
-            )
+            new_images, new_labels = frames(config.rollouts, net, k)
             images = torch.cat([images, new_images])
             labels = torch.cat([labels, new_labels])
         loss = _fit(net, images, labels, config, gen, optimizer, progress, k)

@@ -23,6 +23,7 @@ def test_scenarios_lists_every_bundled_scenario_one_line_each():
             "highway_default",
             "highway_idm",
             "highway_lane_changes",
+            "highway_vision",
         ]
     )
     assert all(len(line) <= 80 for line in lines)
