@@ -9,7 +9,7 @@ across runs):
    and compiled (``torch.compile(fullgraph=True)``, compilation outside the
    timing);
 2. ``pilotnet``: frames/s of PilotNet inference (no gradients) by batch
-   size, as :meth:`PilotNet.steer` runs it (eager, fixed inner batches of 32)
+   size, as :meth:`PilotNet.steer` runs it (eager, fixed inner batches)
    and as a plain forward pass on the whole batch: eager, channels-last
    memory format, and ``torch.compile``;
 3. ``rollouts``: full 10 s rollouts/s of ``highway_vision`` (the vision ego:
@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from avrisk.agents.vision import PilotNet, load_pilotnet
+from avrisk.agents.vision import INNER_BATCH, PilotNet, load_pilotnet
 from avrisk.assembly.builder import (
     ScenarioSimulator,
     base_distribution,
@@ -111,7 +111,8 @@ def bench_pilotnet(
     net = _net(args).to(device).eval()
     for batch in batches:
         images = torch.rand(batch, 3, 66, 200, device=device)
-        variants: dict[str, Any] = {"steer (inner batches of 32)": net.steer}
+        inner = f"steer (inner batches of {INNER_BATCH})"
+        variants: dict[str, Any] = {inner: net.steer}
         if "eager" in modes:
             variants["forward"] = net
         if "channels_last" in modes:

@@ -44,7 +44,7 @@ __all__ = ["IMAGE_SHAPE", "INNER_BATCH", "PilotNet"]
 #: Input shape (channels, height, width) of the published network.
 IMAGE_SHAPE = (3, 66, 200)
 #: Images per network pass in :meth:`PilotNet.steer` (batch independence).
-INNER_BATCH = 32
+INNER_BATCH = 8
 
 _CONVS = ((3, 24, 5, 2), (24, 36, 5, 2), (36, 48, 5, 2), (48, 64, 3, 1), (64, 64, 3, 1))
 _DENSE = (64 * 1 * 18, 1164, 100, 50, 10, 1)
