@@ -14,7 +14,12 @@ across runs):
    memory format, and ``torch.compile``;
 3. ``rollouts``: full 10 s rollouts/s of ``highway_vision`` (the vision ego:
    camera + PilotNet + lidar throttle) and ``highway_default`` (the lidar
-   ego) on the same scenes, eager, one batch size.
+   ego) on the same scenes, one batch size, eager and/or compiled
+   (``--rollout-modes``; ``AVRISK_COMPILE=1``: the whole step as one graph,
+   compilation in the first call, reported apart), with the largest
+   difference in ``f`` between compiled and eager.
+
+``--sections`` picks the tables (default all three).
 
 Usage::
 
@@ -52,6 +57,7 @@ from avrisk.assembly.builder import (
     param_layout,
 )
 from avrisk.scenario import ScenarioParams, load_spec
+from avrisk.sim.simulator import COMPILE_ENV
 
 
 def _sync(device: str) -> None:
@@ -147,25 +153,49 @@ def _net(args: argparse.Namespace) -> PilotNet:
         return PilotNet()  # same cost: the weights' values do not matter here
 
 
-def bench_rollouts(batch: int, device: str, args: argparse.Namespace) -> list[dict]:
+def bench_rollouts(
+    batch: int, modes: list[str], device: str, args: argparse.Namespace
+) -> list[dict]:
     rows = []
     x = base_distribution(load_spec("highway_vision")).sample(
         batch, np.random.default_rng(1)
     )
     seeds = np.arange(batch)
-    for scenario in ("highway_default", "highway_vision"):
-        sim = ScenarioSimulator(load_spec(scenario), device=device)
-        sim.rollout(x[:2], seeds[:2])  # warm-up
-        times = []
-        for _ in range(args.repeats):
-            _sync(device)
+    for mode in modes:
+        for scenario in ("highway_default", "highway_vision"):
+            os.environ[COMPILE_ENV] = "1" if mode == "compiled" else "0"
+            sim = ScenarioSimulator(load_spec(scenario), device=device)
             start = time.perf_counter()
-            sim.rollout(x, seeds)
-            _sync(device)
-            times.append(time.perf_counter() - start)
-        rate = batch / statistics.median(times)
-        rows.append({"scenario": scenario, "batch": batch, "rollouts_per_s": rate})
-        print(f"rollouts {scenario} B={batch}: {rate:,.2f} rollouts/s", flush=True)
+            first = sim.rollout(x, seeds)  # warm-up; compiles when compiled
+            warm_up = time.perf_counter() - start
+            times = []
+            for _ in range(args.repeats):
+                _sync(device)
+                start = time.perf_counter()
+                sim.rollout(x, seeds)
+                _sync(device)
+                times.append(time.perf_counter() - start)
+            rate = batch / statistics.median(times)
+            row = {
+                "scenario": scenario,
+                "mode": mode,
+                "batch": batch,
+                "rollouts_per_s": rate,
+                "first_call_s": warm_up,
+                "f": first.f.tolist(),
+            }
+            rows.append(row)
+            print(
+                f"rollouts {scenario} {mode} B={batch}: {rate:,.2f} rollouts/s "
+                f"(first call {warm_up:.0f} s)",
+                flush=True,
+            )
+    os.environ.pop(COMPILE_ENV, None)
+    for scenario in ("highway_default", "highway_vision"):
+        f = {r["mode"]: np.array(r["f"]) for r in rows if r["scenario"] == scenario}
+        if len(f) == 2:
+            gap = float(np.nanmax(np.abs(f["compiled"] - f["eager"])))
+            print(f"{scenario}: max |f compiled - f eager| = {gap:.3g} s")
     return rows
 
 
@@ -182,6 +212,8 @@ def main() -> None:
     parser.add_argument("--net-batches", type=_ints, default=[1, 32, 256])
     parser.add_argument("--net-modes", default="eager,channels_last,compiled")
     parser.add_argument("--rollout-batch", type=int, default=64)
+    parser.add_argument("--rollout-modes", default="eager")
+    parser.add_argument("--sections", default="render,pilotnet,rollouts")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=2.0)
     parser.add_argument("--weights", default=None, help="PilotNet .npz (shipped)")
@@ -206,15 +238,21 @@ def main() -> None:
         "cpu_count": os.cpu_count(),
         "load_average_before": load,
         "uptime_before": _uptime(),
-        "render": bench_render(
-            args.render_batches, args.render_modes.split(","), device, args
-        ),
-        "pilotnet": bench_pilotnet(
-            args.net_batches, args.net_modes.split(","), device, args
-        ),
-        "rollouts": bench_rollouts(args.rollout_batch, device, args),
-        "uptime_after": _uptime(),
     }
+    sections = args.sections.split(",")
+    if "render" in sections:
+        result["render"] = bench_render(
+            args.render_batches, args.render_modes.split(","), device, args
+        )
+    if "pilotnet" in sections:
+        result["pilotnet"] = bench_pilotnet(
+            args.net_batches, args.net_modes.split(","), device, args
+        )
+    if "rollouts" in sections:
+        result["rollouts"] = bench_rollouts(
+            args.rollout_batch, args.rollout_modes.split(","), device, args
+        )
+    result["uptime_after"] = _uptime()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=1) + "\n")
     print(f"wrote {args.out}; load before {load}, after {result['uptime_after']}")
