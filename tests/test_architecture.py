@@ -32,9 +32,12 @@ ALLOWED = {
     "sim": {"tensors", "registry"},
     "agents": {"sim", "tensors", "registry"},
     "safety": {"sim", "tensors", "registry"},
+    # the camera renderer implements the simulator's camera seam
+    "render": {"sim", "tensors"},
     "scenario": {"rare", "registry"},
     "assembly": {
         "sim",
+        "render",
         "agents",
         "safety",
         "scenario",

@@ -2,7 +2,8 @@
 
 Each implements :class:`avrisk.sim.interfaces.Actor` for the vehicles it
 controls. Importing the package registers every ego policy by name
-(``"constant"``, ``"idm_mobil"``, ``"lidar_imitation"``, ``"external"``: an AV
+(``"constant"``, ``"idm_mobil"``, ``"lidar_imitation"``, ``"vision_pilotnet"``:
+PilotNet on the ego camera, :mod:`avrisk.agents.vision`; ``"external"``: an AV
 in another process over ZeroMQ, :mod:`avrisk.agents.external`;
 :func:`get_policy`);
 other driver models than IDM+MOBIL and the learned one come by name or import
@@ -22,6 +23,7 @@ from avrisk.agents.policy import (
     get_policy,
     register_policy,
 )
+from avrisk.agents.vision import PilotNet, PilotNetEgo
 
 __all__ = [
     "EXTERNAL",
@@ -34,6 +36,8 @@ __all__ = [
     "IDMState",
     "LearnedDriver",
     "LearnedEgoPolicy",
+    "PilotNet",
+    "PilotNetEgo",
     "as_ego_actor",
     "ego_only",
     "get_driver_model",

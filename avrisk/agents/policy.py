@@ -9,7 +9,7 @@ the full state as privileged information. A neural net, a vision net or a
 client of an external process all fit.
 
 Ego policies are registered by name (``"constant"``, ``"idm_mobil"``,
-``"lidar_imitation"``) for scenario files and the command line
+``"lidar_imitation"``, ``"vision_pilotnet"``) for scenario files and the command line
 (:func:`get_policy`). A user's own ego may be simpler than an actor: any
 object with ``init(obs) -> state`` and ``act(obs, state) -> (Action of shape
 (B,), state)`` (an :class:`EgoPolicy`) drives vehicle 0 through
@@ -39,6 +39,7 @@ from pydantic import BaseModel, ConfigDict
 from torch import Tensor
 
 from avrisk.registry import Registry
+from avrisk.sim.camera import reads_camera
 from avrisk.sim.interfaces import Action, Actor, deterministic, reads_lidar
 from avrisk.sim.observation import Observation
 
@@ -102,6 +103,7 @@ class EgoActor:
         self.policy = policy
         self.controlled = ego_only(n_vehicles, device=device)
         self.reads_lidar = reads_lidar(policy)
+        self.reads_camera = reads_camera(policy)
         self.deterministic = deterministic(policy)
 
     def init(self, obs: Observation, params: Tensor | None) -> Any:

@@ -4,7 +4,8 @@ The one place that joins :mod:`avrisk.scenario` (data) with :mod:`avrisk.sim`,
 :mod:`avrisk.agents` and :mod:`avrisk.safety`:
 
 * :func:`road_from_spec`, :func:`sim_config_from_spec`,
-  :func:`safety_measure_from_spec` -- the static pieces;
+  :func:`safety_measure_from_spec`, :func:`camera_from_spec` -- the static
+  pieces;
 * :func:`param_layout`, :func:`base_distribution` -- the scenario's named
   ``X`` and ``P0``, with the learned drivers' ``xi`` block (its dimension and
   the shipped prior ``N(mu0, Sigma0)``);
@@ -46,10 +47,13 @@ from avrisk.agents import (
 from avrisk.agents.drivers import XI_DIM, DriverNet, load_driver_net, load_xi_prior
 from avrisk.agents.drivers.lane_change import LaneChangeParams, LaneChangingDriver
 from avrisk.rare import Product
+from avrisk.render import DEFAULT_VEHICLE_HEIGHT, CameraModel, RayCastCamera
 from avrisk.safety import get_safety_measure
 from avrisk.scenario import ParamLayout, ScenarioParams, build_base_distribution
 from avrisk.scenario.components import IDM_MOBIL, LEARNED, DriverSpec
+from avrisk.scenario.sensors import CameraSpec
 from avrisk.scenario.spec import ScenarioSpec
+from avrisk.sim.camera import reads_camera
 from avrisk.sim.interfaces import Actor, SafetyMeasure, deterministic
 from avrisk.sim.road import Road
 from avrisk.sim.simulator import RolloutCarry, RolloutResult, SimConfig, Simulator
@@ -135,6 +139,30 @@ def _other_driver_models(
                 "one model drives all its vehicles with one set of params"
             )
     return list(found.items())
+
+
+def camera_from_spec(
+    spec: ScenarioSpec,
+    *,
+    device: str | torch.device = "cpu",
+    dtype: torch.dtype = torch.float32,
+) -> RayCastCamera:
+    """The ego camera of a scenario: its ``camera`` (or the defaults), slot heights.
+
+    A slot without a ``height`` gets
+    :data:`~avrisk.render.DEFAULT_VEHICLE_HEIGHT`.
+    """
+    cam = spec.camera if spec.camera is not None else CameraSpec()
+    return RayCastCamera(
+        road_from_spec(spec),
+        CameraModel(**cam.model_dump()),
+        heights=[
+            DEFAULT_VEHICLE_HEIGHT if v.height is None else v.height
+            for v in spec.vehicles
+        ],
+        device=device,
+        dtype=dtype,
+    )
 
 
 def param_layout(spec: ScenarioSpec) -> ParamLayout:
@@ -294,6 +322,9 @@ class ScenarioSimulator:
     ego_policy : Actor or None
         The ego policy when it is not IDM+MOBIL (then slot 0 of the IDM+MOBIL
         drivers); it controls slot 0.
+    camera : avrisk.render.RayCastCamera or None
+        The ego camera (:func:`camera_from_spec`) when the spec has one or the
+        ego reads one (``reads_camera``), else None.
     """
 
     def __init__(
@@ -310,15 +341,6 @@ class ScenarioSimulator:
         self.config = sim_config_from_spec(spec)
         self.device = torch.device(device)
         self.dtype = dtype
-        self.simulator = Simulator(
-            self.road,
-            self.config,
-            measure=safety_measure_from_spec(
-                spec, device=device, dtype=dtype, allow_import=allow_import
-            ),
-            device=device,
-            dtype=dtype,
-        )
         idm_ego = spec.ego.policy == IDM_MOBIL
         types = [spec.driver_type(j) for j in range(1, spec.n_vehicles)]
         # Per slot (A,): driven by the driver network / by IDM+MOBIL.
@@ -364,6 +386,21 @@ class ScenarioSimulator:
                 spec.n_vehicles,
                 device=self.device,
             )
+        )
+        self.camera = (
+            camera_from_spec(spec, device=device, dtype=dtype)
+            if spec.camera is not None or reads_camera(self.ego_policy)
+            else None
+        )
+        self.simulator = Simulator(
+            self.road,
+            self.config,
+            measure=safety_measure_from_spec(
+                spec, device=device, dtype=dtype, allow_import=allow_import
+            ),
+            device=device,
+            dtype=dtype,
+            camera=self.camera,
         )
 
     @property

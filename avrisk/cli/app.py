@@ -11,6 +11,7 @@ from avrisk.cli.scenarios import list_scenarios, show_scenario
 from avrisk.cli.serve_ego import serve_ego
 from avrisk.cli.simulate import replay, simulate
 from avrisk.cli.train_drivers import train_drivers_command
+from avrisk.cli.train_vision import train_vision_command
 
 app = typer.Typer(
     name="avrisk",
@@ -47,6 +48,7 @@ def _root(
 for command in (run, compare, report, simulate, replay, demo):
     app.command()(command)
 app.command("train-drivers")(train_drivers_command)
+app.command("train-vision")(train_vision_command)
 app.command("serve-ego")(serve_ego)
 
 scenarios = typer.Typer(

@@ -66,11 +66,13 @@ STAGE_LABELS = {
     "closed_loop": "closed-loop training",
     "heads": "bootstrap heads",
     "prior": "xi prior",
+    "fit": "PilotNet, BC + DAgger",
 }
 
 #: Metrics shown on a stage's line, when its events carry them.
 SHOWN_METRICS = (
     "train_rows",
+    "frames",
     "val_rows",
     "rows_added",
     "train_loss",

@@ -237,6 +237,13 @@ class VehicleSlotSpec(SpecModel):
     )
     length: float = Field(4.8, gt=1.0, le=25.0, description="Vehicle length [m].")
     width: float = Field(1.9, gt=0.5, le=3.5, description="Vehicle width [m].")
+    height: float | None = Field(
+        None,
+        gt=0.3,
+        le=6.0,
+        exclude_if=lambda v: v is None,
+        description="Vehicle height, for the ego camera [m]; left out: 1.5.",
+    )
     driver: str | None = Field(
         None,
         description="Name of a driver type in 'drivers'; must be unset for the ego.",

@@ -39,11 +39,18 @@ whether they change lanes
     learned_drivers: {actions: mean, xi_search: 0.0, xi_search_unit: prior_sd,
                       lane_changes: {min_gap: 4.0}}
 
+A vision ego (``ego: {policy: vision_pilotnet}``) sees the scene through a
+front camera (:class:`~avrisk.scenario.sensors.CameraSpec`; its defaults when
+left out), and a slot may give its vehicle's ``height`` [m] for it::
+
+    camera: {width: 200, height: 66, hfov: 60.0, pitch: 5.0}
+
 Unknown keys are rejected and every error names the field, the allowed range
 and the value given. This module holds the whole scenario
 (:class:`ScenarioSpec`, with the simulator settings); its parts are in
-:mod:`avrisk.scenario.scene` (road, vehicle slots, initial conditions) and
-:mod:`avrisk.scenario.components` (drivers, ego, safety measure);
+:mod:`avrisk.scenario.scene` (road, vehicle slots, initial conditions),
+:mod:`avrisk.scenario.components` (drivers, ego, safety measure) and
+:mod:`avrisk.scenario.sensors` (the ego camera of a vision ego);
 :mod:`avrisk.scenario.loading` reads files (``yaml.safe_load``) and
 :mod:`avrisk.scenario.errors` words the validation errors.
 """
@@ -78,6 +85,7 @@ from avrisk.scenario.scene import (
     SpecModel,
     VehicleSlotSpec,
 )
+from avrisk.scenario.sensors import CameraSpec
 
 #: What a scenario's name (and a bundled scenario's file name) may be.
 SCENARIO_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_\-]*$")
@@ -168,6 +176,12 @@ class ScenarioSpec(SpecModel):
         LearnedDriversSpec(),
         description="Actions and CE search box of the learned drivers (only "
         "with 'model: learned' driver types).",
+    )
+    camera: CameraSpec | None = Field(
+        None,
+        exclude_if=lambda v: v is None,
+        description="The ego camera, for a vision ego; left out: the defaults "
+        "(PilotNet's 66 x 200 image) when the ego reads a camera.",
     )
 
     @field_validator("name")

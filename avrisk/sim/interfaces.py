@@ -47,6 +47,10 @@ Contracts:
   attribute ``reads_lidar = False``; when no actor reads it, the simulator
   skips the scan and ``obs.lidar`` is None. Without the attribute an actor is
   assumed to read it (:func:`reads_lidar`);
+* camera on demand: the ego's camera image (``obs.camera``) is rendered only
+  when an actor says ``reads_camera = True``, and only by a simulator built
+  with a camera (:mod:`avrisk.sim.camera`); otherwise it is None. Without the
+  attribute an actor is assumed not to read it;
 * repeatability: a rollout's result must depend only on its ``X`` and its
   seed (the noise above). An actor that cannot vouch for it (an AV in another
   process, an actor drawing from a generator of its own) says so with

@@ -1,4 +1,4 @@
-"""What an actor sees at one step: privileged state, lidar, lane features, flags."""
+"""What an actor sees at one step: privileged state, lidar, camera, lanes, flags."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from avrisk.sim.camera import CameraFrame
 from avrisk.sim.lidar import LidarScan
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
@@ -114,6 +115,9 @@ class Observation:
         vector environment).
     dt : float
         Time step [s].
+    camera : CameraFrame or None, default=None
+        The ego camera's image, fields of shape (B, ...); None unless some
+        actor reads it (``reads_camera = True``, see :mod:`avrisk.sim.camera`).
     """
 
     state: VehicleState
@@ -125,6 +129,7 @@ class Observation:
     seeds: Tensor  # [B] int64
     step: int | Tensor
     dt: float
+    camera: CameraFrame | None = None
 
     @property
     def time(self) -> float | Tensor:

@@ -5,7 +5,7 @@ tensors with a leading batch dimension. Per step ``t = 1..T`` (``T =
 horizon / dt``):
 
 1. every vehicle observes (lidar, lane features, flags; the full state as
-   privileged information);
+   privileged information; the ego's camera image when an actor reads it);
 2. the actors act (:mod:`avrisk.sim.interfaces`): each computes actions for
    the batch and the simulator keeps, per vehicle, the action of the last
    actor that controls it;
@@ -51,7 +51,11 @@ multiple of 16 so that every row takes the same kernel, and the per-rollout
 last layer is a batched product per rollout (``bmm``). So results are
 bit-identical alone, in any batch, in any order, in eager mode and under
 ``torch.compile`` (inductor calls the same BLAS for the products; the tests
-check both bundled scenarios), on one machine, in float32. On another device
+check both bundled scenarios), on one machine, in float32. The vision ego is
+the exception to the compiled half: its PilotNet convolutions round
+differently under inductor than in eager mode (BENCHMARKS.md, "The vision
+ego"), so its compiled rollouts match eager ones only to a tolerance; alone,
+in any batch and in any order they stay bit-identical. On another device
 (a GPU) or another BLAS the matrix products may round differently in the last
 bit; elementwise work is the same. The loop ends early once every rollout of
 the batch has stopped; eager ray casting goes through large batches in slices;
@@ -81,6 +85,7 @@ from typing import Any, NamedTuple
 import torch
 from torch import Tensor
 
+from avrisk.sim.camera import Camera, CameraFrame, reads_camera
 from avrisk.sim.collision import Contact, contact, offroad, pairwise_overlap, reversing
 from avrisk.sim.dynamics import BicycleLimits, bicycle_step
 from avrisk.sim.interfaces import Actor, NoiseRequest, SafetyMeasure, reads_lidar
@@ -391,6 +396,10 @@ class Simulator:
     dtype : torch.dtype, default=torch.float32
         Floating type of the simulation (float32 is the fast default; float64
         for checks).
+    camera : Camera or None, default=None
+        The ego's camera (:mod:`avrisk.sim.camera`; :mod:`avrisk.render`
+        implements one), rendered at every step only when an actor reads it
+        (``reads_camera = True``); None for a simulator without one.
     compile : bool or None, default=None
         Run each step through ``torch.compile(fullgraph=True)`` (inductor;
         needs a C++ compiler): one graph per step, actors included, about
@@ -434,6 +443,7 @@ class Simulator:
         measure: SafetyMeasure,
         device: str | torch.device = "cpu",
         dtype: torch.dtype = torch.float32,
+        camera: Camera | None = None,
         compile: bool | None = None,
     ) -> None:
         if road.curvature != 0.0:
@@ -449,6 +459,7 @@ class Simulator:
         self.dtype = dtype
         self.limits = config.limits
         self.measure = measure
+        self.camera = camera
         self._beams = (
             beam_directions(config.n_lidar_beams, dtype=dtype, device=self.device)
             if config.n_lidar_beams > 0
@@ -569,11 +580,18 @@ class Simulator:
         Raises
         ------
         ValueError
-            For no actor, a mask that is not a bool tensor of shape (A,), or a
-            vehicle that no actor controls.
+            For no actor, a mask that is not a bool tensor of shape (A,), a
+            vehicle that no actor controls, or an actor that reads the camera
+            of a simulator without one.
         """
         if not actors:
             raise ValueError("give at least one actor")
+        if self.camera is None and _reads_camera(actors):
+            names = [type(a).__name__ for a in actors if reads_camera(a)]
+            raise ValueError(
+                f"{', '.join(names)} reads the camera, and this simulator has none; "
+                "build the Simulator with camera=... (avrisk.render.RayCastCamera)"
+            )
         masks = []
         for k, actor in enumerate(actors):
             mask = torch.as_tensor(actor.controlled)
@@ -613,6 +631,14 @@ class Simulator:
     def _lidar(self, state: VehicleState, geo: _Geometry) -> LidarScan | None:
         return None if self._beams is None else self._scan(state, geo.cos, geo.sin)
 
+    def _camera_frame(
+        self, state: VehicleState, actors: Sequence[Actor]
+    ) -> CameraFrame | None:
+        """The ego camera's image when an actor reads it, else None."""
+        if self.camera is None or not _reads_camera(actors):
+            return None
+        return self.camera(state)
+
     def _observation(
         self,
         state: VehicleState,
@@ -620,6 +646,7 @@ class Simulator:
         lidar: LidarScan | None,
         seeds: Tensor,
         step: int | Tensor,
+        camera: CameraFrame | None = None,
     ) -> Observation:
         return Observation(
             state=state,
@@ -631,6 +658,7 @@ class Simulator:
             seeds=seeds,
             step=step,
             dt=self.config.dt,
+            camera=camera,
         )
 
     def _noise(self, request: NoiseRequest | None, obs: Observation) -> Tensor | None:
@@ -698,7 +726,8 @@ class Simulator:
             state, geo.cos, geo.sin, partner.clamp_min(0), self.road.lane_width
         )
         lidar = self._lidar(state, geo) if _reads_lidar(actors) else None
-        obs = self._observation(state, geo, lidar, seeds, 0)
+        camera = self._camera_frame(state, actors)
+        obs = self._observation(state, geo, lidar, seeds, 0, camera)
         carry = RolloutCarry(
             state=state,
             geo=geo,
@@ -756,7 +785,8 @@ class Simulator:
         """
         state, geo, alive = carry.state, carry.geo, carry.alive
         lidar = self._lidar(state, geo) if _reads_lidar(actors) else None
-        obs = self._observation(state, geo, lidar, seeds, t)
+        camera = self._camera_frame(state, actors)
+        obs = self._observation(state, geo, lidar, seeds, t, camera)
         accel, steer, memory = self._act(obs, actors, masks, carry.actors)
         acted = torch.isfinite(accel).all(dim=-1) & torch.isfinite(steer).all(-1)
         status = torch.where(alive & ~acted, int(Status.ACTOR_FAILED), carry.status)
@@ -830,6 +860,11 @@ class Simulator:
 def _reads_lidar(actors: Sequence[Actor]) -> bool:
     """Whether some actor reads the lidar (else it is not scanned; same results)."""
     return any(reads_lidar(actor) for actor in actors)
+
+
+def _reads_camera(actors: Sequence[Actor]) -> bool:
+    """Whether some actor reads the ego camera (else it is not rendered)."""
+    return any(reads_camera(actor) for actor in actors)
 
 
 def _frame(state: VehicleState, alive: Tensor, ttc: Tensor) -> tuple[Tensor, ...]:

@@ -26,6 +26,7 @@ def test_scenarios_lists_every_bundled_scenario_with_its_whole_description():
             "highway_idm",
             "highway_lane_changes",
             "highway_rare",
+            "highway_vision",
         ]
     )
     assert all(len(line) <= 80 for line in lines) and "…" not in result.stdout
