@@ -51,7 +51,9 @@ def test_two_workers_give_the_one_worker_run_bit_for_bit(tiny_scenario, tmp_path
     for column in set(one.column_names) - {EVALUATED_BY}:
         assert two[column].equals(one[column]), column
     assert len(set(one[EVALUATED_BY].to_pylist())) == 1
-    assert len(set(two[EVALUATED_BY].to_pylist())) == 2  # one chunk each
+    # a chunk goes to the first free worker: on a loaded machine the first may
+    # finish both before the second has started
+    assert len(set(two[EVALUATED_BY].to_pylist())) in (1, 2)
     assert all(s.startswith("processes ") for s in two[EVALUATED_BY].to_pylist())
 
 
@@ -106,6 +108,12 @@ def live_processes(group):
     return pids
 
 
+def _as_in_a_terminal():
+    """Ctrl-C's default action in the child: a shell's background job (``&``,
+    ``nohup``) ignores SIGINT, and a child would inherit that."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def start_avrisk(*args, stderr=subprocess.PIPE):
     """``avrisk ARGS`` in a process group of its own, as a terminal runs it."""
     return subprocess.Popen(
@@ -114,6 +122,7 @@ def start_avrisk(*args, stderr=subprocess.PIPE):
         stderr=stderr,
         text=True,
         start_new_session=True,
+        preexec_fn=_as_in_a_terminal,
         env={**os.environ, "COLUMNS": "80"},
     )
 
