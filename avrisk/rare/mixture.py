@@ -582,7 +582,7 @@ class MixtureCrossEntropy:
             seeding = np.random.SeedSequence(
                 [context.seed, stage], spawn_key=(SEEDING_STREAM,)
             )
-            structure = search_structure(problem.base, s.space)
+            (structure,) = sampled.components  # init's one component, at P0
             start = seed_components(
                 structure,
                 stats,
