@@ -61,6 +61,7 @@ PRESETS: dict[str, tuple[str, dict[str, Any]]] = {
         dict(rho=0.1, alpha=0.8, n_per_iter=2000, n_iter=5, n_final=10_000),
     ),
     "splitting": ("splitting", dict(n_particles=4000, p0=0.1)),
+    "splitting_is": ("splitting_is", dict(n_particles=2000, p0=0.1, n_final=10_000)),
     "naive": ("naive", dict(n_final=20_000)),
 }
 

@@ -27,6 +27,7 @@ from avrisk.rare.naive_mc import NaiveMC, naive_mc
 from avrisk.rare.problem import InvalidOutputError, RareEventProblem
 from avrisk.rare.results import CEInfo, Estimate, GammaEstimate, MixtureInfo
 from avrisk.rare.splitting import SplittingError, SubsetSimulation, subset_simulation
+from avrisk.rare.splitting_importance import SplittingImportanceSampling, splitting_is
 from avrisk.rare.stages import StageBatch, run_stage
 
 __all__ = [
@@ -53,6 +54,7 @@ __all__ = [
     "ScaledBeta",
     "StandardSpaceShift",
     "SplittingError",
+    "SplittingImportanceSampling",
     "StageBatch",
     "SubsetSimulation",
     "UnreliableEstimateWarning",
@@ -64,5 +66,6 @@ __all__ = [
     "naive_mc",
     "run_estimator",
     "run_stage",
+    "splitting_is",
     "subset_simulation",
 ]

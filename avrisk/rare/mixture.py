@@ -371,7 +371,9 @@ def kmeans_plus_plus(
         if potential.sum() <= 0:
             break
         candidates = rng.choice(len(points), trials, p=potential / potential.sum())
-        distances = ((points[None, :, :] - points[candidates, None, :]) ** 2).sum(-1)
+        distances = np.stack(
+            [((points - points[c]) ** 2).sum(axis=1) for c in candidates]
+        )
         closer = np.minimum(nearest, distances)
         best = int(np.argmin(closer @ weights))
         centres.append(int(candidates[best]))
@@ -420,7 +422,9 @@ def seed_components(
     seeds = standard[
         kmeans_plus_plus(standard, elite_weights, OVERSEEDING * n_components, rng)
     ]
-    nearest = np.argmin(((standard[:, None, :] - seeds[None]) ** 2).sum(-1), axis=1)
+    # one centre at a time: an (n, centres, S) block would not fit for large S
+    distances = np.stack([((standard - c) ** 2).sum(axis=1) for c in seeds], axis=1)
+    nearest = np.argmin(distances, axis=1)
     members = np.eye(len(seeds), dtype=bool)[nearest].T  # (groups, n)
     shares = members @ elite_weights
     means = (members * elite_weights) @ standard / shares[:, None]

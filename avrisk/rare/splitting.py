@@ -351,7 +351,7 @@ class SubsetSimulation:
         """
         s = self.settings
         if state.sets:
-            moved = _move_chains(state, problem, context, s.n_moves)
+            moved = move_chains(state, problem, context, s.n_moves)
         else:
             moved = _draw_p0(state, problem, context, s.n_particles)
         current = state.sets[-1].level if state.sets else math.inf
@@ -644,7 +644,7 @@ def _draw_p0(
     )
 
 
-def _move_chains(
+def move_chains(
     state: SplittingState,
     problem: RareEventProblem,
     context: EstimationContext,

@@ -60,6 +60,9 @@ SETTINGS = {
         "mixture", gamma=0.0, n_per_iter=2000, n_iter=2, n_final=10_000, seed=6
     ),
     "splitting": RunSettings("splitting", gamma=0.0, seed=2, n_particles=1500),
+    "splitting_is": RunSettings(
+        "splitting_is", gamma=0.0, seed=2, n_particles=1500, n_final=5000
+    ),
 }
 
 

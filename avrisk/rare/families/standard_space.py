@@ -23,7 +23,8 @@ log-normal under ``q_mu`` and has finite variance for every ``mu``.
 Coordinates that the base does not search (a block whose CE box is a point,
 like the learned drivers' ``xi`` with ``xi_search: 0``;
 :meth:`~avrisk.rare.families.base.ExponentialFamily.searched_coordinates`)
-keep ``mu_i = 0``; the others are clipped to ``|mu_i| <= max_shift``.
+keep ``mu_i = 0`` (unless the family is told to shift them, ``searched``);
+the others are clipped to ``|mu_i| <= max_shift``.
 """
 
 from __future__ import annotations
@@ -52,6 +53,9 @@ class StandardSpaceShift(ExponentialFamily):
         The shift ``mu`` of ``z`` (default 0: the family is then ``P0``).
     max_shift : float, default=DEFAULT_MAX_SHIFT
         CE search box ``|mu_i| <= max_shift`` on the searched coordinates.
+    searched : array_like of bool, shape (D,), optional
+        Coordinates :meth:`project` may shift (default: the base's
+        ``searched_coordinates()``).
 
     Examples
     --------
@@ -70,12 +74,19 @@ class StandardSpaceShift(ExponentialFamily):
         mean: Any = None,
         *,
         max_shift: float = DEFAULT_MAX_SHIFT,
+        searched: Any = None,
     ) -> None:
         if not max_shift > 0:
             raise ValueError(f"max_shift must be > 0; got {max_shift}")
         self.base = base
         self.dim = self.n_stats = base.dim
-        self.searched = np.asarray(base.searched_coordinates(), dtype=bool)
+        if searched is None:
+            searched = base.searched_coordinates()
+        self.searched = np.asarray(searched, dtype=bool)
+        if self.searched.shape != (self.dim,):
+            raise ValueError(
+                f"searched must be {self.dim} booleans; got shape {self.searched.shape}"
+            )
         self.max_shift = float(max_shift)
         self.mean = np.zeros(self.dim) if mean is None else self._checked(mean)
 

@@ -1,0 +1,428 @@
+"""Importance sampling from subset simulation's particles.
+
+Subset simulation (:mod:`avrisk.rare.splitting`) ends with ``N`` particles
+of ``P0`` conditioned on the level above ``gamma``; those with ``f <= gamma``
+are (correlated) draws of the optimal importance density ``P0(. | f <=
+gamma)``, found without importance weights: pCN moves leave each conditional
+law invariant whatever the dimension. This estimator fits a proposal to them
+and estimates ``p`` by importance sampling from it:
+
+1. run subset simulation to ``gamma`` (its levels, moves and ties as there);
+2. move chains from the last set's particles with ``f <= gamma`` once more,
+   at the level ``gamma`` itself: ``N`` particles of ``P0(. | f <= gamma)``
+   (``N`` states, the hits among them: fewer than ``N`` new calls of ``f``;
+   the last set alone may hold as few as ``p0 N`` hits), taken in the base's
+   standard-normal space, ``z = T(x)``;
+3. keep the coordinates the particles say something about: those where the
+   particles' mean differs from 0, or their mean square from 1, by more than
+   ``INFORMATIVE_T`` standard errors (from the means of ``N_BLOCKS`` blocks of
+   chains, so the chains' correlation is in them). A coordinate on which the
+   event does not depend is ``N(0, 1)`` under ``P0(. | f <= gamma)`` too; a
+   shift fitted there is noise of variance ``1 / n_eff`` each, ``d / n_eff``
+   in all, and costs a factor of about ``exp(d / n_eff)`` in the weights'
+   second moment: fatal when ``d`` is the learned drivers' 404 coordinates
+   or more. Then fit mean shifts of ``N(0, I)`` on the kept coordinates,
+   unweighted (the particles already follow the target), as mixture
+   cross-entropy fits its elites (:mod:`avrisk.rare.mixture`): k-means++
+   seeding, EM, merging of components
+   less than one standard deviation apart. The number of components, from 1
+   to ``n_components``, is the one whose fits to the particles of one half of
+   the chains give the other half's particles the highest mean log-likelihood,
+   summed over both ways round (ties to fewer); the proposal is then fitted
+   to all particles with that number. Chains are numbered in the order of their
+   ancestors at every level, so the two halves descend from different draws
+   of ``P0`` and are close to independent. In high dimension k-means splits one
+   failure region into clusters whose means differ by noise of order ``d /
+   n_k`` (``d`` coordinates, ``n_k`` particles; more, as a chain's states are
+   correlated), and such a split fits the held-out half worse; regions that
+   lie apart fit it better split;
+4. draw ``n_final`` fresh samples of ``q = lam P0 + (1 - lam) sum_k pi_k
+   T^-1(N(mu_k, I))`` and estimate ``mean(w 1{f <= g})``, ``w = p0 / q <= 1 /
+   lam``, per threshold, with ESS and Pareto ``k`` as for every importance
+   sampler.
+
+Why. A cross-entropy search estimates the optimal mean from importance-weighted
+elites of its own proposals. In ``D`` dimensions the mean of ``n`` effective
+elites misses by about ``D / n`` in squared norm, and that error multiplies
+the weights' second moment by about ``exp(D / n)``; the weights of the next
+iteration's elites degenerate in turn, and the search collapses (the linear
+limit state in ``D = 1000`` at ``1e-6``: no hit, or 50% errors, at 100,000
+calls; BENCHMARKS.md). Splitting's particles need no weights, so ``n`` is the
+particles' effective number, and the shift can include coordinates a CE box
+leaves alone (``shift="all"``: the learned drivers' 404-d ``xi``).
+
+The estimate is that of the importance-sampling stage alone: the proposal is
+fixed before its samples are drawn, so it is unbiased whatever the particles,
+and its standard error is the weighted mean's (the usual CLT interval, trusted
+while the hits' weights have Pareto ``k <= 0.7``). The splitting estimate of
+the same run is kept beside it in ``details`` (``splitting``) as a cross-check
+from the same budget; the two are not independent (one run's particles made
+the proposal) but have different errors.
+
+:class:`SplittingImportanceSampling` is registered as ``"splitting_is"``;
+:func:`splitting_is` is the top-level function.
+
+References
+----------
+S.-K. Au, J. L. Beck. "A new adaptive importance sampling scheme for
+reliability calculations." Structural Safety 21, 1999 (importance densities
+from conditional samples of the failure domain).
+S. Geyer, I. Papaioannou, D. Straub. "Cross entropy-based importance sampling
+using Gaussian densities revisited." Structural Safety 76, 2019.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import Field
+from scipy.special import logsumexp
+
+from avrisk.rare.cross_entropy import ShareOfP0
+from avrisk.rare.estimator import (
+    EstimationContext,
+    estimate_black_box,
+    register_estimator,
+)
+from avrisk.rare.evaluation import Evaluator
+from avrisk.rare.families.base import ExponentialFamily, FloatArray
+from avrisk.rare.families.standard_space import StandardSpaceShift
+from avrisk.rare.final_stage import weighted_stage_estimates
+from avrisk.rare.mixture import (
+    MixtureProposal,
+    component_log_kernels,
+    fit_mixture,
+    merge_overlapping,
+    seed_components,
+)
+from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
+from avrisk.rare.results import Estimate
+from avrisk.rare.splitting import (
+    SplittingInfo,
+    SplittingSettings,
+    SplittingState,
+    SubsetSimulation,
+    move_chains,
+)
+from avrisk.rare.stages import BatchCache, BatchRecorder
+from avrisk.rare.stopping import StoppingRule
+
+__all__ = [
+    "SplittingISSettings",
+    "informative_coordinates",
+    "SplittingImportanceSampling",
+    "particle_proposal",
+    "splitting_is",
+]
+
+#: Standard errors beyond which a coordinate's particle mean (or mean square)
+#: counts as informative (step 3 of the module docstring).
+INFORMATIVE_T = 3.0
+#: Blocks of chains whose means give those standard errors.
+N_BLOCKS = 20
+
+#: Extra key of the fit's generator (k-means++ seeding), so that it draws no
+#: chunk's stream.
+FIT_STREAM = 0x736973
+
+
+class SplittingISSettings(SplittingSettings):
+    """Settings of subset simulation followed by importance sampling.
+
+    Those of :class:`~avrisk.rare.splitting.SplittingSettings` (the levels),
+    and of the importance-sampling stage:
+
+    Attributes
+    ----------
+    n_final : int, default=10000
+        Samples of the fitted proposal.
+    n_components : int, default=4
+        Mean shifts seeded from the particles (fewer survive merging on one
+        failure region).
+    defensive : float, default=0.1
+        Weight ``lam`` of ``P0`` in the proposal, in [0, 1): every weight is
+        at most ``1 / lam``.
+    min_weight : float, default=0.02
+        Share of the particles below which a component dies in EM.
+    shift : {"all", "searched"}, default="all"
+        Which standard coordinates the shifts may move: all of them, or only
+        those the base's cross-entropy box searches
+        (:meth:`~avrisk.rare.families.base.ExponentialFamily.searched_coordinates`).
+    """
+
+    n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
+    n_components: int = Field(
+        4, ge=1, description="Mean shifts seeded from the particles."
+    )
+    defensive: ShareOfP0 = Field(
+        0.1, description="Weight of P0 in the proposal (weights <= 1/defensive)."
+    )
+    min_weight: float = Field(
+        0.02,
+        gt=0.0,
+        lt=1.0,
+        description="Share of the particles below which a component dies.",
+    )
+    shift: Literal["all", "searched"] = Field(
+        "all",
+        description="Standard coordinates the shifts may move: 'all', or those the "
+        "base's CE box searches ('searched').",
+    )
+
+
+def particle_proposal(
+    z: FloatArray,
+    chain: np.ndarray,
+    base: ExponentialFamily,
+    settings: SplittingISSettings,
+    rng: np.random.Generator,
+) -> MixtureProposal:
+    """The importance-sampling proposal fitted to particles (steps 3-4 above).
+
+    Parameters
+    ----------
+    z : ndarray of shape (n, D)
+        Particles of ``P0(. | f <= gamma)`` in the base's standard-normal space.
+    chain : ndarray of int, shape (n,)
+        The chain of each particle, chains numbered in the order of their
+        ancestors (the number of components is chosen by fitting one half of
+        the chains and scoring the other).
+    base : ExponentialFamily
+        ``P0``.
+    settings : SplittingISSettings
+        ``n_components``, ``min_weight``, ``defensive`` and ``shift``.
+    rng : numpy.random.Generator
+        For the k-means++ seeding.
+
+    Returns
+    -------
+    MixtureProposal
+        Mean shifts of the base's standard normals (``StandardSpaceShift``)
+        and ``P0`` with weight ``settings.defensive``.
+
+    Examples
+    --------
+    >>> from avrisk.rare import FixedCovNormal
+    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    >>> rng = np.random.default_rng(0)
+    >>> z = np.vstack([rng.normal((4, 0), 0.3, (500, 2)),
+    ...                rng.normal((-4, 0), 0.3, (500, 2))])
+    >>> chain = rng.permutation(1000) // 10
+    >>> q = particle_proposal(z, chain, base, SplittingISSettings(), rng)
+    >>> sorted(round(float(c.mean[0])) for c in q.components)
+    [-4, 4]
+    """
+    searched = (
+        np.ones(base.dim, dtype=bool)
+        if settings.shift == "all"
+        else np.asarray(base.searched_coordinates(), dtype=bool)
+    )
+    searched &= informative_coordinates(z, chain)
+    structure = StandardSpaceShift(base, searched=searched)
+    z = np.where(searched, z, 0.0)  # the others play no part in the fit
+
+    def fit(points: FloatArray, k: int) -> tuple[list[ExponentialFamily], FloatArray]:
+        weights = np.full(len(points), 1.0 / len(points))
+        start = seed_components(structure, points, weights, k, rng)
+        mixture = fit_mixture(*start, points, weights, settings.min_weight)
+        return merge_overlapping(mixture.components, mixture.weights)
+
+    first = chain < (chain.max() + 1) / 2
+    best_k, best_score = 1, -np.inf
+    if first.any() and not first.all():
+        for k in range(1, settings.n_components + 1):
+            score = 0.0
+            for train in (first, ~first):  # two-fold: each half scores the other
+                components, weights = fit(z[train], k)
+                log_joint = np.log(weights) + component_log_kernels(
+                    components, z[~train]
+                )
+                score += float(logsumexp(log_joint, axis=1).mean())
+            if score > best_score:
+                best_k, best_score = k, score
+    components, weights = fit(z, best_k)
+    return MixtureProposal(components, weights, base, settings.defensive)
+
+
+def informative_coordinates(z: FloatArray, chain: np.ndarray) -> np.ndarray:
+    """Coordinates whose particle mean or mean square is off ``N(0, 1)``'s (step 3).
+
+    Parameters
+    ----------
+    z : ndarray of shape (n, D)
+        Particles in standard-normal space.
+    chain : ndarray of int, shape (n,)
+        Their chains, numbered in the order of their ancestors.
+
+    Returns
+    -------
+    ndarray of bool, shape (D,)
+        True where ``|mean(z_i)|`` or ``|mean(z_i^2) - 1|`` exceeds
+        ``INFORMATIVE_T`` standard errors, each from the spread of the means of
+        ``N_BLOCKS`` blocks of consecutive chains (fewer blocks with fewer
+        chains); every coordinate with fewer than 4 chains.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> z = rng.standard_normal((2000, 4)) * [1.0, 1.0, 3.0, 1.0] + [0.0, 2.0, 0.0, 0.0]
+    >>> informative_coordinates(z, np.arange(2000) // 10).tolist()
+    [False, True, True, False]
+    """
+    n_chains = int(chain.max()) + 1
+    if n_chains < 4:
+        return np.ones(z.shape[1], dtype=bool)
+    blocks = min(N_BLOCKS, n_chains)
+    block = chain * blocks // n_chains
+    informative = np.zeros(z.shape[1], dtype=bool)
+    for moment in (z, z * z - 1.0):
+        means = np.stack([moment[block == b].mean(axis=0) for b in range(blocks)])
+        stderr = means.std(axis=0, ddof=1) / np.sqrt(blocks)
+        informative |= np.abs(moment.mean(axis=0)) > INFORMATIVE_T * stderr
+    return informative
+
+
+@register_estimator
+class SplittingImportanceSampling(SubsetSimulation):
+    """Subset simulation, then importance sampling from its particles (module doc)."""
+
+    name = "splitting_is"
+    label = "subset simulation + importance sampling"
+    Settings: type[SplittingISSettings] = SplittingISSettings
+    weighted = True
+    decomposable = True
+    settings: SplittingISSettings
+
+    def budget(self) -> int:
+        """Subset simulation's bound, the moves at ``gamma`` and the final stage."""
+        s = self.settings
+        return super().budget() + s.n_particles * s.n_moves + s.n_final
+
+    def describe(self) -> str:
+        """``"subset simulation, 2,000 particles per level, p0 0.1, then IS ..."``."""
+        s = self.settings
+        return (
+            f"{super().describe()}, then IS {s.n_final:,} "
+            f"({s.n_components} components, defensive {s.defensive:g})"
+        )
+
+    def finalize(
+        self,
+        state: SplittingState,
+        problem: RareEventProblem,
+        context: EstimationContext,
+    ) -> Estimate:
+        """Move the hits at ``gamma``, fit the proposal, sample it ``n_final`` times.
+
+        The fit's generator comes from the run seed, so a resumed run fits the
+        same proposal and replays the recorded final stage.
+        """
+        s = self.settings
+        levels = super().finalize(state, problem, context)
+        moved = move_chains(state, problem, context, s.n_moves)
+        rng = np.random.default_rng(
+            np.random.SeedSequence([context.seed], spawn_key=(FIT_STREAM,))
+        )
+        chain = np.nonzero(~np.isnan(moved.values))[0]
+        proposal = particle_proposal(moved.z, chain, problem.base, s, rng)
+        n_evals = state.n_evals + moved.n_calls
+        stage = context.stage(
+            problem, proposal, s.n_final, FINAL_STAGE, final_after=n_evals
+        )
+        return Estimate(
+            method="splitting_is",
+            gamma=problem.gamma,
+            by_gamma=weighted_stage_estimates(stage, problem.thresholds),
+            n_evals=n_evals + stage.values.size,
+            proposal=proposal,
+            stopped_by=stage.stopped_by or "budget",
+            details={
+                **levels.details,
+                "fit_acceptance": moved.acceptance,
+                "n_components": proposal.n_components,
+                "splitting": {
+                    str(g): {"p": e.p, "ci": list(e.ci)}
+                    for g, e in levels.by_gamma.items()
+                },
+            },
+        )
+
+
+def splitting_is(
+    f: BatchFunction,
+    base: ExponentialFamily,
+    gamma: float,
+    *,
+    settings: SplittingISSettings | None = None,
+    seed: int = 0,
+    gamma_test: Sequence[float] | float = (),
+    batch_size: int | None = None,
+    callback: Callable[[SplittingInfo, SplittingState], None] | None = None,
+    on_batch: BatchRecorder | None = None,
+    cache: BatchCache | None = None,
+    evaluator: Evaluator | None = None,
+    stopping: StoppingRule | None = None,
+    **overrides: Any,
+) -> Estimate:
+    """Estimate ``P0(f(X) <= gamma)`` by importance sampling from splitting's particles.
+
+    Parameters
+    ----------
+    f : callable
+        Batched black box, ``(n, D)`` float64 array to ``(n,)`` values.
+    base : ExponentialFamily
+        ``P0``; it must map to standard normals (``to_standard_normal``).
+    gamma : float
+        Threshold of the event ``f <= gamma``.
+    settings : SplittingISSettings, optional
+        The method's settings (default: those of :class:`SplittingISSettings`).
+    seed : int, default=0
+        Run seed; same seed, same result, whatever ``batch_size``.
+    gamma_test, batch_size, callback, on_batch, cache, evaluator
+        As for :func:`~avrisk.rare.splitting.subset_simulation`.
+    stopping : StoppingRule, optional
+        May end the importance-sampling stage early.
+    **overrides
+        Settings of :class:`SplittingISSettings` by name.
+
+    Returns
+    -------
+    Estimate
+        The importance-sampling estimate; ``details`` holds the levels (as
+        subset simulation's), the acceptance of the moves at ``gamma``, the
+        number of components and the splitting estimate of every threshold
+        (``splitting``).
+
+    Raises
+    ------
+    SplittingError
+        If the levels cannot reach ``gamma``.
+
+    Examples
+    --------
+    >>> from scipy.stats import norm
+    >>> from avrisk.rare import FixedCovNormal
+    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    >>> f = lambda x: 4.0 - x.sum(axis=1) / np.sqrt(2)   # P(f <= 0) = Phi(-4)
+    >>> est = splitting_is(f, base, 0.0, n_particles=1000, n_final=5000, seed=0)
+    >>> bool(abs(est.p / norm.sf(4.0) - 1) < 4 * est.stderr / est.p)
+    True
+    """
+    return estimate_black_box(
+        SplittingImportanceSampling(
+            SplittingISSettings.overridden(settings, "splitting_is", **overrides)
+        ),
+        f,
+        base,
+        gamma,
+        seed=seed,
+        gamma_test=gamma_test,
+        batch_size=batch_size,
+        callback=callback,
+        on_batch=on_batch,
+        cache=cache,
+        evaluator=evaluator,
+        stopping=stopping,
+    )

@@ -1,0 +1,151 @@
+"""Importance sampling from splitting's particles: exact problems, fit, seeds."""
+
+import json
+
+import numpy as np
+import pytest
+
+from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
+from avrisk.rare import (
+    FixedCovNormal,
+    Product,
+    ScaledBeta,
+    get_estimator,
+    splitting_is,
+)
+from avrisk.rare.splitting_importance import SplittingISSettings, particle_proposal
+from avrisk.testing import (
+    beta_sum_problem,
+    check_estimator,
+    four_branch_problem,
+    gaussian_linear_problem,
+)
+
+
+def sis(problem, seed=0, **kw):
+    kw = {"n_particles": 2000, "n_final": 5000, **kw}
+    return splitting_is(problem.f, problem.base, problem.gamma, seed=seed, **kw)
+
+
+@pytest.mark.parametrize(
+    "problem",
+    [
+        gaussian_linear_problem(2, p=1e-6),
+        gaussian_linear_problem(20, p=1e-6),
+        beta_sum_problem(6, p=1e-5),
+        four_branch_problem(),
+    ],
+    ids=lambda p: p.name,
+)
+def test_finds_p_of_exact_problems_within_its_stderr(problem):
+    est = check_estimator(sis, problem, seed=4)
+    assert est.n_samples == 5000  # the estimate is the importance-sampling stage's
+    last = est.history[-1]  # its survivors seed the moves at gamma: N states each
+    assert est.n_evals == last.n_evals + (2000 - last.n_survivors) + 5000
+    assert est.main.pareto_k < 0.7
+    levels = est.details["splitting"][str(problem.gamma)]
+    assert levels["ci"][0] <= levels["p"] <= levels["ci"][1]  # the cross-check
+
+
+def test_the_four_branches_get_a_component_each():
+    est = sis(four_branch_problem(), seed=1, n_particles=4000)
+    assert est.details["n_components"] == 4
+    means = np.array([c.mean for c in est.proposal.components])
+    # one shift per quadrant direction (+-1, +-1) / sqrt 2, each at the branch
+    directions = {tuple(np.sign(m).astype(int)) for m in means}
+    assert directions == {(1, 1), (-1, -1), (1, -1), (-1, 1)}
+
+
+def test_one_region_in_high_dimension_is_one_component():
+    # k-means cuts 600 particles in 200 dimensions into clusters by noise alone;
+    # the held-out half of the chains says one component fits them better
+    d, rng = 200, np.random.default_rng(0)
+    base = FixedCovNormal(np.zeros(d), cov=np.eye(d))
+    z = rng.standard_normal((600, d))
+    z[:, 0] += 4.0
+    chain = np.repeat(np.arange(60), 10)
+    q = particle_proposal(z, chain, base, SplittingISSettings(), rng)
+    assert q.n_components == 1
+    assert q.components[0].mean[0] == pytest.approx(4.0, abs=0.2)
+
+
+def test_shift_searched_leaves_unsearched_coordinates_at_zero():
+    base = Product(
+        [
+            ScaledBeta(2.0, 2.0, lo=0.0, scale=1.0, bounds=(1.0, 3.9)),
+            FixedCovNormal(np.zeros(2), cov=np.eye(2), max_shift=0.0),
+        ]
+    )
+    rng = np.random.default_rng(0)
+    z = rng.standard_normal((400, 3)) + 3.0
+    chain = np.arange(400) // 4
+    for shift, moved in (("all", [True, True, True]), ("searched", [True, 0, 0])):
+        settings = SplittingISSettings(shift=shift, n_components=1)
+        (component,) = particle_proposal(z, chain, base, settings, rng).components
+        np.testing.assert_array_equal(component.mean != 0, moved)
+
+
+@pytest.mark.slow
+def test_the_95_percent_interval_covers_p_in_most_runs():
+    problems = [gaussian_linear_problem(20, p=1e-6), four_branch_problem()]
+    covered = {
+        problem.name: np.mean(
+            [
+                lo <= problem.p_exact <= hi
+                for lo, hi in (sis(problem, seed=100 + s).ci for s in range(40))
+            ]
+        )
+        for problem in problems
+    }
+    assert min(covered.values()) >= 0.85, covered
+
+
+def test_same_seed_same_result_whatever_the_batch_size():
+    problem = four_branch_problem()
+    whole = sis(problem, seed=3, n_particles=500, n_final=2000)
+    batched = sis(problem, seed=3, n_particles=500, n_final=2000, batch_size=37)
+    assert whole.to_dict() | {"wall_time_s": 0} == batched.to_dict() | {
+        "wall_time_s": 0
+    }
+
+
+def test_an_interrupted_run_resumes_to_the_same_summary(tmp_path):
+    problem = gaussian_linear_problem(2, p=1e-4)
+    settings = RunSettings(
+        "splitting_is", gamma=0.0, seed=2, n_particles=500, n_final=3000
+    )
+
+    def run(path, f=problem.f):
+        directory = RunDirectory(path, ["x0", "x1"])
+        return run_estimation(directory, problem.base, f, settings)
+
+    reference = run(tmp_path / "reference")
+    calls = []
+
+    def interrupted(x):
+        if len(calls) == 30:  # in the moves at gamma or the final stage
+            raise KeyboardInterrupt
+        calls.append(len(x))
+        return problem.f(x)
+
+    with pytest.raises(KeyboardInterrupt):
+        run(tmp_path / "run", f=interrupted)
+    resumed = run(tmp_path / "run")
+    assert resumed["method"] == "splitting_is"
+    drop = {"wall_time_s"}
+    assert {k: v for k, v in resumed["estimate"].items() if k not in drop} == {
+        k: v for k, v in reference["estimate"].items() if k not in drop
+    }
+
+
+def test_settings_budget_and_description():
+    method = get_estimator("splitting_is", n_particles=400, max_levels=6, n_final=900)
+    assert method.budget() == 400 * (1 + 5) + 400 + 900
+    assert method.describe() == (
+        "subset simulation, 400 particles per level, p0 0.1, then IS 900 "
+        "(4 components, defensive 0.1)"
+    )
+    with pytest.raises(ValueError, match="shift"):
+        get_estimator("splitting_is", shift="some")
+    est = sis(gaussian_linear_problem(2, p=1e-4), seed=0, n_particles=300)
+    assert json.loads(json.dumps(est.to_dict()))["method"] == "splitting_is"
