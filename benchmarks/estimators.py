@@ -9,7 +9,8 @@ installed (``pip install avrisk[bench]``); its budget is set by its own stopping
 rule, so its mean number of calls is reported with it. So is subset simulation's,
 which makes one level per factor of about ``p0 = 0.1`` in ``p``.
 
-    python benchmarks/estimators.py [--budget 100000] [--seeds 20]
+    python benchmarks/estimators.py [--budget 100000] [--seeds 20] \
+        [--problems four_branch,gaussian_linear_d1000] [--methods splitting,CE]
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from avrisk.rare import (
     cross_entropy,
     mixture_ce,
     naive_mc,
+    splitting_is,
     subset_simulation,
 )
 from avrisk.testing import (
@@ -134,6 +136,31 @@ def avrisk_splitting(budget: int) -> Run:
     return run
 
 
+def avrisk_splitting_is(budget: int) -> Run:
+    """Subset simulation with ``budget // 14`` particles, then IS of ``budget // 2``.
+
+    At p ~ 1e-6 the levels (about 5.5 N), the moves at gamma (N) and the final
+    stage spend about the budget; likelier events fewer.
+    """
+    n_particles, n_final = budget // 14, budget // 2
+
+    def run(problem: AnalyticProblem, seed: int) -> tuple[float, float, float, int]:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UnreliableEstimateWarning)
+            est = splitting_is(
+                problem.f,
+                problem.base,
+                problem.gamma,
+                n_particles=n_particles,
+                n_final=n_final,
+                seed=seed,
+            )
+        return _unpack(est)
+
+    run.label = f"avrisk splitting + IS (N={n_particles:,}, then {n_final:,})"
+    return run
+
+
 def _unpack(est: Estimate) -> tuple[float, float, float, int]:
     return est.p, est.ci[0], est.ci[1], est.n_evals
 
@@ -229,14 +256,29 @@ def evaluate(run: Run, problem: AnalyticProblem, seeds: int) -> dict[str, float]
     }
 
 
+def _short_name(label: str) -> str:
+    """``"avrisk CE, select=..."`` -> ``"CE,"`` stripped: the word after 'avrisk'."""
+    words = label.split()
+    return (words[1] if words[0] == "avrisk" else words[0]).rstrip(",")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--budget", type=int, default=100_000)
     parser.add_argument("--seeds", type=int, default=20)
+    parser.add_argument(
+        "--problems", help="Comma-separated problem names (default: all)."
+    )
+    parser.add_argument(
+        "--methods",
+        help="Comma-separated labels' first words after 'avrisk' "
+        "(naive, CE, subset, mixture, splitting) or 'OpenTURNS' (default: all).",
+    )
     args = parser.parse_args()
     problems = [
         gaussian_linear_problem(2, p=1e-6),
         gaussian_linear_problem(100, p=1e-6),
+        gaussian_linear_problem(1000, p=1e-6),
         beta_sum_problem(6, p=1e-5, bounds=(1.5, 7.0)),
         mixed_problem(1e-2, 1e-3),
         four_branch_problem(),
@@ -247,11 +289,18 @@ def main() -> None:
         avrisk_ce(args.budget, "variance"),
         avrisk_splitting(args.budget),
         avrisk_mixture(args.budget),
+        avrisk_splitting_is(args.budget),
     ]
     if ot is not None:
         methods.append(openturns_ce(args.budget))
     else:
         print("(OpenTURNS not installed: `pip install avrisk[bench]` to compare)")
+    if args.problems:
+        wanted = set(args.problems.split(","))
+        problems = [p for p in problems if p.name in wanted]
+    if args.methods:
+        wanted = set(args.methods.split(","))
+        methods = [m for m in methods if _short_name(m.label) in wanted]
     print(f"budget {args.budget:,} calls of f, {args.seeds} seeds\n")
     print(
         "| problem | exact p | method | mean calls | rel. bias | rel. RMSE | "
