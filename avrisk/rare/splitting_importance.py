@@ -15,27 +15,32 @@ and estimates ``p`` by importance sampling from it:
    standard-normal space, ``z = T(x)``;
 3. keep the coordinates the particles say something about: those where the
    particles' mean differs from 0, or their mean square from 1, by more than
-   ``INFORMATIVE_T`` standard errors (from the means of ``N_BLOCKS`` blocks of
-   chains, so the chains' correlation is in them). A coordinate on which the
-   event does not depend is ``N(0, 1)`` under ``P0(. | f <= gamma)`` too; a
-   shift fitted there is noise of variance ``1 / n_eff`` each, ``d / n_eff``
-   in all, and costs a factor of about ``exp(d / n_eff)`` in the weights'
-   second moment: fatal when ``d`` is the learned drivers' 404 coordinates
-   or more. Then fit mean shifts of ``N(0, I)`` on the kept coordinates,
-   unweighted (the particles already follow the target), as mixture
-   cross-entropy fits its elites (:mod:`avrisk.rare.mixture`): k-means++
-   seeding, EM, merging of components
-   less than one standard deviation apart. The number of components, from 1
-   to ``n_components``, is the one whose fits to the particles of one half of
-   the chains give the other half's particles the highest mean log-likelihood,
-   summed over both ways round (ties to fewer); the proposal is then fitted
-   to all particles with that number. Chains are numbered in the order of their
-   ancestors at every level, so the two halves descend from different draws
-   of ``P0`` and are close to independent. In high dimension k-means splits one
-   failure region into clusters whose means differ by noise of order ``d /
-   n_k`` (``d`` coordinates, ``n_k`` particles; more, as a chain's states are
-   correlated), and such a split fits the held-out half worse; regions that
-   lie apart fit it better split;
+   ``t`` standard errors (from the means of ``N_BLOCKS`` blocks of chains, so
+   the chains' correlation is in them). A coordinate on which the event does
+   not depend is ``N(0, 1)`` under ``P0(. | f <= gamma)`` too; a shift fitted
+   there is noise of variance ``1 / n_eff`` each, ``d / n_eff`` in all, and
+   costs a factor of about ``exp(d / n_eff)`` in the weights' second moment:
+   fatal when ``d`` is the learned drivers' 404 coordinates or more. A high
+   ``t`` drops that noise but also weak real shifts (a failure set that
+   depends a little on each of many coordinates); a low one keeps both. Then
+   fit mean shifts of ``N(0, I)`` on the kept coordinates, unweighted (the
+   particles already follow the target), as mixture cross-entropy fits its
+   elites (:mod:`avrisk.rare.mixture`): k-means++ seeding, EM, merging of
+   components less than one standard deviation apart. The threshold ``t``
+   (from ``THRESHOLDS``, with one component), then the number of components
+   (from 1 to ``n_components``), is the one whose fits to the particles of one
+   half of the chains give the other half's particles the highest mean
+   log-likelihood, summed over both ways round (ties to the sparser fit); the
+   proposal is then fitted to all particles with those choices. Chains are
+   numbered in the order of their ancestors at every level, so the two halves
+   descend from different draws of ``P0`` and are close to independent. The
+   held-out likelihood of a mean shift falls with its squared distance from
+   the other half's mean, so it scores noise admitted and signal dropped
+   alike. In high dimension k-means splits one failure region into clusters
+   whose means differ by noise of order ``d / n_k`` (``d`` coordinates,
+   ``n_k`` particles; more, as a chain's states are correlated), and such a
+   split fits the held-out half worse; regions that lie apart fit it better
+   split;
 4. draw ``n_final`` fresh samples of ``q = lam P0 + (1 - lam) sum_k pi_k
    T^-1(N(mu_k, I))`` and estimate ``mean(w 1{f <= g})``, ``w = p0 / q <= 1 /
    lam``, per threshold, with ESS and Pareto ``k`` as for every importance
@@ -74,7 +79,7 @@ using Gaussian densities revisited." Structural Safety 76, 2019.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from pydantic import Field
@@ -110,6 +115,8 @@ from avrisk.rare.stages import BatchCache, BatchRecorder
 from avrisk.rare.stopping import StoppingRule
 
 __all__ = [
+    "THRESHOLDS",
+    "ParticleFit",
     "SplittingISSettings",
     "informative_coordinates",
     "SplittingImportanceSampling",
@@ -117,9 +124,10 @@ __all__ = [
     "splitting_is",
 ]
 
-#: Standard errors beyond which a coordinate's particle mean (or mean square)
-#: counts as informative (step 3 of the module docstring).
-INFORMATIVE_T = 3.0
+#: Candidate thresholds, in standard errors, beyond which a coordinate's particle
+#: mean (or mean square) counts as informative (step 3 of the module
+#: docstring), the sparsest first (ties of the held-out score go to it).
+THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5)
 #: Blocks of chains whose means give those standard errors.
 N_BLOCKS = 20
 
@@ -172,13 +180,33 @@ class SplittingISSettings(SplittingSettings):
     )
 
 
+class ParticleFit(NamedTuple):
+    """The proposal fitted to the particles, and the choices the fit made.
+
+    Attributes
+    ----------
+    proposal : MixtureProposal
+        Mean shifts of the base's standard normals (``StandardSpaceShift``)
+        and ``P0`` with weight ``settings.defensive``.
+    threshold : float
+        The standard errors beyond which a coordinate was shifted (one of
+        ``THRESHOLDS``).
+    n_shifted : int
+        Coordinates shifted.
+    """
+
+    proposal: MixtureProposal
+    threshold: float
+    n_shifted: int
+
+
 def particle_proposal(
     z: FloatArray,
     chain: np.ndarray,
     base: ExponentialFamily,
     settings: SplittingISSettings,
     rng: np.random.Generator,
-) -> MixtureProposal:
+) -> ParticleFit:
     """The importance-sampling proposal fitted to particles (steps 3-4 above).
 
     Parameters
@@ -187,8 +215,8 @@ def particle_proposal(
         Particles of ``P0(. | f <= gamma)`` in the base's standard-normal space.
     chain : ndarray of int, shape (n,)
         The chain of each particle, chains numbered in the order of their
-        ancestors (the number of components is chosen by fitting one half of
-        the chains and scoring the other).
+        ancestors (the threshold and the number of components are chosen by
+        fitting one half of the chains and scoring the other).
     base : ExponentialFamily
         ``P0``.
     settings : SplittingISSettings
@@ -198,9 +226,7 @@ def particle_proposal(
 
     Returns
     -------
-    MixtureProposal
-        Mean shifts of the base's standard normals (``StandardSpaceShift``)
-        and ``P0`` with weight ``settings.defensive``.
+    ParticleFit
 
     Examples
     --------
@@ -210,43 +236,52 @@ def particle_proposal(
     >>> z = np.vstack([rng.normal((4, 0), 0.3, (500, 2)),
     ...                rng.normal((-4, 0), 0.3, (500, 2))])
     >>> chain = rng.permutation(1000) // 10
-    >>> q = particle_proposal(z, chain, base, SplittingISSettings(), rng)
-    >>> sorted(round(float(c.mean[0])) for c in q.components)
+    >>> fit = particle_proposal(z, chain, base, SplittingISSettings(), rng)
+    >>> sorted(round(float(c.mean[0])) for c in fit.proposal.components)
     [-4, 4]
     """
-    searched = (
+    allowed = (
         np.ones(base.dim, dtype=bool)
         if settings.shift == "all"
         else np.asarray(base.searched_coordinates(), dtype=bool)
     )
-    searched &= informative_coordinates(z, chain)
-    structure = StandardSpaceShift(base, searched=searched)
-    z = np.where(searched, z, 0.0)  # the others play no part in the fit
 
-    def fit(points: FloatArray, k: int) -> tuple[list[ExponentialFamily], FloatArray]:
+    def fit(
+        points: FloatArray, point_chain: np.ndarray, threshold: float, k: int
+    ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
+        shifted = allowed & informative_coordinates(points, point_chain, threshold)
+        structure = StandardSpaceShift(base, searched=shifted)
+        masked = np.where(shifted, points, 0.0)  # the others play no part in it
         weights = np.full(len(points), 1.0 / len(points))
-        start = seed_components(structure, points, weights, k, rng)
-        mixture = fit_mixture(*start, points, weights, settings.min_weight)
-        return merge_overlapping(mixture.components, mixture.weights)
+        start = seed_components(structure, masked, weights, k, rng)
+        mixture = fit_mixture(*start, masked, weights, settings.min_weight)
+        return (*merge_overlapping(mixture.components, mixture.weights), shifted)
 
     first = chain < (chain.max() + 1) / 2
-    best_k, best_score = 1, -np.inf
-    if first.any() and not first.all():
-        for k in range(1, settings.n_components + 1):
-            score = 0.0
-            for train in (first, ~first):  # two-fold: each half scores the other
-                components, weights = fit(z[train], k)
-                log_joint = np.log(weights) + component_log_kernels(
-                    components, z[~train]
-                )
-                score += float(logsumexp(log_joint, axis=1).mean())
-            if score > best_score:
-                best_k, best_score = k, score
-    components, weights = fit(z, best_k)
-    return MixtureProposal(components, weights, base, settings.defensive)
+
+    def held_out(threshold: float, k: int) -> float:
+        """Mean log-likelihood of each half under the fit to the other, summed."""
+        score = 0.0
+        for train in (first, ~first):
+            components, weights, _ = fit(z[train], chain[train], threshold, k)
+            log_joint = np.log(weights) + component_log_kernels(components, z[~train])
+            score += float(logsumexp(log_joint, axis=1).mean())
+        return score
+
+    threshold, k = THRESHOLDS[0], 1
+    if first.any() and not first.all():  # max keeps the first of ties
+        threshold = max(THRESHOLDS, key=lambda t: held_out(t, 1))
+        k = max(
+            range(1, settings.n_components + 1), key=lambda k: held_out(threshold, k)
+        )
+    components, weights, shifted = fit(z, chain, threshold, k)
+    proposal = MixtureProposal(components, weights, base, settings.defensive)
+    return ParticleFit(proposal, threshold, int(np.count_nonzero(shifted)))
 
 
-def informative_coordinates(z: FloatArray, chain: np.ndarray) -> np.ndarray:
+def informative_coordinates(
+    z: FloatArray, chain: np.ndarray, threshold: float
+) -> np.ndarray:
     """Coordinates whose particle mean or mean square is off ``N(0, 1)``'s (step 3).
 
     Parameters
@@ -254,13 +289,16 @@ def informative_coordinates(z: FloatArray, chain: np.ndarray) -> np.ndarray:
     z : ndarray of shape (n, D)
         Particles in standard-normal space.
     chain : ndarray of int, shape (n,)
-        Their chains, numbered in the order of their ancestors.
+        Their chains, numbered in the order of their ancestors (any integers
+        in that order).
+    threshold : float
+        Standard errors.
 
     Returns
     -------
     ndarray of bool, shape (D,)
         True where ``|mean(z_i)|`` or ``|mean(z_i^2) - 1|`` exceeds
-        ``INFORMATIVE_T`` standard errors, each from the spread of the means of
+        ``threshold`` standard errors, each from the spread of the means of
         ``N_BLOCKS`` blocks of consecutive chains (fewer blocks with fewer
         chains); every coordinate with fewer than 4 chains.
 
@@ -268,19 +306,20 @@ def informative_coordinates(z: FloatArray, chain: np.ndarray) -> np.ndarray:
     --------
     >>> rng = np.random.default_rng(0)
     >>> z = rng.standard_normal((2000, 4)) * [1.0, 1.0, 3.0, 1.0] + [0.0, 2.0, 0.0, 0.0]
-    >>> informative_coordinates(z, np.arange(2000) // 10).tolist()
+    >>> informative_coordinates(z, np.arange(2000) // 10, 3.0).tolist()
     [False, True, True, False]
     """
-    n_chains = int(chain.max()) + 1
+    _, order = np.unique(chain, return_inverse=True)
+    n_chains = int(order.max()) + 1
     if n_chains < 4:
         return np.ones(z.shape[1], dtype=bool)
     blocks = min(N_BLOCKS, n_chains)
-    block = chain * blocks // n_chains
+    block = order * blocks // n_chains
     informative = np.zeros(z.shape[1], dtype=bool)
     for moment in (z, z * z - 1.0):
         means = np.stack([moment[block == b].mean(axis=0) for b in range(blocks)])
         stderr = means.std(axis=0, ddof=1) / np.sqrt(blocks)
-        informative |= np.abs(moment.mean(axis=0)) > INFORMATIVE_T * stderr
+        informative |= np.abs(moment.mean(axis=0)) > threshold * stderr
     return informative
 
 
@@ -326,7 +365,8 @@ class SplittingImportanceSampling(SubsetSimulation):
             np.random.SeedSequence([context.seed], spawn_key=(FIT_STREAM,))
         )
         chain = np.nonzero(~np.isnan(moved.values))[0]
-        proposal = particle_proposal(moved.z, chain, problem.base, s, rng)
+        fitted = particle_proposal(moved.z, chain, problem.base, s, rng)
+        proposal = fitted.proposal
         n_evals = state.n_evals + moved.n_calls
         stage = context.stage(
             problem, proposal, s.n_final, FINAL_STAGE, final_after=n_evals
@@ -342,6 +382,8 @@ class SplittingImportanceSampling(SubsetSimulation):
                 **levels.details,
                 "fit_acceptance": moved.acceptance,
                 "n_components": proposal.n_components,
+                "informative_threshold": fitted.threshold,
+                "n_shifted": fitted.n_shifted,
                 "splitting": {
                     str(g): {"p": e.p, "ci": list(e.ci)}
                     for g, e in levels.by_gamma.items()
@@ -392,8 +434,8 @@ def splitting_is(
     Estimate
         The importance-sampling estimate; ``details`` holds the levels (as
         subset simulation's), the acceptance of the moves at ``gamma``, the
-        number of components and the splitting estimate of every threshold
-        (``splitting``).
+        number of components, the threshold chosen, the number of coordinates
+        shifted and the splitting estimate of every threshold (``splitting``).
 
     Raises
     ------

@@ -64,7 +64,7 @@ def test_one_region_in_high_dimension_is_one_component():
     z = rng.standard_normal((600, d))
     z[:, 0] += 4.0
     chain = np.repeat(np.arange(60), 10)
-    q = particle_proposal(z, chain, base, SplittingISSettings(), rng)
+    q = particle_proposal(z, chain, base, SplittingISSettings(), rng).proposal
     assert q.n_components == 1
     assert q.components[0].mean[0] == pytest.approx(4.0, abs=0.2)
 
@@ -81,7 +81,8 @@ def test_shift_searched_leaves_unsearched_coordinates_at_zero():
     chain = np.arange(400) // 4
     for shift, moved in (("all", [True, True, True]), ("searched", [True, 0, 0])):
         settings = SplittingISSettings(shift=shift, n_components=1)
-        (component,) = particle_proposal(z, chain, base, settings, rng).components
+        fit = particle_proposal(z, chain, base, settings, rng)
+        (component,) = fit.proposal.components
         np.testing.assert_array_equal(component.mean != 0, moved)
 
 
