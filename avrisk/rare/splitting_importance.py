@@ -328,7 +328,7 @@ class SplittingImportanceSampling(SubsetSimulation):
     """Subset simulation, then importance sampling from its particles (module doc)."""
 
     name = "splitting_is"
-    label = "subset simulation + importance sampling"
+    label = "splitting + IS"
     Settings: type[SplittingISSettings] = SplittingISSettings
     weighted = True
     decomposable = True

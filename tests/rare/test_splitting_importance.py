@@ -69,6 +69,22 @@ def test_one_region_in_high_dimension_is_one_component():
     assert q.components[0].mean[0] == pytest.approx(4.0, abs=0.2)
 
 
+def test_a_weak_shift_of_every_coordinate_is_kept_and_noise_is_dropped():
+    # dense: 0.3 sd on each of 100 coordinates (2-3 standard errors each); sparse:
+    # 4 sd on one of 100, noise on the others; the held-out half picks the threshold
+    d, rng = 100, np.random.default_rng(1)
+    base = FixedCovNormal(np.zeros(d), cov=np.eye(d))
+    chain = np.repeat(np.arange(100), 8)
+    dense = particle_proposal(
+        rng.standard_normal((800, d)) + 0.3, chain, base, SplittingISSettings(), rng
+    )
+    assert dense.n_shifted >= 90 and dense.threshold <= 2.0
+    sparse_z = rng.standard_normal((800, d))
+    sparse_z[:, 0] += 4.0
+    sparse = particle_proposal(sparse_z, chain, base, SplittingISSettings(), rng)
+    assert sparse.n_shifted <= 5 and sparse.threshold >= 3.0
+
+
 def test_shift_searched_leaves_unsearched_coordinates_at_zero():
     base = Product(
         [
