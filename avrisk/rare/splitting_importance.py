@@ -54,7 +54,10 @@ iteration's elites degenerate in turn, and the search collapses (the linear
 limit state in ``D = 1000`` at ``1e-6``: no hit, or 50% errors, at 100,000
 calls; BENCHMARKS.md). Splitting's particles need no weights, so ``n`` is the
 particles' effective number, and the shift can include coordinates a CE box
-leaves alone (``shift="all"``: the learned drivers' 404-d ``xi``).
+leaves alone (``shift="all"``: the learned drivers' 404-d ``xi``, of which the
+particles show few to matter). Where many coordinates each matter a little
+and ``D / n_eff`` is far above 1, this fails too (the same ``D = 1000``
+problem: relative errors of about 50%).
 
 The estimate is that of the importance-sampling stage alone: the proposal is
 fixed before its samples are drawn, so it is unbiased whatever the particles,
