@@ -274,15 +274,13 @@ def compare_runs(
     )
     if tested.method == NAIVE_PART:
         raise CliError("compare tests a method against naive Monte Carlo: not naive")
+
+    def naive_at(n: int) -> RunSettings:
+        return settings("naive", n_final=n, seed=tested.seed + 1, **shared)
+
     plan = [
         (method_label(tested.method), out / tested.method, tested),
-        (
-            "naive MC, same budget",
-            out / NAIVE_PART,
-            settings(
-                "naive", n_final=tested.total_rollouts, seed=tested.seed + 1, **shared
-            ),
-        ),
+        ("naive MC, same budget", out / NAIVE_PART, naive_at(tested.total_rollouts)),
     ]
     if reference_n:
         plan.append(
@@ -293,16 +291,16 @@ def compare_runs(
             )
         )
     cost = cost_meter(spec, [(label, s) for label, _, s in plan])
+    runs: list[tuple[str, RunDirectory]] = []
     with open_evaluator(objective, *backend) as evaluator:
-        runs = [
-            (
-                label,
-                execute(
-                    label, path, objective, spec_json, s, failures, evaluator, cost=cost
-                ),
+        for label, path, s in plan:
+            if path == out / NAIVE_PART:
+                # the budget the method used: subset simulation's plan is a bound
+                s = naive_at(runs[0][1].summary()["estimate"]["n_evals"])
+            run_dir = execute(
+                label, path, objective, spec_json, s, failures, evaluator, cost=cost
             )
-            for label, path, s in plan
-        ]
+            runs.append((label, run_dir))
     reference = runs[2][1] if reference_n else None
     if reference is not None:
         notes = check_same_definition(

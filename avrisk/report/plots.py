@@ -29,12 +29,12 @@ from avrisk.rare.estimator import DiagnosticTable  # noqa: E402
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable  # noqa: E402
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K  # noqa: E402
 
-#: Marks a figure computed from an unreliable CE standard error.
+#: Marks a figure computed from an unreliable importance-sampling standard error.
 UNRELIABLE_MARK = "*"
 UNRELIABLE_NOTE = (
-    f"{UNRELIABLE_MARK} fewer than {MIN_RELIABLE_ESS:g} effective CE hits, or hit "
-    f"weights with a heavy tail (Pareto k > {MAX_RELIABLE_PARETO_K:g}), at this "
-    "threshold: CE's standard error, hence the variance ratio, is unreliable"
+    f"{UNRELIABLE_MARK} fewer than {MIN_RELIABLE_ESS:g} effective hits of the method, "
+    f"or hit weights with a heavy tail (Pareto k > {MAX_RELIABLE_PARETO_K:g}), at "
+    "this threshold: its standard error, hence the variance ratio, is unreliable"
 )
 
 

@@ -175,6 +175,22 @@ def test_compare_json_has_one_variance_ratio_per_threshold(short_scenario, tmp_p
     assert tables.count("trust at 1 s: caution (") == 2
 
 
+def test_compare_gives_naive_sampling_the_rollouts_the_method_used(
+    short_scenario, tmp_path
+):
+    # subset simulation's planned budget is a bound (max_levels full sets); naive
+    # Monte Carlo gets what the run used, not the bound
+    out = tmp_path / "cmp"
+    args = ("compare", short_scenario, "--out", out, "--method", "splitting_is")
+    args += ("--set", "n_particles=100", "--n-final", 100, "--gamma", 1.0)
+    result = invoke(*args, "--gamma-test", "2.0", "--reference-n", 0, "--json")
+    assert result.exit_code == 0, result.output
+    runs = json.loads(result.stdout)["runs"]
+    used = [run["n_rollouts"] for run in runs]
+    assert [run["label"] for run in runs] == ["splitting + IS", "naive MC, same budget"]
+    assert used[0] == used[1] < 100 * 12 + 100 + 100
+
+
 def test_compare_defaults_finish_in_minutes():
     options = estimator_options("ce", {}, None, COMPARE_DEFAULTS)
     budget = get_estimator("ce", **options).budget()

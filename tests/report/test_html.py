@@ -127,7 +127,7 @@ def test_a_variance_ratio_from_few_effective_hits_is_marked_unreliable(runs, tmp
     assert all(row["reliable"] for row in comparison_rows(ce))
 
     report = write_report(tmp_path / "report", dirs, title="t")
-    assert "effective CE hits" not in report.read_text()
+    assert "effective hits of the method" not in report.read_text()
     summary_path = dirs[0][1].path / "summary.json"
     original = summary_path.read_text()
     try:
@@ -137,7 +137,10 @@ def test_a_variance_ratio_from_few_effective_hits_is_marked_unreliable(runs, tmp
         text = write_report(tmp_path / "shaky", dirs, title="t").read_text()
     finally:
         _reseal(summary_path, original)
-    assert "fewer than 10 effective CE hits, or hit weights with a heavy tail" in text
+    assert (
+        "fewer than 10 effective hits of the method, or hit weights with a heavy tail"
+        in text
+    )
     assert text.count("</td></tr>") > 0 and "*</td></tr>" in text
 
 
