@@ -383,6 +383,7 @@ class SplittingImportanceSampling(SubsetSimulation):
             stopped_by=stage.stopped_by or "budget",
             details={
                 **levels.details,
+                "n_failed": state.n_failed + moved.n_failed,  # the moves at gamma too
                 "fit_acceptance": moved.acceptance,
                 "n_components": proposal.n_components,
                 "informative_threshold": fitted.threshold,
