@@ -19,6 +19,7 @@ import argparse
 import time
 import warnings
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -47,28 +48,34 @@ except ImportError:  # optional comparator
 Run = Callable[[AnalyticProblem, int], tuple[float, float, float, int]]
 
 
-def avrisk_ce(budget: int, select: str) -> Run:
-    n_iter, n_per_iter = 10, budget // 25
-    n_final = budget - n_iter * n_per_iter
+def _estimator_run(method: Callable[..., Estimate], **settings: Any) -> Run:
+    """A run of ``method(f, base, gamma, seed=seed, **settings)`` per problem and seed.
+
+    Degenerate runs (``UnreliableEstimateWarning``) are part of what the RMSE
+    measures, so their warnings are silenced.
+    """
 
     def run(problem: AnalyticProblem, seed: int) -> tuple[float, float, float, int]:
         with warnings.catch_warnings():
-            # degenerate runs are part of what the RMSE measures
             warnings.simplefilter("ignore", UnreliableEstimateWarning)
-            est = cross_entropy(
-                problem.f,
-                problem.base,
-                problem.gamma,
-                rho=0.1,
-                alpha=0.8,
-                n_per_iter=n_per_iter,
-                n_iter=n_iter,
-                n_final=n_final,
-                seed=seed,
-                select=select,
-            )
+            est = method(problem.f, problem.base, problem.gamma, seed=seed, **settings)
         return _unpack(est)
 
+    return run
+
+
+def avrisk_ce(budget: int, select: str) -> Run:
+    n_iter, n_per_iter = 10, budget // 25
+    n_final = budget - n_iter * n_per_iter
+    run = _estimator_run(
+        cross_entropy,
+        rho=0.1,
+        alpha=0.8,
+        n_per_iter=n_per_iter,
+        n_iter=n_iter,
+        n_final=n_final,
+        select=select,
+    )
     run.label = f"avrisk CE, select={select} ({n_iter}x{n_per_iter} + {n_final})"
     return run
 
@@ -82,22 +89,9 @@ def avrisk_mixture(budget: int) -> Run:
     """
     n_iter, n_per_iter = 8, budget // 25
     n_final = budget - n_iter * n_per_iter
-
-    def run(problem: AnalyticProblem, seed: int) -> tuple[float, float, float, int]:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UnreliableEstimateWarning)
-            est = mixture_ce(
-                problem.f,
-                problem.base,
-                problem.gamma,
-                rho=0.1,
-                n_per_iter=n_per_iter,
-                n_iter=n_iter,
-                n_final=n_final,
-                seed=seed,
-            )
-        return _unpack(est)
-
+    run = _estimator_run(
+        mixture_ce, rho=0.1, n_per_iter=n_per_iter, n_iter=n_iter, n_final=n_final
+    )
     run.label = f"avrisk mixture CE, 4 components ({n_iter}x{n_per_iter} + {n_final})"
     return run
 
@@ -120,18 +114,7 @@ def avrisk_splitting(budget: int) -> Run:
     after the first N); likelier events stop sooner, with fewer calls.
     """
     n_particles = budget // 6
-
-    def run(problem: AnalyticProblem, seed: int) -> tuple[float, float, float, int]:
-        return _unpack(
-            subset_simulation(
-                problem.f,
-                problem.base,
-                problem.gamma,
-                n_particles=n_particles,
-                seed=seed,
-            )
-        )
-
+    run = _estimator_run(subset_simulation, n_particles=n_particles)
     run.label = f"avrisk subset simulation (N={n_particles:,}, p0=0.1)"
     return run
 
@@ -143,20 +126,7 @@ def avrisk_splitting_is(budget: int) -> Run:
     stage spend about the budget; likelier events fewer.
     """
     n_particles, n_final = budget // 14, budget // 2
-
-    def run(problem: AnalyticProblem, seed: int) -> tuple[float, float, float, int]:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UnreliableEstimateWarning)
-            est = splitting_is(
-                problem.f,
-                problem.base,
-                problem.gamma,
-                n_particles=n_particles,
-                n_final=n_final,
-                seed=seed,
-            )
-        return _unpack(est)
-
+    run = _estimator_run(splitting_is, n_particles=n_particles, n_final=n_final)
     run.label = f"avrisk splitting + IS (N={n_particles:,}, then {n_final:,})"
     return run
 
