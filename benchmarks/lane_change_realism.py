@@ -194,15 +194,14 @@ def calibrate(net, scenes: Scenes, train: LaneChangeStatistics, noise: float):
     """The three calibration steps of the module docstring; settings and log."""
     log: dict[str, Any] = {"clip": [], "gaps": []}
     base = LaneChangeParams(rate=train.rate / 3600.0)
+
+    def measured(p: LaneChangeParams) -> dict:
+        trace = scenes.run(layer(net, scenes, p), [scenes.xi])
+        return measure(trace, scenes.init, scenes.road.lane_width, noise)
+
     best = None
     for clip in CLIPS:
-        p = dataclasses.replace(base, offset_clip=clip)
-        m = measure(
-            scenes.run(layer(net, scenes, p), [scenes.xi]),
-            scenes.init,
-            scenes.road.lane_width,
-            noise,
-        )
+        m = measured(dataclasses.replace(base, offset_clip=clip))
         s = statistics(m)
         err = abs(s.duration_q50 / train.duration_q50 - 1) + abs(
             s.peak_q50 / train.peak_q50 - 1
@@ -214,13 +213,7 @@ def calibrate(net, scenes: Scenes, train: LaneChangeStatistics, noise: float):
     assert best is not None
     base = dataclasses.replace(base, offset_clip=best[1])
     for gap, ttc in GAP_GRID:
-        p = dataclasses.replace(base, min_gap=gap, min_ttc=ttc)
-        m = measure(
-            scenes.run(layer(net, scenes, p), [scenes.xi]),
-            scenes.init,
-            scenes.road.lane_width,
-            noise,
-        )
+        m = measured(dataclasses.replace(base, min_gap=gap, min_ttc=ttc))
         s = statistics(m)
         row = {
             "min_gap": gap,
