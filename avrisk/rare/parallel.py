@@ -109,7 +109,12 @@ def in_flight(
     try:
         while True:
             for task in todo:
-                pending[submit(task)] = task
+                try:
+                    pending[submit(task)] = task
+                except crashed as err:  # the pool broke before this submission
+                    if not pending:
+                        raise _died(task, err) from err
+                    break  # a pending chunk's result names the one that died
                 if len(pending) >= window:
                     break
             if not pending:
@@ -120,15 +125,20 @@ def in_flight(
                 try:
                     values, extras = future.result()
                 except crashed as err:
-                    raise WorkerError(
-                        f"a worker died while evaluating chunk {task.chunk} of "
-                        f"stage {task.stage} ({type(err).__name__}: {err}); the "
-                        "chunks recorded so far are kept: rerun to resume"
-                    ) from err
+                    raise _died(task, err) from err
                 yield EvalResult(task, values, extras)
     finally:
         for future in pending:
             future.cancel()
+
+
+def _died(task: EvalTask, err: BaseException) -> WorkerError:
+    """The error of a worker that died while ``task`` was under way."""
+    return WorkerError(
+        f"a worker died while evaluating chunk {task.chunk} of stage {task.stage} "
+        f"({type(err).__name__}: {err}); the chunks recorded so far are kept: "
+        "rerun to resume"
+    )
 
 
 def _start_worker(factory: Factory, parent: int) -> None:

@@ -2,13 +2,22 @@
 
 import os
 import time
+from concurrent.futures import Future
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from avrisk.rare import cross_entropy, naive_mc
-from avrisk.rare.parallel import EVALUATED_BY, ProcessPoolEvaluator, WorkerError
+from avrisk.rare.evaluation import EvalTask
+from avrisk.rare.parallel import (
+    EVALUATED_BY,
+    ProcessPoolEvaluator,
+    WorkerError,
+    in_flight,
+)
 from avrisk.testing import gaussian_linear_problem
 
 PROBLEM = gaussian_linear_problem(3, p=1e-4)
@@ -103,6 +112,28 @@ def test_a_dead_worker_is_an_error_naming_its_chunk_and_the_run_resumes(pool, tm
     resumed = run(pool)
     local = naive_mc(PROBLEM.f, PROBLEM.base, PROBLEM.gamma, 40_000, seed=3)
     assert without_time(resumed) == without_time(local)
+
+
+@pytest.mark.parametrize("under_way", [False, True])
+def test_a_pool_broken_before_a_submission_is_the_dead_workers_error(under_way):
+    # the worker may die before the next chunk is submitted: the submission then
+    # raises (not a pending future); the chunk under way, if any, is the one named
+    dead = BrokenProcessPool("a child process terminated abruptly")
+    died = Future()
+    died.set_exception(dead)
+    chunks = (7, 8) if under_way else (8,)
+    tasks = [
+        EvalTask(0, j, np.arange(1), np.zeros((1, 3)), np.zeros(1)) for j in chunks
+    ]
+
+    def submit(task):
+        if task.chunk == 7:
+            return died
+        raise dead
+
+    named = 7 if under_way else 8
+    with pytest.raises(WorkerError, match=f"chunk {named} of stage 0 .* rerun to res"):
+        list(in_flight(submit, tasks, 4, (BrokenProcessPool,)))
 
 
 def test_workers_must_be_a_positive_integer():
