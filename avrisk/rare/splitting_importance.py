@@ -26,7 +26,15 @@ and estimates ``p`` by importance sampling from it:
    fit mean shifts of ``N(0, I)`` on the kept coordinates, unweighted (the
    particles already follow the target), as mixture cross-entropy fits its
    elites (:mod:`avrisk.rare.mixture`): k-means++ seeding, EM, merging of
-   components less than one standard deviation apart. The threshold ``t``
+   components less than one standard deviation apart. Each fitted shift ``m``
+   (of ``pi N`` particles) is then shrunk towards 0, James-Stein fashion, to
+   ``c m`` with ``c = max(0, 1 - s^2 / (pi |m|^2))``, ``s^2`` the sum of the
+   kept coordinates' squared standard errors: ``|m|^2`` overstates the true
+   shift's by about that noise, and ``c`` is the scale that minimises the
+   expected squared distance to the true shift. ``t = 0`` keeps every
+   coordinate and relies on the shrinkage alone: the fit for a failure set
+   that depends a little on each of many coordinates (a linear limit state in
+   ``D = 1000``), where no single coordinate stands out. The threshold ``t``
    (from ``THRESHOLDS``, with one component), then the number of components
    (from 1 to ``n_components``), is the one whose fits to the particles of one
    half of the chains give the other half's particles the highest mean
@@ -55,9 +63,10 @@ limit state in ``D = 1000`` at ``1e-6``: no hit, or 50% errors, at 100,000
 calls; BENCHMARKS.md). Splitting's particles need no weights, so ``n`` is the
 particles' effective number, and the shift can include coordinates a CE box
 leaves alone (``shift="all"``: the learned drivers' 404-d ``xi``, of which the
-particles show few to matter). Where many coordinates each matter a little
-and ``D / n_eff`` is far above 1, this fails too (the same ``D = 1000``
-problem: relative errors of about 50%).
+particles show few to matter). Where many coordinates each matter a little,
+no coordinate selection helps; the shrunk shift over all of them does, as long
+as the noise ``D / n_eff`` it leaves in the weights' second moment, a factor of
+about ``exp(c^2 D / n_eff)``, stays moderate.
 
 The estimate is that of the importance-sampling stage alone: the proposal is
 fixed before its samples are drawn, so it is unbiased whatever the particles,
@@ -120,17 +129,20 @@ from avrisk.rare.stopping import StoppingRule
 __all__ = [
     "THRESHOLDS",
     "ParticleFit",
+    "block_means",
     "SplittingISSettings",
     "informative_coordinates",
     "SplittingImportanceSampling",
     "particle_proposal",
+    "shrink",
     "splitting_is",
 ]
 
 #: Candidate thresholds, in standard errors, beyond which a coordinate's particle
 #: mean (or mean square) counts as informative (step 3 of the module
-#: docstring), the sparsest first (ties of the held-out score go to it).
-THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5)
+#: docstring), the sparsest first (ties of the held-out score go to it); 0
+#: keeps every coordinate.
+THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
 #: Blocks of chains whose means give those standard errors.
 N_BLOCKS = 20
 
@@ -252,13 +264,20 @@ def particle_proposal(
     def fit(
         points: FloatArray, point_chain: np.ndarray, threshold: float, k: int
     ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
-        shifted = allowed & informative_coordinates(points, point_chain, threshold)
+        _, stderr = block_means(points, point_chain)
+        informative = informative_coordinates(points, point_chain, threshold)
+        shifted = allowed & informative
         structure = StandardSpaceShift(base, searched=shifted)
         masked = np.where(shifted, points, 0.0)  # the others play no part in it
         weights = np.full(len(points), 1.0 / len(points))
         start = seed_components(structure, masked, weights, k, rng)
         mixture = fit_mixture(*start, masked, weights, settings.min_weight)
-        return (*merge_overlapping(mixture.components, mixture.weights), shifted)
+        components, shares = merge_overlapping(mixture.components, mixture.weights)
+        noise = float(np.nansum(stderr[shifted] ** 2))
+        shrunk = [
+            shrink(c, share, noise) for c, share in zip(components, shares, strict=True)
+        ]
+        return shrunk, shares, shifted
 
     first = chain < (chain.max() + 1) / 2
 
@@ -282,6 +301,65 @@ def particle_proposal(
     return ParticleFit(proposal, threshold, int(np.count_nonzero(shifted)))
 
 
+def shrink(
+    component: StandardSpaceShift, share: float, noise: float
+) -> StandardSpaceShift:
+    """A fitted shift ``m`` scaled by ``c = max(0, 1 - noise / (share |m|^2))``.
+
+    Parameters
+    ----------
+    component : StandardSpaceShift
+        The fit, of ``share`` of the particles.
+    share : float
+        Its mixture weight, in (0, 1].
+    noise : float
+        Sum of the shifted coordinates' squared standard errors of the mean
+        of all particles (a component of a share ``pi`` has ``1 / pi`` times
+        that noise).
+
+    Examples
+    --------
+    >>> from avrisk.rare import FixedCovNormal
+    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    >>> fit = StandardSpaceShift(base, [3.0, 4.0])
+    >>> shrink(fit, 0.5, 2.5).mean.round(6).tolist()  # c = 1 - 2.5 / (0.5 * 25)
+    [2.4, 3.2]
+    """
+    size = float(component.mean @ component.mean)
+    if size == 0.0:
+        return component
+    scale = max(0.0, 1.0 - noise / (share * size))
+    return component.with_natural_params(scale * component.mean)
+
+
+def block_means(z: FloatArray, chain: np.ndarray) -> tuple[FloatArray, FloatArray]:
+    """Mean of each coordinate and its standard error, from blocks of chains.
+
+    Parameters
+    ----------
+    z : ndarray of shape (n, D)
+        Particles (or any per-particle quantity).
+    chain : ndarray of int, shape (n,)
+        Their chains, numbered in the order of their ancestors (any integers
+        in that order).
+
+    Returns
+    -------
+    mean, stderr : ndarray of shape (D,)
+        ``stderr`` from the spread of the means of ``N_BLOCKS`` blocks of
+        consecutive chains (fewer blocks with fewer chains); NaN with fewer
+        than 4 chains (then nothing is shrunk).
+    """
+    _, order = np.unique(chain, return_inverse=True)
+    n_chains = int(order.max()) + 1
+    if n_chains < 4:
+        return z.mean(axis=0), np.full(z.shape[1], np.nan)
+    blocks = min(N_BLOCKS, n_chains)
+    block = order * blocks // n_chains
+    means = np.stack([z[block == b].mean(axis=0) for b in range(blocks)])
+    return z.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(blocks)
+
+
 def informative_coordinates(
     z: FloatArray, chain: np.ndarray, threshold: float
 ) -> np.ndarray:
@@ -301,9 +379,8 @@ def informative_coordinates(
     -------
     ndarray of bool, shape (D,)
         True where ``|mean(z_i)|`` or ``|mean(z_i^2) - 1|`` exceeds
-        ``threshold`` standard errors, each from the spread of the means of
-        ``N_BLOCKS`` blocks of consecutive chains (fewer blocks with fewer
-        chains); every coordinate with fewer than 4 chains.
+        ``threshold`` standard errors (:func:`block_means`); every
+        coordinate with fewer than 4 chains or ``threshold`` 0.
 
     Examples
     --------
@@ -312,17 +389,12 @@ def informative_coordinates(
     >>> informative_coordinates(z, np.arange(2000) // 10, 3.0).tolist()
     [False, True, True, False]
     """
-    _, order = np.unique(chain, return_inverse=True)
-    n_chains = int(order.max()) + 1
-    if n_chains < 4:
+    if threshold == 0.0 or np.unique(chain).size < 4:
         return np.ones(z.shape[1], dtype=bool)
-    blocks = min(N_BLOCKS, n_chains)
-    block = order * blocks // n_chains
     informative = np.zeros(z.shape[1], dtype=bool)
     for moment in (z, z * z - 1.0):
-        means = np.stack([moment[block == b].mean(axis=0) for b in range(blocks)])
-        stderr = means.std(axis=0, ddof=1) / np.sqrt(blocks)
-        informative |= np.abs(moment.mean(axis=0)) > threshold * stderr
+        mean, stderr = block_means(moment, chain)
+        informative |= np.abs(mean) > threshold * stderr
     return informative
 
 

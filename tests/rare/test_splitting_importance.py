@@ -85,6 +85,26 @@ def test_a_weak_shift_of_every_coordinate_is_kept_and_noise_is_dropped():
     assert sparse.n_shifted <= 5 and sparse.threshold >= 3.0
 
 
+def test_a_shift_spread_over_many_coordinates_is_shrunk_towards_the_truth():
+    # 0.15 sd on each of 1000 coordinates (|a|^2 = 22.5), 400 particles: no one
+    # coordinate stands out, so every coordinate is kept (t = 0), and the fitted
+    # mean's noise (about 1000 / 400 in squared norm) is shrunk out of it
+    d, rng = 1000, np.random.default_rng(2)
+    base = FixedCovNormal(np.zeros(d), cov=np.eye(d))
+    z = rng.standard_normal((400, d)) + 0.15
+    fit = particle_proposal(
+        z, np.arange(400) // 4, base, SplittingISSettings(n_components=1), rng
+    )
+    assert fit.threshold == 0.0 and fit.n_shifted == d
+    (component,) = fit.proposal.components
+    raw_error = np.sum((z.mean(axis=0) - 0.15) ** 2)
+    shrunk_error = np.sum((component.mean - 0.15) ** 2)
+    assert raw_error == pytest.approx(d / 400, rel=0.15)
+    assert shrunk_error < 0.9 * raw_error
+    scale = component.mean @ z.mean(axis=0) / np.sum(z.mean(axis=0) ** 2)
+    assert scale == pytest.approx(22.5 / (22.5 + d / 400), abs=0.03)
+
+
 def test_shift_searched_leaves_unsearched_coordinates_at_zero():
     base = Product(
         [
