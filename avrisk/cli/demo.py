@@ -88,7 +88,7 @@ def demo(
         50_000,
         min=0,
         help="Rollouts of the naive reference run on the default scenario "
-        "(0: none; the ratios then use CE's own estimate of p).",
+        "(0: none; the ratios then use splitting_is's own estimate of p).",
     ),
 ) -> None:
     """The main job: cross-entropy vs naive MC on exact problems, then a scenario.

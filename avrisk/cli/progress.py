@@ -4,8 +4,10 @@ A :class:`CostMeter` is shared by the runs of one command (a ``compare`` has
 three): before the first rollout it prints the plan (rollouts, and disk as
 estimated from the scenario's parameters), and once the first chunk has been
 simulated, the rate measured on it and the time the rest will take, and the
-disk a rollout took in it. A run that resumes says so when it ends: how many
-rollouts it reused from the earlier session.
+disk a rollout took in it. Where a run's rollouts are only bounded (subset
+simulation ends when its levels reach ``gamma``), each figure says "at most".
+A run that resumes says so when it ends: how many rollouts it reused from the
+earlier session.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from rich.console import Console
 from rich.markup import escape
@@ -49,6 +52,28 @@ def megabytes(n_bytes: float) -> str:
     return f"{n_bytes / 1e6:.0f} MB" if n_bytes >= 1e6 else f"{n_bytes / 1e3:.0f} kB"
 
 
+class PlannedRun(NamedTuple):
+    """One run of a command's plan.
+
+    Attributes
+    ----------
+    label : str
+        The run, as its progress bar names it.
+    what : str
+        What it does (the estimator's ``describe()``).
+    rollouts : int
+        The rollouts it plans, or at most makes (``at_most``).
+    at_most : bool
+        Whether ``rollouts`` is an upper bound
+        (:attr:`~avrisk.rare.estimator.Estimator.budget_is_bound`).
+    """
+
+    label: str
+    what: str
+    rollouts: int
+    at_most: bool = False
+
+
 @dataclass
 class CostMeter:
     """What a command's runs will cost, printed before and once measured.
@@ -57,9 +82,8 @@ class CostMeter:
     ----------
     console : Console
         Where the lines go (stderr).
-    plan : sequence of (str, str, int)
-        Each run of the command: its label, what it does (the estimator's
-        ``describe()``) and the rollouts it plans.
+    plan : sequence of PlannedRun
+        Each run of the command.
     bytes_per_rollout : float
         Disk a rollout will take in ``samples.parquet`` [B], as estimated
         before any is written
@@ -73,7 +97,7 @@ class CostMeter:
     """
 
     console: Console
-    plan: Sequence[tuple[str, str, int]]
+    plan: Sequence[PlannedRun]
     bytes_per_rollout: float
     done: int = 0
     measured_bytes: float | None = None
@@ -82,19 +106,26 @@ class CostMeter:
 
     @property
     def total(self) -> int:
-        """Rollouts of every run of the plan."""
-        return sum(n for _, _, n in self.plan)
+        """Rollouts of every run of the plan (an upper bound if :attr:`at_most`)."""
+        return sum(run.rollouts for run in self.plan)
+
+    @property
+    def at_most(self) -> str:
+        """``"at most "`` when some run's rollouts are only bounded, else ``""``."""
+        return "at most " if any(run.at_most for run in self.plan) else ""
 
     def announce(self) -> None:
         """The plan, once, before the first rollout of the command."""
         if self._announced:
             return
         self._announced = True
-        runs = ", ".join(f"{label} ({what})" for label, what, _ in self.plan)
+        runs = ", ".join(f"{run.label} ({run.what})" for run in self.plan)
         in_all = " in all" if len(self.plan) > 1 else ""
         self.console.print(
-            f"plan: {escape(runs)}: {self.total:,} rollouts{in_all}; samples take "
-            f"about {megabytes(self.total * self.bytes_per_rollout)} on disk "
+            f"plan: {escape(runs)}: {self.at_most}{self.total:,} rollouts{in_all}"
+            + ("" if not self.at_most else " (fewer if the levels reach gamma sooner)")
+            + f"; samples take {self.at_most}about "
+            f"{megabytes(self.total * self.bytes_per_rollout)} on disk "
             f"(an estimate: {self.bytes_per_rollout:,.0f} B a rollout)",
             highlight=False,
         )
@@ -119,13 +150,15 @@ class CostMeter:
         if not left:
             return
         disk = self.measured_bytes
+        bound = self.at_most
+        rest = f"at most {left:,} more" if bound else f"the {left:,} left"
         self.console.print(
-            f"rate: {rate:,.0f} rollouts/s on the first {n:,}: about "
-            f"{duration(left / rate)} for the {left:,} left"
+            f"rate: {rate:,.0f} rollouts/s on the first {n:,}: {bound}about "
+            f"{duration(left / rate)} for {rest}"
             + (
                 ""
                 if disk is None
-                else f"; disk: {disk:,.0f} B a rollout, about "
+                else f"; disk: {disk:,.0f} B a rollout, {bound}about "
                 f"{megabytes(self.total * disk)} in all"
             ),
             highlight=False,

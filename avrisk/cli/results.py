@@ -28,7 +28,12 @@ from avrisk.report.answer import (
     search_sentence,
     threshold_trust,
 )
-from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, comparison_rows
+from avrisk.report.plots import (
+    UNRELIABLE_MARK,
+    UNRELIABLE_NOTE,
+    comparison_rows,
+    table_cells,
+)
 from avrisk.scenario import ScenarioSpec
 
 #: Schema of the ``--json`` document.
@@ -48,8 +53,10 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
     """The answer in one sentence, then every run's estimate at every threshold.
 
     After each run's table: that its search converged (a search that did not
-    is a reason of its trust), and its trust when not ok (the answer's
-    reasons are in the answer).
+    is a reason of its trust), its trust when not ok (the answer's reasons
+    are in the answer), and the tables of its estimator's diagnostics that
+    the report does not draw (splitting_is: its proposal, and the estimate
+    beside subset simulation's own).
     """
     lead = answer(runs, spec)
     out_console.print(f"[bold]{escape(lead.sentence())}[/]", highlight=False)
@@ -94,6 +101,20 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
                 highlight=False,
             )
         print_mechanisms(label, summary)
+        print_diagnostic_tables(label, summary)
+
+
+def print_diagnostic_tables(label: str, summary: dict[str, Any]) -> None:
+    """The diagnostic tables of a run's estimator that are not drawn, as tables."""
+    estimator = estimator_class(summary["method"])
+    for diagnostic in estimator.diagnostics(summary["estimate"]):
+        if diagnostic.drawn:
+            continue
+        table = compact_table(f"{label}: {diagnostic.title}")
+        add_columns(table, diagnostic.columns)
+        for row in table_cells(diagnostic):
+            table.add_row(*row)
+        out_console.print(table)
 
 
 def _interval(est: dict[str, Any]) -> str | None:

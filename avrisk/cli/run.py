@@ -1,15 +1,17 @@
 """``avrisk run``, ``avrisk compare`` and ``avrisk report``: the main job.
 
 ``run`` estimates ``P0(min TTC <= gamma)`` for a scenario with any registered
-estimator (``--method``; cross-entropy importance sampling by default) into a
-run directory (resumable; see :mod:`avrisk.pipeline.store`) and writes its
-report. ``compare`` runs a method, naive MC at its budget and a larger naive
-reference side by side, as the paper's Table 1 and Fig. 2-3 do. ``report``
-rebuilds the report of either.
+estimator (``--method``; by default ``splitting_is``, importance sampling from
+subset simulation's particles, the best of the coverage benchmark; ``ce`` is
+the paper's cross-entropy) into a run directory (resumable; see
+:mod:`avrisk.pipeline.store`) and writes its report. ``compare`` runs a
+method, naive MC at its budget and a larger naive reference side by side, as
+the paper's Table 1 and Fig. 2-3 do. ``report`` rebuilds the report of either.
 
 The estimators' settings are options by name: those with a flag (``--rho``,
 ``--n-iter`` ...) and any other through ``--set NAME=VALUE``; a setting the
-chosen estimator does not have is refused by name.
+chosen estimator does not have is refused by name, with the methods that have
+it (``--rho`` is cross-entropy's).
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ from avrisk.cli.workflow import (
     cost_meter,
     execute,
     method_label,
+    planned,
     samples_directory,
     settings,
     write_run_report,
@@ -53,13 +56,56 @@ from avrisk.rare.estimator import estimator_class
 from avrisk.scenario import load_spec, spec_from_dict
 
 DEFAULT_SCENARIO = "highway_default"
+#: The best estimator of the coverage benchmark on both simulator scenarios
+#: (BENCHMARKS.md, "Coverage"); ``--method ce`` is the paper's.
+DEFAULT_METHOD = "splitting_is"
 #: Where the command line's defaults differ from an estimator's own.
 CLI_DEFAULTS = {"n_iter": 20}
-#: ``compare``'s: a budget that finishes in minutes on a laptop (CE 5 x 2,000
-#: + 10,000 rollouts, as much naive MC and a reference of 50,000: 90,000
-#: rollouts, about 3.5 minutes on one core on highway_default).
+#: ``compare``'s: a budget that finishes in minutes on a laptop. splitting_is
+#: keeps its own 2,000 particles per level and takes a final stage of 10,000:
+#: about 19,000 rollouts on highway_default (at most 36,000 if its levels
+#: needed all 12), as much naive MC and a reference of 50,000, about 90,000
+#: rollouts; CE 5 x 2,000 + 10,000 rollouts, 90,000 in all too.
 COMPARE_DEFAULTS = {"n_iter": 5, "n_per_iter": 2000, "n_final": 10_000}
 COMPARE_REFERENCE = 50_000
+
+
+def methods_with(name: str) -> list[str]:
+    """The registered estimators that have the setting ``name``."""
+    return [
+        m for m in estimator_names() if name in estimator_class(m).Settings.model_fields
+    ]
+
+
+def _defaults(name: str, cli_defaults: dict[str, Any]) -> str:
+    """``"10000 for splitting_is; 100000 for ce, defensive, mixture, naive"``.
+
+    The default of setting ``name`` per estimator that has it (the command's
+    ``cli_defaults`` over the estimator's own), the default method first.
+    """
+    by_value: dict[str, list[str]] = {}
+    owners = methods_with(name)
+    for m in sorted(owners, key=lambda m: m != DEFAULT_METHOD):
+        value = cli_defaults.get(
+            name, estimator_class(m).Settings.model_fields[name].default
+        )
+        by_value.setdefault(str(value), []).append(m)
+    if len(by_value) == 1 and len(owners) == len(estimator_names()):
+        return next(iter(by_value))
+    return "; ".join(f"{v} for {', '.join(ms)}" for v, ms in by_value.items())
+
+
+def _setting(
+    kind: type, name: str, text: str, cli_defaults: dict[str, Any] = CLI_DEFAULTS
+) -> Any:
+    """An estimator-setting option (``kind | None``): its help gives each default.
+
+    ``text`` says what it is; the help adds, per method that has the setting,
+    its default, so a flag of another method's (``--rho`` with splitting_is)
+    shows as such.
+    """
+    option = typer.Option(help=f"{text} [default: {_defaults(name, cli_defaults)}].")
+    return Annotated[kind | None, option]
 
 
 Scenario = Annotated[
@@ -69,55 +115,37 @@ Scenario = Annotated[
 Out = Annotated[Path, typer.Option("--out", help="Run directory (created or resumed).")]
 Method = Annotated[
     str,
-    typer.Option(help=f"Estimator: {', '.join(estimator_names())}."),
+    typer.Option(
+        help=f"Estimator: {', '.join(estimator_names())}; ce is the paper's "
+        "cross-entropy. The options below say which methods have them."
+    ),
 ]
 Gamma = Annotated[float, typer.Option(help="Threshold on the minimum TTC [s].")]
 GammaTest = Annotated[
     str, typer.Option(help="Further thresholds [s], comma-separated, e.g. 0.1,0.2,0.3.")
 ]
-Rho = Annotated[
-    float | None,
-    typer.Option(
-        help="Elite quantile level, in (0, 1) [default: 0.01 for ce, 0.1 for mixture]."
-    ),
-]
-Alpha = Annotated[
-    float | None,
-    typer.Option(help="CE smoothing of the update, in (0, 1] [default: 0.8]."),
-]
-
-
-def _budget(help_text: str, default: int) -> Any:
-    """A CE budget option (``int | None``) whose help gives its default."""
-    option = typer.Option(help=f"{help_text} [default: {default}].")
-    return Annotated[int | None, option]
-
-
+Rho = _setting(float, "rho", "CE search: elite quantile level, in (0, 1)")
+Alpha = _setting(float, "alpha", "CE search: smoothing of the update, in (0, 1]")
 PER_ITER, ITERS, FINAL = (
-    "CE samples per iteration",
-    "CE search iterations",
-    ("Rollouts of the final stage (naive: all)"),
+    "CE search: samples per iteration",
+    "CE search: iterations",
+    "Rollouts of the final stage (naive: all)",
 )
-NPerIter = _budget(PER_ITER, 5000)
-NIter = _budget(ITERS, CLI_DEFAULTS["n_iter"])
-NFinal = _budget(FINAL, 100_000)
-CompareNPerIter = _budget(PER_ITER, COMPARE_DEFAULTS["n_per_iter"])
-CompareNIter = _budget(ITERS, COMPARE_DEFAULTS["n_iter"])
-CompareNFinal = _budget(FINAL, COMPARE_DEFAULTS["n_final"])
+NPerIter = _setting(int, "n_per_iter", PER_ITER)
+NIter = _setting(int, "n_iter", ITERS)
+NFinal = _setting(int, "n_final", FINAL)
+CompareNPerIter = _setting(int, "n_per_iter", PER_ITER, COMPARE_DEFAULTS)
+CompareNIter = _setting(int, "n_iter", ITERS, COMPARE_DEFAULTS)
+CompareNFinal = _setting(int, "n_final", FINAL, COMPARE_DEFAULTS)
 Seed = Annotated[int, typer.Option(min=0, help="Run seed.")]
 BatchSize = Annotated[int, typer.Option(min=1, help="Rollouts simulated together.")]
-Select = Annotated[
-    str | None,
-    typer.Option(help="CE proposal selection: quantile (default) or variance."),
-]
-Defensive = Annotated[
-    float | None,
-    typer.Option(
-        help="Share of CE's final stage drawn from P0 instead of the proposal, "
-        "in [0, 1): bounds every weight by 1/share (0, the paper's CE, for ce; "
-        "0.1 for defensive)."
-    ),
-]
+Select = _setting(str, "select", "CE proposal selection: quantile or variance")
+Defensive = _setting(
+    float,
+    "defensive",
+    "Share of P0 in the final stage's proposal, in [0, 1): bounds every weight "
+    "by 1/share (0 is the paper's CE)",
+)
 Set = Annotated[
     list[str] | None,
     typer.Option(
@@ -186,8 +214,7 @@ def estimator_options(
 
     Flags left unset take the command's defaults (``cli_defaults``, those of
     the estimator's settings that it has) or else the estimator's own; a
-    flag or name the estimator does not have is a CliError naming it and
-    listing the estimator's settings.
+    flag or name the estimator does not have is a CliError (:func:`foreign`).
     """
     try:
         known = estimator_class(method).Settings.model_fields
@@ -196,19 +223,45 @@ def estimator_options(
             f"method must be one of {estimator_names()}; got {method!r}"
         ) from err
     given = {k: v for k, v in flags.items() if v is not None}
+    flagged = set(given)
     for text in assignments or []:
         name, sep, value = text.partition("=")
         if not sep or not name.strip():
             raise CliError(f"--set takes NAME=VALUE; got {text!r}")
         given[name.strip()] = yaml.safe_load(value)
+        flagged.discard(name.strip())
     unknown = sorted(set(given) - set(known))
     if unknown:
-        raise CliError(
-            f"{', '.join(unknown)}: not a setting of method {method!r} "
-            f"(its settings: {', '.join(known)})"
-        )
+        raise CliError(foreign(method, unknown, flagged))
     defaults = {k: v for k, v in cli_defaults.items() if k in known}
     return {**defaults, **given}
+
+
+def foreign(method: str, names: list[str], flag_names: set[str]) -> str:
+    """The one-line error for settings ``names`` that ``method`` does not have.
+
+    Each is named as given (a flag of ``flag_names`` as ``--n-iter``) with
+    the methods that have it, then the method's own settings: ``--rho: not a
+    setting of method 'splitting_is', the default (--rho belongs to ce,
+    defensive, mixture: choose one with --method); its settings: ...``.
+    """
+    shown = {n: f"--{n.replace('_', '-')}" if n in flag_names else n for n in names}
+    owners: dict[str, list[str]] = {}
+    for name in names:
+        methods = ", ".join(methods_with(name)) or "no method"
+        owners.setdefault(methods, []).append(shown[name])
+    whose = "; ".join(
+        f"{', '.join(given)} {'belongs' if len(given) == 1 else 'belong'} to {methods}"
+        for methods, given in owners.items()
+    )
+    default = ", the default" if method == DEFAULT_METHOD else ""
+    known = estimator_class(method).Settings.model_fields
+    return (
+        f"{', '.join(shown.values())}: not "
+        f"{'a setting' if len(names) == 1 else 'settings'} of method "
+        f"{method!r}{default} ({whose}: choose one with --method); its settings: "
+        f"{', '.join(known)}"
+    )
 
 
 #: The options of ``run`` and ``compare`` that are estimator settings by name.
@@ -250,7 +303,7 @@ def run(
     ctx: typer.Context,
     scenario: Scenario = DEFAULT_SCENARIO,
     out: Out = Path("runs/latest"),
-    method: Method = "ce",
+    method: Method = DEFAULT_METHOD,
     gamma: Gamma = 0.14,
     gamma_test: GammaTest = "0.1,0.2,0.3",
     rho: Rho = None,
@@ -282,8 +335,11 @@ def run(
 ) -> None:
     """Estimate how likely the ego gets within gamma seconds of a collision.
 
-    Prints the plan (rollouts, disk) first and the time it will take once the
-    first chunk is simulated. Rerunning the same command after an
+    By default with splitting_is (subset simulation, then importance sampling
+    from its particles: about 19,000 rollouts on highway_default); --method
+    ce is the paper's cross-entropy. Prints the plan (rollouts, disk; "at
+    most" where the levels may end sooner) first and the time it will take
+    once the first chunk is simulated. Rerunning the same command after an
     interruption (Ctrl-C prints it) resumes the run; a finished run is read
     back and its report rebuilt. The run ends at its planned size or at the
     first stopping rule given, and says which.
@@ -314,7 +370,9 @@ def run(
         check_thresholds(spec, run_settings)
         objective = SimulationObjective(spec, device=device, allow_import=True)
         label = method_label(method)
-        cost = cost_meter(spec, [(label, run_settings)], store_full=store_full_samples)
+        cost = cost_meter(
+            spec, [planned(label, run_settings)], store_full=store_full_samples
+        )
         with open_evaluator(objective, backend, workers, address) as evaluator:
             run_dir = execute(
                 label,
@@ -338,7 +396,7 @@ def compare(
     ctx: typer.Context,
     scenario: Scenario = DEFAULT_SCENARIO,
     out: Out = Path("runs/compare"),
-    method: Method = "ce",
+    method: Method = DEFAULT_METHOD,
     gamma: Gamma = 0.14,
     gamma_test: GammaTest = "0.1,0.2,0.3",
     rho: Rho = None,
@@ -363,11 +421,13 @@ def compare(
 ) -> None:
     """A method vs naive Monte Carlo on one scenario (paper's Table 1, Fig. 2-3).
 
-    Runs the method (cross-entropy by default), naive MC with its total number
-    of rollouts, and a larger naive reference, each in its own resumable
-    directory under OUT, then writes OUT/report.html with the rare-event and
-    variance ratios per threshold. The defaults (CE 5 x 2,000 + 10,000
-    rollouts, a reference of 50,000) take minutes; the plan's cost is
+    Runs the method (splitting_is by default; ce for the paper's
+    cross-entropy), naive MC with its total number of rollouts, and a larger
+    naive reference, each in its own resumable directory under OUT, then
+    writes OUT/report.html with the rare-event and variance ratios per
+    threshold. The defaults (splitting_is: 2,000 particles per level and a
+    final stage of 10,000, about 19,000 rollouts on highway_default; ce: 5 x
+    2,000 + 10,000; a reference of 50,000) take minutes; the plan's cost is
     printed before the first rollout.
     """
     with user_errors(*EXPECTED), resumable(ctx):

@@ -25,7 +25,7 @@ from avrisk.assembly import (
 )
 from avrisk.cli.backends import Backend, open_evaluator
 from avrisk.cli.common import CliError, err_console, write_failures
-from avrisk.cli.progress import CostMeter, RichRunMonitor
+from avrisk.cli.progress import CostMeter, PlannedRun, RichRunMonitor
 from avrisk.cli.readback import check_recorded
 from avrisk.cli.results import ratio_rows, show_results
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
@@ -162,20 +162,27 @@ def execute(
     return run_dir
 
 
+def planned(label: str, s: RunSettings) -> PlannedRun:
+    """A run of ``s`` in a plan: its rollouts, and whether they are only a bound."""
+    return PlannedRun(
+        label, s.estimator.describe(), s.total_rollouts, s.estimator.budget_is_bound
+    )
+
+
 def cost_meter(
     spec: ScenarioSpec,
-    plan: list[tuple[str, RunSettings]],
+    plan: list[PlannedRun],
     *,
     store_full: bool = False,
 ) -> CostMeter:
-    """The cost of ``plan`` (label and settings of each run), printed on stderr.
+    """The cost of ``plan``, printed on stderr.
 
     The disk a rollout takes is estimated from the scenario's parameters
     until the first chunk written measures it.
     """
     return CostMeter(
         err_console,
-        [(label, s.estimator.describe(), s.total_rollouts) for label, s in plan],
+        plan,
         estimated_row_bytes(
             param_layout(spec).columns, base_distribution(spec), store_full=store_full
         ),
@@ -290,7 +297,13 @@ def compare_runs(
                 settings("naive", n_final=reference_n, seed=tested.seed + 2, **shared),
             )
         )
-    cost = cost_meter(spec, [(label, s) for label, _, s in plan])
+    tested_plan = planned(plan[0][0], tested)
+    naive_plan = planned(plan[1][0], plan[1][2])._replace(
+        what=f"naive MC, as many rollouts as {plan[0][0]}",
+        at_most=tested_plan.at_most,
+    )
+    rest = [planned(label, s) for label, _, s in plan[2:]]
+    cost = cost_meter(spec, [tested_plan, naive_plan, *rest])
     runs: list[tuple[str, RunDirectory]] = []
     with open_evaluator(objective, *backend) as evaluator:
         for label, path, s in plan:

@@ -48,7 +48,7 @@ from avrisk.rare.estimator import (
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
-from avrisk.rare.final_stage import weighted_stage_estimates
+from avrisk.rare.final_stage import Advice, weighted_stage_estimates
 from avrisk.rare.problem import (
     FINAL_STAGE,
     BatchFunction,
@@ -292,6 +292,15 @@ def search_checkpoint(state: CEState, infos: Sequence[Any]) -> dict[str, Any]:
     }
 
 
+#: Remedies of a CE search's unreliable final stage, in its settings' names.
+SEARCH_ADVICE = Advice(
+    no_hit="raise n_final, or the search (n_iter, n_per_iter)",
+    degenerate="the proposal is degenerate: raise n_per_iter or rho, or see "
+    "Estimate.history",
+    heavy_tail="raise n_per_iter and n_final, or compare runs with other seeds",
+)
+
+
 def search_final_estimate(
     method: str,
     state: CEState,
@@ -311,7 +320,7 @@ def search_final_estimate(
     return Estimate(
         method=method,
         gamma=problem.gamma,
-        by_gamma=weighted_stage_estimates(stage, problem.thresholds),
+        by_gamma=weighted_stage_estimates(stage, problem.thresholds, SEARCH_ADVICE),
         n_evals=state.n_evals + stage.values.size,
         proposal=state.best,
         best_iteration=None if state.best_iteration < 0 else state.best_iteration,
@@ -390,6 +399,7 @@ class CrossEntropy:
     Settings: type[CESettings] = CESettings
     weighted = True
     decomposable = True
+    budget_is_bound = False
 
     def __init__(self, settings: CESettings) -> None:
         self.settings = settings

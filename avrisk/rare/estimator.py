@@ -172,18 +172,20 @@ class EstimatorSettings(BaseModel):
 
 @dataclass(frozen=True)
 class DiagnosticTable:
-    """Per-step diagnostics an estimator contributes to reports (engine-neutral).
+    """Diagnostics an estimator contributes to reports (engine-neutral).
 
     A report draws ``lines`` against the first column (a top panel, with the
-    threshold ``gamma`` marked) and ``bars`` below it.
+    threshold ``gamma`` marked) and ``bars`` below it; a table with neither
+    (a summary rather than steps) it shows as a table.
 
     Attributes
     ----------
     title : str
     columns : tuple of str
-        Column names, the step index first; units in brackets.
+        Column names, the step index (or what else a row stands for) first;
+        units in brackets.
     rows : list of tuple
-        One row per step.
+        One row per step (numbers, ``(low, high)`` intervals, or None).
     lines : tuple of str
         Columns drawn as lines on the top panel (in the unit of ``f``).
     bars : str or None
@@ -195,6 +197,11 @@ class DiagnosticTable:
     rows: list[tuple[Any, ...]]
     lines: tuple[str, ...] = ()
     bars: str | None = None
+
+    @property
+    def drawn(self) -> bool:
+        """Whether a report draws it (it has ``lines`` or ``bars``)."""
+        return bool(self.lines or self.bars)
 
     def column(self, name: str) -> list[Any]:
         """The values of one column, in step order."""
@@ -357,6 +364,10 @@ class Estimator(Protocol, Generic[State, Info]):
         Whether its estimate is the mean of ``w 1{f <= gamma}`` over its final
         stage (``w = 1`` for naive sampling): then ``p`` splits exactly by any
         per-sample label (:mod:`avrisk.pipeline.mechanisms`).
+    budget_is_bound : bool
+        Whether :meth:`budget` is an upper bound rather than the calls it
+        makes (subset simulation's levels usually reach ``gamma`` before
+        ``max_levels``): a plan then says "at most".
     """
 
     name: ClassVar[str]
@@ -364,10 +375,11 @@ class Estimator(Protocol, Generic[State, Info]):
     Settings: ClassVar[type[EstimatorSettings]]
     weighted: ClassVar[bool]
     decomposable: ClassVar[bool]
+    budget_is_bound: ClassVar[bool]
     settings: EstimatorSettings
 
     def budget(self) -> int:
-        """Calls of ``f`` the estimator plans to make (a progress bar's total)."""
+        """Calls of ``f`` it plans, or at most makes (a progress bar's total)."""
         ...
 
     def describe(self) -> str:

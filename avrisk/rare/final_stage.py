@@ -5,6 +5,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -59,6 +60,37 @@ class UnreliableEstimateWarning(UserWarning):
     the standard error and the interval are computed from those same weights,
     so they cannot be trusted either.
     """
+
+
+class Advice(NamedTuple):
+    """What to change when a final stage's estimate is unreliable.
+
+    Clauses for the warnings of :func:`importance_estimates`, in the setting
+    names of the estimator that made the stage (a cross-entropy search
+    raises ``n_per_iter``, subset simulation ``n_particles``).
+
+    Attributes
+    ----------
+    no_hit : str
+        No sample reached the threshold.
+    degenerate : str
+        Hits, but fewer than ``MIN_RELIABLE_ESS`` effective ones.
+    heavy_tail : str
+        The hits' weights have a heavy tail (Pareto k above 0.7).
+    """
+
+    no_hit: str
+    degenerate: str
+    heavy_tail: str
+
+
+#: For a final stage whose proposal no estimator made (a script's own).
+NEUTRAL_ADVICE = Advice(
+    no_hit="raise n_final or move the proposal towards the event",
+    degenerate="the proposal is degenerate: bring it closer to P0 given the event",
+    heavy_tail="raise n_final and bring the proposal closer to P0 given the "
+    "event, or compare runs with other seeds",
+)
 
 
 def bracket_failures(
@@ -126,12 +158,17 @@ def binomial_estimates(
 
 
 def importance_estimates(
-    values: FloatArray, log_w: FloatArray, thresholds: tuple[float, ...]
+    values: FloatArray,
+    log_w: FloatArray,
+    thresholds: tuple[float, ...],
+    advice: Advice = NEUTRAL_ADVICE,
 ) -> dict[float, GammaEstimate]:
     """Importance sampling: ``mean(w 1{f <= g})``, its standard error, a normal CI.
 
     With zero hits the data bound nothing better than ``p <= 1`` (the weights of
     unseen events are unknown), so that is the interval reported, with a warning.
+    Few effective hits and a heavy tail of the hits' weights are warned about
+    too; each warning ends with the remedy ``advice`` gives.
     """
     out = {}
     for g in thresholds:
@@ -141,8 +178,7 @@ def importance_estimates(
         if k == 0:
             warnings.warn(
                 f"no sample of the final stage reached f <= {g:g}; the estimate is 0 "
-                "with the uninformative interval (0, 1): raise n_final or the "
-                "search budget",
+                f"with the uninformative interval (0, 1): {advice.no_hit}",
                 ZeroHitsWarning,
                 stacklevel=3,
             )
@@ -155,8 +191,7 @@ def importance_estimates(
             warnings.warn(
                 f"f <= {g:g}: {k} hits but an effective number of only {ess:.1f}; "
                 "a few weights dominate and the standard error is unreliable "
-                "(the proposal is degenerate: raise n_per_iter or rho, or see "
-                "Estimate.history)",
+                f"({advice.degenerate})",
                 UnreliableEstimateWarning,
                 stacklevel=3,
             )
@@ -164,8 +199,7 @@ def importance_estimates(
             warnings.warn(
                 f"f <= {g:g}: the hits' weights have a heavy tail (Pareto k = "
                 f"{tail:.2f} > {MAX_RELIABLE_PARETO_K}); the standard error is "
-                "unreliable, likely too small (raise n_per_iter and n_final, or "
-                "compare runs with other seeds)",
+                f"unreliable, likely too small ({advice.heavy_tail})",
                 UnreliableEstimateWarning,
                 stacklevel=3,
             )
@@ -185,15 +219,16 @@ def importance_estimates(
 
 
 def weighted_stage_estimates(
-    stage: StageResult, thresholds: tuple[float, ...]
+    stage: StageResult, thresholds: tuple[float, ...], advice: Advice
 ) -> dict[float, GammaEstimate]:
     """Importance-sampling estimates of a final stage, failed samples bracketed.
 
     :func:`importance_estimates` of the stage's values and log-weights per
-    threshold, through :func:`bracket_failures`.
+    threshold, through :func:`bracket_failures`; ``advice``: the remedies of
+    the estimator that made the stage.
     """
     return bracket_failures(
-        lambda values: importance_estimates(values, stage.log_w, thresholds),
+        lambda values: importance_estimates(values, stage.log_w, thresholds, advice),
         stage.values,
         stage.failed,
     )

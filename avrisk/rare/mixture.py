@@ -535,6 +535,7 @@ class MixtureCrossEntropy:
     Settings: type[MixtureSettings] = MixtureSettings
     weighted = True
     decomposable = True
+    budget_is_bound = False
 
     def __init__(self, settings: MixtureSettings) -> None:
         self.settings = settings

@@ -59,6 +59,7 @@ class NaiveMC:
     Settings = NaiveSettings
     weighted = False
     decomposable = True
+    budget_is_bound = False
 
     def __init__(self, settings: NaiveSettings) -> None:
         self.settings = settings

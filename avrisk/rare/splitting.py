@@ -307,6 +307,7 @@ class SubsetSimulation:
     label = "subset simulation"
     Settings: type[SplittingSettings] = SplittingSettings
     weighted = False
+    budget_is_bound = True  # its levels may reach gamma before max_levels
 
     def __init__(self, settings: SplittingSettings) -> None:
         self.settings = settings

@@ -99,6 +99,7 @@ from scipy.special import logsumexp
 
 from avrisk.rare.cross_entropy import ShareOfP0
 from avrisk.rare.estimator import (
+    DiagnosticTable,
     EstimationContext,
     estimate_black_box,
     register_estimator,
@@ -106,7 +107,7 @@ from avrisk.rare.estimator import (
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
-from avrisk.rare.final_stage import weighted_stage_estimates
+from avrisk.rare.final_stage import Advice, weighted_stage_estimates
 from avrisk.rare.mixture import (
     MixtureProposal,
     component_log_kernels,
@@ -145,6 +146,16 @@ __all__ = [
 THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
 #: Blocks of chains whose means give those standard errors.
 N_BLOCKS = 20
+
+#: Remedies of an unreliable importance-sampling stage, in its settings' names.
+ADVICE = Advice(
+    no_hit="raise n_final, or n_particles (the proposal is fitted to them)",
+    degenerate="the proposal fitted to the particles is degenerate: raise "
+    "n_particles or defensive, and compare subset simulation's own estimate of "
+    "the run (details['splitting'])",
+    heavy_tail="raise n_particles and n_final, or compare subset simulation's own "
+    "estimate of the run (details['splitting']) and runs with other seeds",
+)
 
 #: Extra key of the fit's generator (k-means++ seeding), so that it draws no
 #: chunk's stream.
@@ -422,6 +433,48 @@ class SplittingImportanceSampling(SubsetSimulation):
             f"({s.n_components} components, defensive {s.defensive:g})"
         )
 
+    @staticmethod
+    def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
+        """The levels, the proposal fitted to the particles, and the cross-check.
+
+        The levels as subset simulation's; the proposal's components, the
+        coordinates it shifts, the threshold that chose them [standard
+        errors], the acceptance of the moves at ``gamma`` that made its
+        particles, and its samples' hits, ESS and Pareto k at ``gamma``; then,
+        per threshold, the importance-sampling estimate beside subset
+        simulation's own of the same run (``details["splitting"]``).
+        """
+        levels = SubsetSimulation.diagnostics(estimate)
+        details = estimate.get("details") or {}
+        if "splitting" not in details:
+            return levels
+        by_gamma = sorted(estimate["by_gamma"], key=lambda g: g["gamma"])
+        main = next(g for g in by_gamma if g["gamma"] == estimate["gamma"])
+        fit = (
+            details["n_components"],
+            details["n_shifted"],
+            details["informative_threshold"],
+            details["fit_acceptance"],
+            main["n_hits"],
+            main["ess"],
+            main["pareto_k"],
+        )
+        columns = ("components", "shifted coordinates", "threshold [SE]")
+        columns += ("acceptance at gamma", "hits", "ESS", "Pareto k")
+        own = [details["splitting"].get(str(g["gamma"]), {}) for g in by_gamma]
+        return [
+            *levels,
+            DiagnosticTable("Importance-sampling proposal", columns, [fit]),
+            DiagnosticTable(
+                "Importance sampling vs subset simulation's own estimate",
+                ("gamma", "p", "95% CI", "p, subset simulation", "its 95% CI"),
+                [
+                    (g["gamma"], g["p"], g["ci"], s.get("p"), s.get("ci"))
+                    for g, s in zip(by_gamma, own, strict=True)
+                ],
+            ),
+        ]
+
     def finalize(
         self,
         state: SplittingState,
@@ -449,7 +502,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         return Estimate(
             method="splitting_is",
             gamma=problem.gamma,
-            by_gamma=weighted_stage_estimates(stage, problem.thresholds),
+            by_gamma=weighted_stage_estimates(stage, problem.thresholds, ADVICE),
             n_evals=n_evals + stage.values.size,
             proposal=proposal,
             stopped_by=stage.stopped_by or "budget",

@@ -34,6 +34,7 @@ from avrisk.report.plots import (
     comparison_rows,
     plot_comparison,
     plot_diagnostic,
+    table_cells,
 )
 from avrisk.scenario import ScenarioSpec
 
@@ -59,7 +60,10 @@ def top_failures(run_dir: RunDirectory, gamma: float, k: int) -> list[dict[str, 
 
 
 def _run_view(
-    label: str, run_dir: RunDirectory, diagnostics: list[str]
+    label: str,
+    run_dir: RunDirectory,
+    diagnostics: list[str],
+    tables: list[dict[str, Any]],
 ) -> dict[str, Any]:
     summary = run_dir.summary()
     est = summary["estimate"]
@@ -95,6 +99,7 @@ def _run_view(
             )
         ),
         "diagnostics": diagnostics,
+        "tables": tables,
         # a search that did not converge is a reason of the run's trust
         "search": search_sentence(search) if search and search.converged else None,
         "mechanisms": next(
@@ -129,8 +134,9 @@ def write_report(
         Where ``report.html`` and ``plots/`` go.
     runs : sequence of (label, RunDirectory)
         Complete runs to show, in order, the run under test first; each gets
-        its estimator's diagnostic plots, and the first importance-weighted
-        one is compared with naive sampling.
+        its estimator's diagnostics (plots, and tables of those it does not
+        draw), and the first importance-weighted one is compared with naive
+        sampling.
     title, subtitle : str
     reference : RunDirectory, optional
         A large naive run whose estimates serve as ``p`` in the comparison.
@@ -160,14 +166,23 @@ def write_report(
     for i, (label, run_dir) in enumerate(runs):
         summary = run_dir.summary()
         estimator = estimator_class(summary["method"])
-        images = []
+        images, tables = [], []
         for j, table in enumerate(estimator.diagnostics(summary["estimate"])):
+            if not table.drawn:
+                tables.append(
+                    {
+                        "title": table.title,
+                        "columns": table.columns,
+                        "rows": table_cells(table),
+                    }
+                )
+                continue
             name = f"diagnostics_{i}_{j}.png"
             plot_diagnostic(table, summary["estimate"]["gamma"], plots / name)
             images.append(f"plots/{name}")
         if estimator.weighted and weighted is None:
             weighted = (label, summary)
-        views.append(_run_view(label, run_dir, images))
+        views.append(_run_view(label, run_dir, images, tables))
     comparison = None
     if weighted is not None:
         ref = reference.summary()["estimate"] if reference is not None else None

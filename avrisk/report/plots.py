@@ -5,7 +5,8 @@
   hits expected with CE's whole budget of rollouts) and the ratio of estimator
   variances (naive over CE, at that budget).
 * :func:`plot_diagnostic` -- an estimator's per-step diagnostics (for CE:
-  ``gamma_k`` and the ``rho``-quantile per iteration, with its hits).
+  ``gamma_k`` and the ``rho``-quantile per iteration, with its hits);
+  :func:`table_cells` -- those it gives as a table instead, as text.
 
 Ratios use expected naive figures, ``n p`` hits and variance ``p (1 - p) / n``
 with ``p`` the best estimate at hand (a reference run when given, else CE's
@@ -127,6 +128,32 @@ def plot_comparison(
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def table_cells(table: DiagnosticTable) -> list[tuple[str, ...]]:
+    """The rows of a diagnostic table as text, for a report or a terminal.
+
+    Integers with thousands separators, other numbers to 3 significant
+    digits, a ``(low, high)`` pair as ``low..high``, a missing or non-finite
+    value as ``-``.
+
+    Examples
+    --------
+    >>> row = (2000, 0.012345, [1e-4, 2e-4], None)
+    >>> table_cells(DiagnosticTable("t", ("a", "b", "c", "d"), [row]))
+    [('2,000', '0.0123', '0.0001..0.0002', '-')]
+    """
+
+    def cell(value: Any) -> str:
+        if isinstance(value, list | tuple):
+            return "..".join(cell(v) for v in value)
+        if isinstance(value, int) and not isinstance(value, bool):
+            return f"{value:,}"
+        if isinstance(value, float):
+            return f"{value:.3g}" if np.isfinite(value) else "-"
+        return "-" if value is None else str(value)
+
+    return [tuple(cell(v) for v in row) for row in table.rows]
 
 
 def plot_diagnostic(

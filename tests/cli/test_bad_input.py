@@ -58,7 +58,8 @@ def short_scenario(tmp_path_factory):
 
 
 #: A run of three chunks (two CE iterations and the final stage): seconds.
-SMALL = ("--rho", 0.2, "--n-per-iter", 30, "--n-iter", 2, "--n-final", 40)
+SMALL = ("--method", "ce", "--rho", 0.2, "--n-per-iter", 30, "--n-iter", 2)
+SMALL += ("--n-final", 40)
 SMALL += ("--batch-size", 25, "--failures", 0, "--gamma", 1.0, "--gamma-test", "0.5")
 
 
@@ -121,15 +122,15 @@ def test_run_settings_refuse_non_finite_thresholds(kwargs):
     ("args", "needle"),
     [
         (("--n-final", 0), "n_final"),
-        (("--n-per-iter", 0), "n_per_iter"),
+        (("--method", "ce", "--n-per-iter", 0), "n_per_iter"),
         (("--batch-size", 0), "--batch-size"),
         (("--max-rollouts", 0), "--max-rollouts"),
         (("--max-time", -1), "max_seconds"),
         (("--max-time", "nan"), "max_seconds"),
         (("--target-rel-half-width", 0), "rel_half_width"),
         (("--target-rel-half-width", "nan"), "rel_half_width"),
-        (("--rho", "nan"), "rho"),
-        (("--alpha", "inf"), "alpha"),
+        (("--method", "ce", "--rho", "nan"), "rho"),
+        (("--method", "ce", "--alpha", "inf"), "alpha"),
         (("--set", "n_final=-5"), "n_final"),
         (("--seed", -1), "--seed"),
     ],

@@ -22,6 +22,8 @@ def invoke(*args):
 
 
 CE_ARGS = (
+    "--method",
+    "ce",
     "--rho",
     0.1,
     "--n-per-iter",
@@ -116,7 +118,7 @@ def test_bad_input_gives_one_clear_line_and_leaves_nothing(tmp_path):
     out = tmp_path / "run"
     missing = invoke("run", tmp_path / "nope.yaml", "--out", out)
     assert missing.exit_code == 2 and "error:" in missing.output
-    bad_rho = invoke("run", "highway_idm", "--out", out, "--rho", 1.5)
+    bad_rho = invoke("run", "highway_idm", "--out", out, "--method", "ce", "--rho", 1.5)
     assert (
         bad_rho.exit_code == 2 and "rho: Input should be less than 1" in bad_rho.output
     )
@@ -129,6 +131,10 @@ def test_bad_input_gives_one_clear_line_and_leaves_nothing(tmp_path):
 def test_every_registered_method_is_offered_and_foreign_settings_refused(tmp_path):
     help_text = " ".join(invoke("run", "--help").output.split())
     assert "ce, defensive, mixture, naive, splitting" in help_text
+    assert "[default: splitting_is]" in help_text
+    # each setting's default per method that has it
+    assert "[default: 10000 for splitting_is; 100000 for ce, defensive" in help_text
+    assert "[default: 0.01 for ce, defensive; 0.1 for mixture]" in help_text
     out = tmp_path / "run"
     foreign = invoke(
         "run", "highway_idm", "--out", out, "--method", "naive", "--rho", 0.1
@@ -136,6 +142,22 @@ def test_every_registered_method_is_offered_and_foreign_settings_refused(tmp_pat
     assert foreign.exit_code == 2
     assert "rho: not a setting of method 'naive'" in foreign.output
     assert "its settings: n_final, interval" in foreign.output
+    # a cross-entropy flag with the default method: which method it belongs to
+    ce_flags = invoke("run", "highway_idm", "--out", out, "--rho", 0.2, "--n-iter", 3)
+    assert ce_flags.exit_code == 2 and ce_flags.output.count("\n") == 1
+    assert " ".join(ce_flags.output.split()) == (
+        "error: --n-iter, --rho: not settings of method 'splitting_is', the default "
+        "(--n-iter, --rho belong to ce, defensive, mixture: choose one with "
+        "--method); its settings: n_particles, p0, p0_max, max_levels, n_moves, "
+        "initial_beta, n_final, n_components, defensive, min_weight, shift"
+    )
+    by_name = invoke(
+        "run", "highway_idm", "--out", out, "--method", "ce", "--set", "n_particles=9"
+    )
+    assert by_name.exit_code == 2 and (
+        "error: n_particles: not a setting of method 'ce' (n_particles belongs to "
+        "splitting, splitting_is: choose one with --method)"
+    ) in " ".join(by_name.output.split())
     unknown = invoke("run", "highway_idm", "--out", out, "--method", "splitz")
     assert unknown.exit_code == 2 and "method must be one of" in unknown.output
     bad_set = invoke("run", "highway_idm", "--out", out, "--set", "rho")

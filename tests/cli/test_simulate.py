@@ -274,7 +274,7 @@ def test_replay_takes_the_samples_of_a_run_without_its_scenario(
 ):
     compared = tmp_path / "cmp"
     args = ["compare", str(short_scenario), "--out", str(compared), "--failures", "0"]
-    args += ["--n-per-iter", "20", "--n-iter", "1", "--n-final", "20"]
+    args += ["--method", "ce", "--n-per-iter", "20", "--n-iter", "1", "--n-final", "20"]
     args += ["--reference-n", "0", "--gamma", "1.0", "--gamma-test", ""]
     assert runner.invoke(app, args).exit_code == 0
     samples = compared / "naive" / "samples.parquet"

@@ -24,7 +24,8 @@ def short_scenario(tmp_path_factory):
     return shortened_scenario(tmp_path_factory.mktemp("scenario"), 1.5)
 
 
-RUN_ARGS = ("--rho", "0.1", "--n-per-iter", "60", "--n-iter", "2", "--n-final", "100")
+RUN_ARGS = ("--method", "ce", "--rho", "0.1", "--n-per-iter", "60", "--n-iter", "2")
+RUN_ARGS += ("--n-final", "100")
 RUN_ARGS += ("--gamma", "1.0", "--gamma-test", "0.5,2.0", "--batch-size", "64")
 RUN_ARGS += ("--failures", "1")
 
@@ -107,6 +108,40 @@ def test_the_plan_and_the_measured_rate_come_before_the_results(
     assert disk_figures(err)[0] == pytest.approx(273, rel=0.15)  # as estimated
 
 
+def test_the_default_method_is_splitting_is_its_plan_a_bound_and_its_tables_shown(
+    short_scenario, tmp_path
+):
+    out = tmp_path / "run"
+    args = ("--set", "n_particles=100", "--n-final", 100, "--gamma", 1.0)
+    args += ("--gamma-test", "2.0", "--batch-size", 64, "--failures", 0)
+    result = invoke("run", short_scenario, "--out", out, *args)
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "config.json").read_text())["settings"]["method"] == (
+        "splitting_is"
+    )
+    err = words(result.stderr)
+    # max_levels=12 sets of 100, the moves at gamma and the final stage: a bound
+    assert (
+        "plan: splitting + IS (subset simulation, 100 particles per level, p0 0.1, "
+        "then IS 100 (4 components, defensive 0.1)): at most 1,400 rollouts (fewer "
+        "if the levels reach gamma sooner); samples take at most about"
+    ) in err
+    assert "rollouts/s on the first 100: at most about" in err
+    assert "for at most 1,300 more" in err
+    assert_whole_at_80_columns(result.stdout)
+    estimate = json.loads((out / "summary.json").read_text())["estimate"]
+    assert estimate["n_evals"] < 1400
+    assert f"method splitting + IS, {estimate['n_evals']:,} rollouts" in words(
+        result.stdout
+    )
+    details = estimate["details"]
+    tables = words(result.stdout)
+    assert "splitting + IS: Importance-sampling proposal" in tables
+    assert "splitting + IS: Importance sampling vs subset simulation's own" in tables
+    for g in ("1.0", "2.0"):  # subset simulation's own estimate, beside the IS one
+        assert f"{details['splitting'][g]['p']:.3g}" in tables
+
+
 def disk_figures(err):
     """The disk a rollout takes [B] as the plan estimates it, and as measured."""
     estimate = err.split("(an estimate: ")[1].split(" B a rollout")[0]
@@ -117,7 +152,8 @@ def disk_figures(err):
 def test_the_plan_measures_the_disk_of_a_scenario_that_records_more(tmp_path):
     """The learned drivers' 404-d xi, stored: ten times the disk of the default."""
     scenario = shortened_scenario(tmp_path, 0.3, scenario="highway_default")
-    args = ("--n-per-iter", 50, "--n-iter", 1, "--n-final", 50, "--failures", 0)
+    args = ("--method", "ce", "--n-per-iter", 50, "--n-iter", 1, "--n-final", 50)
+    args += ("--failures", 0)
     result = invoke(
         "run", scenario, "--out", tmp_path / "run", *args, "--store-full-samples"
     )
@@ -197,6 +233,16 @@ def test_compare_defaults_finish_in_minutes():
     reference = inspect.signature(compare).parameters["reference_n"].default
     assert budget == 20_000 and reference == 50_000
     assert 2 * budget + reference <= 100_000  # ~3.5 min at 450 rollouts/s
+    # the default, splitting_is: 2,000 particles per level and 10,000 in its
+    # final stage; on highway_default its levels reach 0.14 s in 4 sets
+    # (README: 18,908 rollouts), within the bound the plan gives
+    method = inspect.signature(compare).parameters["method"].default
+    options = estimator_options(method, {}, None, COMPARE_DEFAULTS)
+    splitting = get_estimator(method, **options)
+    assert method == "splitting_is" and options == {"n_final": 10_000}
+    s = splitting.settings
+    four_sets = 4 * s.n_particles + s.n_particles + s.n_final
+    assert four_sets == 20_000 and splitting.budget() == 36_000
 
 
 def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(

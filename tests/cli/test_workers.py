@@ -88,8 +88,8 @@ def test_the_ray_backend_without_ray_installed_says_how_to_install_it(
 
 
 #: A CE run of seven one-chunk stages: Ctrl-C lands with most of them to come.
-CE_ARGS = ("--rho", 0.1, "--n-per-iter", 200, "--n-iter", 6, "--n-final", 400)
-CE_ARGS += ("--gamma", 0.5, "--failures", 0)
+CE_ARGS = ("--method", "ce", "--rho", 0.1, "--n-per-iter", 200, "--n-iter", 6)
+CE_ARGS += ("--n-final", 400, "--gamma", 0.5, "--failures", 0)
 
 
 def live_processes(group):

@@ -1,6 +1,7 @@
 """Importance sampling from splitting's particles: exact problems, fit, seeds."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -13,7 +14,15 @@ from avrisk.rare import (
     get_estimator,
     splitting_is,
 )
-from avrisk.rare.splitting_importance import SplittingISSettings, particle_proposal
+from avrisk.rare.cross_entropy import SEARCH_ADVICE, CESettings
+from avrisk.rare.splitting import SubsetSimulation
+from avrisk.rare.splitting_importance import (
+    ADVICE,
+    SplittingImportanceSampling,
+    SplittingISSettings,
+    particle_proposal,
+)
+from avrisk.report.plots import table_cells
 from avrisk.testing import (
     beta_sum_problem,
     check_estimator,
@@ -186,3 +195,47 @@ def test_settings_budget_and_description():
         get_estimator("splitting_is", shift="some")
     est = sis(gaussian_linear_problem(2, p=1e-4), seed=0, n_particles=300)
     assert json.loads(json.dumps(est.to_dict()))["method"] == "splitting_is"
+
+
+def test_diagnostics_show_the_levels_the_proposal_and_the_cross_check():
+    problem = gaussian_linear_problem(2, p=1e-4)
+    est = splitting_is(
+        problem.f, problem.base, problem.gamma, seed=1, gamma_test=(0.5,),
+        n_particles=400, n_final=2000,
+    )  # fmt: skip
+    summary = json.loads(json.dumps(est.to_dict()))  # as read from summary.json
+    levels, fit, check = SplittingImportanceSampling.diagnostics(summary)
+    assert levels == SubsetSimulation.diagnostics(summary)[0] and levels.drawn
+    assert len(levels.rows) == len(est.history)
+    assert not fit.drawn and not check.drawn  # shown as tables
+    (row,) = fit.rows
+    shown = dict(zip(fit.columns, row, strict=True))
+    details = est.details
+    assert shown["components"] == details["n_components"] >= 1
+    assert shown["shifted coordinates"] == details["n_shifted"] <= 2
+    assert shown["threshold [SE]"] == details["informative_threshold"]
+    assert shown["acceptance at gamma"] == details["fit_acceptance"]
+    assert shown["hits"] == est.n_hits > 0
+    assert shown["ESS"] == pytest.approx(est.ess)
+    assert shown["Pareto k"] == pytest.approx(est.main.pareto_k)
+    assert check.column("gamma") == [0.0, 0.5]  # every threshold, in order
+    for g, p, ci, own, own_ci in check.rows:
+        assert (p, ci) == (est.by_gamma[g].p, list(est.by_gamma[g].ci))
+        assert own == details["splitting"][str(g)]["p"] != p
+        assert own_ci == details["splitting"][str(g)]["ci"]
+    assert table_cells(check)[0][2] == "..".join(f"{c:.3g}" for c in est.ci)
+    # a summary without the importance-sampling details: the levels alone
+    without = {k: v for k, v in summary.items() if k != "details"}
+    assert SplittingImportanceSampling.diagnostics(without) == [levels]
+
+
+def test_each_estimators_advice_names_only_its_own_settings():
+    named = {  # setting names: snake_case words, and the single-word ones
+        advice: set(re.findall(r"\b[a-z]+_[a-z_]+\b|\brho\b|\bdefensive\b", text))
+        for advice in (ADVICE, SEARCH_ADVICE)
+        for text in [" ".join(advice)]
+    }
+    assert named[ADVICE] == {"n_final", "n_particles", "defensive"}
+    assert named[ADVICE] <= set(SplittingISSettings.model_fields)
+    assert named[SEARCH_ADVICE] == {"n_final", "n_iter", "n_per_iter", "rho"}
+    assert named[SEARCH_ADVICE] <= set(CESettings.model_fields)

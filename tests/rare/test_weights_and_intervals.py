@@ -4,7 +4,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from avrisk.rare.final_stage import UnreliableEstimateWarning, importance_estimates
+from avrisk.rare.final_stage import (
+    NEUTRAL_ADVICE,
+    Advice,
+    UnreliableEstimateWarning,
+    ZeroHitsWarning,
+    importance_estimates,
+)
 from avrisk.rare.intervals import clopper_pearson, normal_interval, wilson
 from avrisk.rare.weights import (
     kish_ess,
@@ -143,6 +149,22 @@ def test_heavy_tailed_hit_weights_are_reported_and_warned_about():
         warnings.simplefilter("error")
         light = importance_estimates(values, log_w, (0.5,))[0.5]
     assert light.pareto_k < 0.5
+
+
+def test_the_warnings_give_the_remedies_of_the_estimator_that_made_the_stage():
+    advice = Advice("raise A", "the proposal is degenerate: raise B", "raise C")
+    rng = np.random.default_rng(3)
+    values = rng.uniform(size=1000)
+    with pytest.warns(ZeroHitsWarning, match=r"\(0, 1\): raise A$"):
+        importance_estimates(values, np.zeros(1000), (-1.0,), advice)
+    values[0] = 0.0  # a hit whose weight dominates all others
+    log_w = np.where(np.arange(1000) == 0, 20.0, 0.0)
+    with pytest.warns(UnreliableEstimateWarning, match=r"\(the proposal is .*B\)$"):
+        importance_estimates(values, log_w, (0.5,), advice)
+    with pytest.warns(UnreliableEstimateWarning) as caught:
+        importance_estimates(values, log_w, (0.5,))  # no estimator's: neutral
+    (text,) = [str(w.message) for w in caught]
+    assert NEUTRAL_ADVICE.degenerate in text and "n_per_iter" not in text
 
 
 @pytest.mark.parametrize(

@@ -3,10 +3,12 @@ import json
 import re
 
 import pytest
+from markupsafe import escape as html_escape
 
 from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
+from avrisk.rare.splitting_importance import SplittingImportanceSampling
 from avrisk.report.html import top_failures, write_report
-from avrisk.report.plots import comparison_rows
+from avrisk.report.plots import comparison_rows, table_cells
 from avrisk.testing import beta_sum_problem
 
 PROBLEM = beta_sum_problem(6, p=1e-5)
@@ -212,3 +214,30 @@ def test_every_threshold_dependent_column_names_its_threshold(runs, tmp_path):
     for header in headers:
         if header.startswith(("P(", "hits", "p used", "naive hits", "what happened")):
             assert "gamma" in header or " s)" in header, header
+
+
+def test_splitting_is_shows_its_levels_proposal_and_cross_check(tmp_path):
+    settings = RunSettings(
+        method="splitting_is",
+        gamma=PROBLEM.gamma,
+        gamma_test=GAMMAS,
+        n_particles=500,
+        n_final=2000,
+    )
+    run_dir = RunDirectory(tmp_path / "splitting_is", NAMES)
+    run_estimation(run_dir, PROBLEM.base, f, settings)
+    html = write_report(tmp_path / "report", [("splitting + IS", run_dir)], title="t")
+    text = html.read_text()
+    tables = SplittingImportanceSampling.diagnostics(run_dir.summary()["estimate"])
+    drawn = [t for t in tables if t.drawn]
+    assert [t.title for t in drawn] == ["Subset simulation levels"]
+    assert (tmp_path / "report" / "plots" / "diagnostics_0_0.png").is_file()
+    for table in (t for t in tables if not t.drawn):
+        title = f"<h3>{html_escape(table.title)}</h3>"
+        section = text.split(title, 1)[1].split("</table>")[0]
+        assert re.findall(r"<th>([^<]*)</th>", section) == [
+            html_escape(c) for c in table.columns
+        ]
+        cells = re.findall(r"<td>([^<]*)</td>", section)
+        assert cells == [c for row in table_cells(table) for c in row]
+    assert len(re.findall(r"<h3>", text)) == 2  # the proposal and the cross-check
