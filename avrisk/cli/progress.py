@@ -66,12 +66,16 @@ class PlannedRun(NamedTuple):
     at_most : bool
         Whether ``rollouts`` is an upper bound
         (:attr:`~avrisk.rare.estimator.Estimator.budget_is_bound`).
+    stored_in_full : int
+        Those of ``rollouts`` whose every column is stored
+        (:meth:`~avrisk.rare.estimator.Estimator.budget_not_redrawn`).
     """
 
     label: str
     what: str
     rollouts: int
     at_most: bool = False
+    stored_in_full: int = 0
 
 
 @dataclass
@@ -89,6 +93,9 @@ class CostMeter:
         before any is written
         (:func:`~avrisk.pipeline.store.estimated_row_bytes`); the chunk files
         hold as much again until they are gathered at the end of a run.
+    full_bytes_per_rollout : float, optional
+        The same for a rollout stored in full (each run's
+        ``stored_in_full``); default ``bytes_per_rollout``.
 
     Attributes
     ----------
@@ -99,8 +106,10 @@ class CostMeter:
     console: Console
     plan: Sequence[PlannedRun]
     bytes_per_rollout: float
+    full_bytes_per_rollout: float | None = None
     done: int = 0
     measured_bytes: float | None = None
+    _scale: float = 1.0
     _announced: bool = False
     _measured: bool = False
 
@@ -108,6 +117,17 @@ class CostMeter:
     def total(self) -> int:
         """Rollouts of every run of the plan (an upper bound if :attr:`at_most`)."""
         return sum(run.rollouts for run in self.plan)
+
+    @property
+    def total_bytes(self) -> float:
+        """Disk of every run's samples [B]: estimated, then scaled as measured."""
+        full = self.full_bytes_per_rollout or self.bytes_per_rollout
+        estimate = sum(
+            (run.rollouts - run.stored_in_full) * self.bytes_per_rollout
+            + run.stored_in_full * full
+            for run in self.plan
+        )
+        return self._scale * estimate
 
     @property
     def at_most(self) -> str:
@@ -125,15 +145,36 @@ class CostMeter:
             f"plan: {escape(runs)}: {self.at_most}{self.total:,} rollouts{in_all}"
             + ("" if not self.at_most else " (fewer if the levels reach gamma sooner)")
             + f"; samples take {self.at_most}about "
-            f"{megabytes(self.total * self.bytes_per_rollout)} on disk "
-            f"(an estimate: {self.bytes_per_rollout:,.0f} B a rollout)",
+            f"{megabytes(self.total_bytes)} on disk "
+            f"(an estimate: {self._per_rollout_text()})",
             highlight=False,
         )
 
-    def disk(self, row_bytes: float) -> None:
-        """The disk a rollout took in a chunk just written [B]: the first counts."""
+    def _per_rollout_text(self) -> str:
+        full = self.full_bytes_per_rollout
+        if full in (None, self.bytes_per_rollout) or not any(
+            run.stored_in_full for run in self.plan
+        ):
+            return f"{self.bytes_per_rollout:,.0f} B a rollout"
+        return (
+            f"{self.bytes_per_rollout:,.0f} B a rollout, {full:,.0f} B for one "
+            "stored in full"
+        )
+
+    def disk(self, row_bytes: float, *, full: bool = False) -> None:
+        """The disk a rollout took in a chunk just written [B]: the first counts.
+
+        It scales the estimate of its kind (``full``: a chunk that stored
+        every column), and with it the whole plan's.
+        """
         if self.measured_bytes is None:
             self.measured_bytes = row_bytes
+            estimate = (
+                self.full_bytes_per_rollout or self.bytes_per_rollout
+                if full
+                else self.bytes_per_rollout
+            )
+            self._scale = row_bytes / estimate
 
     def count(self, n: int, seconds: float | None) -> None:
         """``n`` rollouts are done: simulated in ``seconds``, or replayed (None).
@@ -159,7 +200,7 @@ class CostMeter:
                 ""
                 if disk is None
                 else f"; disk: {disk:,.0f} B a rollout, {bound}about "
-                f"{megabytes(self.total * disk)} in all"
+                f"{megabytes(self.total_bytes)} in all"
             ),
             highlight=False,
         )
@@ -256,7 +297,7 @@ class RichRunMonitor:
         assert self._progress is not None
         self._progress.update(self._task, status=text)
 
-    def disk(self, row_bytes: float) -> None:
+    def disk(self, row_bytes: float, *, full: bool) -> None:
         """Tell the cost meter the disk a rollout took in the first chunk [B]."""
         if self.cost is not None:
-            self.cost.disk(row_bytes)
+            self.cost.disk(row_bytes, full=full)

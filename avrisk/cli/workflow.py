@@ -165,7 +165,11 @@ def execute(
 def planned(label: str, s: RunSettings) -> PlannedRun:
     """A run of ``s`` in a plan: its rollouts, and whether they are only a bound."""
     return PlannedRun(
-        label, s.estimator.describe(), s.total_rollouts, s.estimator.budget_is_bound
+        label,
+        s.estimator.describe(),
+        s.total_rollouts,
+        s.estimator.budget_is_bound,
+        s.rollouts_not_redrawn,
     )
 
 
@@ -178,14 +182,15 @@ def cost_meter(
     """The cost of ``plan``, printed on stderr.
 
     The disk a rollout takes is estimated from the scenario's parameters
-    until the first chunk written measures it.
+    (for rollouts stored in full apart) until the first chunk written
+    measures it.
     """
+    columns, base = param_layout(spec).columns, base_distribution(spec)
     return CostMeter(
         err_console,
         plan,
-        estimated_row_bytes(
-            param_layout(spec).columns, base_distribution(spec), store_full=store_full
-        ),
+        estimated_row_bytes(columns, base, store_full=store_full),
+        estimated_row_bytes(columns, base, store_full=True),
     )
 
 

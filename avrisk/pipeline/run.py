@@ -21,6 +21,7 @@ import avrisk
 from avrisk.pipeline.lock import run_lock
 from avrisk.pipeline.manifest import RecordIntegrityWarning
 from avrisk.pipeline.mechanisms import decompose
+from avrisk.pipeline.regenerate import chunk_meta
 from avrisk.pipeline.repeatability import check_repeatable
 from avrisk.pipeline.store import RunDirectory, marginal_row_bytes
 from avrisk.rare import (
@@ -116,6 +117,11 @@ class RunSettings:
         """Calls of ``f`` the run plans to make."""
         return self.estimator.budget()
 
+    @property
+    def rollouts_not_redrawn(self) -> int:
+        """Those of them stored in full (:meth:`Estimator.budget_not_redrawn`)."""
+        return self.estimator.budget_not_redrawn()
+
     def to_dict(self) -> dict[str, Any]:
         """The settings that define the run (recorded in config.json)."""
         return {
@@ -147,12 +153,13 @@ class RunMonitor(Protocol):
     def status(self, text: str) -> None:
         """The estimator finished a step (a CE iteration): its status line."""
 
-    def disk(self, row_bytes: float) -> None:
+    def disk(self, row_bytes: float, *, full: bool) -> None:
         """Disk a rollout takes in the samples [B], measured once per session.
 
         On the first chunk of two or more rows that this session writes
         (:func:`~avrisk.pipeline.store.marginal_row_bytes`), before its
-        :meth:`advance`.
+        :meth:`advance`; ``full``: whether that chunk stored every column
+        (its points are not drawn again from a recorded proposal).
         """
 
 
@@ -168,7 +175,7 @@ class SilentMonitor:
     def status(self, text: str) -> None:  # noqa: D102
         pass
 
-    def disk(self, row_bytes: float) -> None:  # noqa: D102
+    def disk(self, row_bytes: float, *, full: bool) -> None:  # noqa: D102
         pass
 
 
@@ -309,7 +316,7 @@ def _estimate(
             row_bytes = marginal_row_bytes(table)
             if row_bytes is not None:
                 measured = True
-                monitor.disk(row_bytes)
+                monitor.disk(row_bytes, full=chunk_meta(table.schema) is None)
         monitor.advance(len(batch.values), replayed=False)
 
     def cache(stage: int, chunk: int) -> StageBatch | None:

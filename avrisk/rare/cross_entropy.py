@@ -409,6 +409,10 @@ class CrossEntropy:
         s = self.settings
         return s.n_iter * s.n_per_iter + s.n_final
 
+    def budget_not_redrawn(self) -> int:
+        """0: every sample is a fresh draw of its stage's proposal."""
+        return 0
+
     def describe(self) -> str:
         """``"CE 20x5,000 + 100,000"`` (and the defensive share)."""
         s = self.settings

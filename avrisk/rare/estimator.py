@@ -382,6 +382,17 @@ class Estimator(Protocol, Generic[State, Info]):
         """Calls of ``f`` it plans, or at most makes (a progress bar's total)."""
         ...
 
+    def budget_not_redrawn(self) -> int:
+        """Calls of :meth:`budget` at points no recorded proposal draws again.
+
+        Fresh draws of a stage's proposal can be drawn again from its record
+        (:mod:`avrisk.rare.proposals`), so a run directory need not store
+        their large blocks; other points (subset simulation's: ``P0`` drawn in
+        standard space, pCN moves) are stored in full. A plan's disk estimate
+        counts them apart.
+        """
+        ...
+
     def describe(self) -> str:
         """One line: the method and its budget (``"CE 20x5,000 + 100,000"``)."""
         ...

@@ -545,6 +545,10 @@ class MixtureCrossEntropy:
         s = self.settings
         return s.n_iter * s.n_per_iter + s.n_final
 
+    def budget_not_redrawn(self) -> int:
+        """0: every sample is a fresh draw of its stage's proposal."""
+        return 0
+
     def describe(self) -> str:
         """``"mixture CE (4 components) 20x5,000 + 100,000, defensive 0.1"``."""
         s = self.settings

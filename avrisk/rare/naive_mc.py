@@ -68,6 +68,10 @@ class NaiveMC:
         """``n_final`` calls of ``f``."""
         return self.settings.n_final
 
+    def budget_not_redrawn(self) -> int:
+        """0: every sample is a fresh draw of its stage's proposal."""
+        return 0
+
     def describe(self) -> str:
         """``"naive MC, 100,000 rollouts"``."""
         return f"naive MC, {self.settings.n_final:,} rollouts"

@@ -50,9 +50,15 @@ def proposal_record(
     a record and must be stored). Members that shift the base's standard
     normals (:class:`StandardSpaceShift`) are recorded by their shift, with
     ``"space": "standard"``.
+
+    The sampler's base need not be ``base`` itself, only of its kind (a run
+    directory builds its own ``P0`` from the scenario): numbers recorded on
+    another structure draw other samples, which is why a run directory draws
+    a chunk again from its record and compares the bits before leaving
+    anything out (:mod:`avrisk.pipeline.regenerate`).
     """
     if isinstance(proposal, DefensiveMixture | MixtureProposal):
-        if proposal.base is not base:
+        if not _same_kind(proposal.base, base):
             return None
         members = (
             [proposal.proposal]
@@ -90,11 +96,16 @@ def _member_record(
     member: Any, base: ExponentialFamily
 ) -> tuple[str, list[float]] | None:
     """``(space, params)`` of one member of ``base``'s families, or None."""
-    if isinstance(member, StandardSpaceShift) and member.base is base:
+    if isinstance(member, StandardSpaceShift) and _same_kind(member.base, base):
         return "standard", _floats(member.mean)
     if isinstance(member, ExponentialFamily) and type(member) is type(base):
         return "natural", _floats(member.exact_params())
     return None
+
+
+def _same_kind(one: ExponentialFamily, other: ExponentialFamily) -> bool:
+    """Whether two bases are of one type and dimension (the same, or rebuilt)."""
+    return one is other or (type(one) is type(other) and one.dim == other.dim)
 
 
 def proposal_from_record(record: Any, base: ExponentialFamily) -> Sampler:

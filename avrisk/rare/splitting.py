@@ -321,6 +321,10 @@ class SubsetSimulation:
         s = self.settings
         return s.n_particles * (1 + (s.max_levels - 1) * s.n_moves)
 
+    def budget_not_redrawn(self) -> int:
+        """All of :meth:`budget`: its points are drawn in standard space and moved."""
+        return SubsetSimulation.budget(self)
+
     def describe(self) -> str:
         """``"subset simulation, 2,000 particles per level, p0 0.1"``."""
         s = self.settings

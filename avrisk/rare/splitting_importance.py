@@ -425,6 +425,10 @@ class SplittingImportanceSampling(SubsetSimulation):
         s = self.settings
         return super().budget() + s.n_particles * s.n_moves + s.n_final
 
+    def budget_not_redrawn(self) -> int:
+        """All but the final stage, a fresh draw of the fitted proposal."""
+        return self.budget() - self.settings.n_final
+
     def describe(self) -> str:
         """``"subset simulation, 2,000 particles per level, p0 0.1, then IS ..."``."""
         s = self.settings

@@ -163,6 +163,26 @@ def test_the_plan_measures_the_disk_of_a_scenario_that_records_more(tmp_path):
     assert measured == pytest.approx(estimate, rel=0.15)
 
 
+def test_the_plan_counts_the_rollouts_splitting_stores_in_full(tmp_path):
+    """Its levels' points (xi too) are stored; its final stage leaves xi out."""
+    scenario = shortened_scenario(tmp_path, 0.3, scenario="highway_default")
+    args = ("--set", "n_particles=30", "--n-final", 30, "--gamma", 1.0)
+    args += ("--gamma-test", "2.0", "--batch-size", 64, "--failures", 0)
+    result = invoke("run", scenario, "--out", tmp_path / "run", *args)
+    assert result.exit_code == 0, result.output
+    err = words(result.stderr)
+    estimates = err.split("(an estimate: ")[1].split(" B for one")[0]
+    compact, full = (
+        float(x.replace(",", "")) for x in estimates.split(" B a rollout, ")
+    )
+    assert compact < 400 < 2000 < full  # xi's 404 float32 columns
+    # 12 sets of 30 and 30 moves at gamma in full, the final 30 without xi
+    planned = err.split("samples take at most about ")[1].split(" kB on disk")[0]
+    assert float(planned) == pytest.approx((390 * full + 30 * compact) / 1e3, abs=1)
+    measured = float(err.split("; disk: ")[1].split(" B a rollout")[0].replace(",", ""))
+    assert measured == pytest.approx(full, rel=0.15)  # the first chunk: a level
+
+
 def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
     out = tmp_path / "run"
     result = invoke("run", short_scenario, "--out", out, *RUN_ARGS, "--json")

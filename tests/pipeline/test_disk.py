@@ -65,8 +65,8 @@ class DiskMonitor:
     def status(self, text):
         pass
 
-    def disk(self, row_bytes):
-        self.calls.append(("disk", row_bytes))
+    def disk(self, row_bytes, *, full):
+        self.calls.append(("disk", row_bytes, full))
 
 
 def test_the_disk_measured_on_the_first_chunk_is_what_a_rollout_takes(tmp_path):
@@ -80,3 +80,30 @@ def test_the_disk_measured_on_the_first_chunk_is_what_a_rollout_takes(tmp_path):
     measured = monitor.calls[0][1]
     written = (run_dir.path / "samples.parquet").stat().st_size / 20_000
     assert measured == pytest.approx(written, rel=0.05)
+
+
+@pytest.mark.parametrize(
+    ("settings", "full"),
+    [
+        (RunSettings("naive", gamma=0.0, n_final=2000), False),
+        (RunSettings("splitting", gamma=0.0, n_particles=500), True),
+    ],
+    ids=["fresh draws", "subset simulation"],
+)
+def test_the_first_chunk_says_whether_it_stored_every_column(tmp_path, settings, full):
+    # a large block is left out of fresh draws only (drawn again when read)
+    big = MIN_REGENERATED_DIM + 8
+    block = FixedCovNormal(np.zeros(big), precision=sparse.eye_array(big))
+    base = Product([ScaledBeta(2.0, 2.0), block])
+    names = ["a", *(f"big.{i}" for i in range(big))]
+    monitor = DiskMonitor()
+    run_dir = RunDirectory(tmp_path / "run", names, base=base)
+
+    def f(x):
+        return 2.0 - x[:, 1:].sum(axis=1) / np.sqrt(big)
+
+    run_estimation(run_dir, base, f, settings, monitor=monitor)
+    (first,) = [c for c in monitor.calls if c[0] == "disk"]
+    assert first[2] is full
+    stored = estimated_row_bytes(names, base, store_full=full)
+    assert first[1] == pytest.approx(stored, rel=0.3)

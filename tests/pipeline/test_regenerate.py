@@ -1,5 +1,6 @@
 """Large blocks of X left out of a run directory and drawn again, checked."""
 
+import copy
 import json
 
 import numpy as np
@@ -67,7 +68,11 @@ SETTINGS = {
 
 
 def run(path, settings, *, base=BASE, store_full=False, fn=f):
-    directory = RunDirectory(path, NAMES, base=base, store_full=store_full)
+    # the run directory's P0 is built apart from the estimator's, as the CLI
+    # builds both from the scenario: equal, not the same object
+    directory = RunDirectory(
+        path, NAMES, base=copy.deepcopy(base), store_full=store_full
+    )
     summary = run_estimation(directory, BASE, fn, settings)
     return directory, summary
 
