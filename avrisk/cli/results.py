@@ -224,7 +224,7 @@ def print_ratios(
         table.add_row(
             f"{row['gamma']:g}",
             f"{row['p']:.3g}",
-            str(row["ce_hits"]),
+            str(row["hits"]),
             str(row["naive_hits_seen"] if row["naive_hits_seen"] is not None else ""),
             f"{row['naive_hits_expected']:.1f}",
             f"{row['rare_event_ratio']:.1f}x",

@@ -186,7 +186,9 @@ def write_report(
     comparison = None
     if weighted is not None:
         ref = reference.summary()["estimate"] if reference is not None else None
-        plot_comparison(weighted[1]["estimate"], plots / "comparison.png", ref)
+        plot_comparison(
+            weighted[1]["estimate"], weighted[0], plots / "comparison.png", ref
+        )
         comparison = {
             "label": weighted[0],
             "n_evals": weighted[1]["estimate"]["n_evals"],

@@ -1,16 +1,16 @@
 """Plots of a run, drawn from its ``summary.json`` alone (Matplotlib, Agg).
 
 * :func:`plot_comparison` -- the paper's Fig. 2/3: against each test threshold,
-  the ratio of the number of rare events (CE's final-stage hits over the naive
-  hits expected with CE's whole budget of rollouts) and the ratio of estimator
-  variances (naive over CE, at that budget).
+  the ratio of the number of rare events (the method's final-stage hits over the
+  naive hits expected with its whole budget of rollouts) and the ratio of
+  estimator variances (naive over the method, at that budget).
 * :func:`plot_diagnostic` -- an estimator's per-step diagnostics (for CE:
   ``gamma_k`` and the ``rho``-quantile per iteration, with its hits);
   :func:`table_cells` -- those it gives as a table instead, as text.
 
 Ratios use expected naive figures, ``n p`` hits and variance ``p (1 - p) / n``
-with ``p`` the best estimate at hand (a reference run when given, else CE's
-own), because a naive run at a 1e-6 event mostly sees zero hits and its ratio
+with ``p`` the best estimate at hand (a reference run when given, else the
+method's own), because a naive run at a 1e-6 event mostly sees zero hits and its ratio
 would be infinite or undefined.
 """
 
@@ -40,19 +40,20 @@ UNRELIABLE_NOTE = (
 
 
 def comparison_rows(
-    ce: dict[str, Any], reference: dict[str, Any] | None = None
+    tested: dict[str, Any], reference: dict[str, Any] | None = None
 ) -> list[dict[str, Any]]:
-    """Per test threshold: CE hits, expected naive hits and the two ratios.
+    """Per test threshold: the method's hits, expected naive hits and the two ratios.
 
     The comparison is at an equal budget: naive Monte Carlo with as many
-    rollouts as CE used in all (``n_evals``, search iterations included),
-    against CE's final-stage hits and standard error. Both ratios are thus
-    conservative for CE: the hits of its search iterations are not counted.
+    rollouts as the method used in all (``n_evals``, a CE search or subset
+    simulation's levels included), against the method's final-stage hits and
+    standard error. Both ratios are thus conservative for the method: the
+    hits of its search are not counted.
 
     Parameters
     ----------
-    ce : dict
-        ``estimate`` section of a CE run's summary.
+    tested : dict
+        ``estimate`` section of a weighted run's summary (CE, splitting_is).
     reference : dict, optional
         ``estimate`` section of a (large) naive run, used for ``p`` when it has
         hits at that threshold.
@@ -61,19 +62,19 @@ def comparison_rows(
     -------
     list of dict
         Keys ``gamma``, ``p``, ``p_from`` (``"reference"`` or ``"own"``: where
-        ``p`` comes from), ``ce_hits``, ``naive_hits_expected``,
-        ``rare_event_ratio``, ``variance_ratio``, and ``reliable``: whether CE's
-        standard error there can be trusted
+        ``p`` comes from), ``hits`` (the method's), ``naive_hits_expected``,
+        ``rare_event_ratio``, ``variance_ratio``, and ``reliable``: whether the
+        method's standard error there can be trusted
         (:func:`avrisk.rare.final_stage.is_reliable`; else the variance ratio
         means little).
     """
     ref = {g["gamma"]: g for g in (reference or {}).get("by_gamma", [])}
     rows = []
-    for g in ce["by_gamma"]:
+    for g in tested["by_gamma"]:
         r = ref.get(g["gamma"])
         p_from = "reference" if r is not None and r["n_hits"] > 0 else "own"
         p = r["p"] if p_from == "reference" else g["p"]
-        n = ce["n_evals"]
+        n = tested["n_evals"]
         naive_hits = n * p
         naive_var = p * (1 - p) / n
         stderr = g["stderr"] or 0.0
@@ -82,7 +83,7 @@ def comparison_rows(
                 "gamma": g["gamma"],
                 "p": p,
                 "p_from": p_from,
-                "ce_hits": g["n_hits"],
+                "hits": g["n_hits"],
                 "naive_hits_expected": naive_hits,
                 "rare_event_ratio": g["n_hits"] / naive_hits
                 if naive_hits > 0
@@ -95,15 +96,21 @@ def comparison_rows(
 
 
 def plot_comparison(
-    ce: dict[str, Any], path: Path, reference: dict[str, Any] | None = None
+    tested: dict[str, Any],
+    label: str,
+    path: Path,
+    reference: dict[str, Any] | None = None,
 ) -> Path:
-    """Draw the rare-event ratio and the variance ratio against the threshold."""
-    rows = comparison_rows(ce, reference)
+    """Draw the rare-event ratio and the variance ratio against the threshold.
+
+    ``label`` names the method (``"cross-entropy"``, ``"splitting + IS"``).
+    """
+    rows = comparison_rows(tested, reference)
     gammas = [r["gamma"] for r in rows]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
     panels = (
-        ("rare_event_ratio", "rare events: CE / naive (same budget)"),
-        ("variance_ratio", "variance: naive / CE (same budget)"),
+        ("rare_event_ratio", f"rare events: {label} / naive (same budget)"),
+        ("variance_ratio", f"variance: naive / {label} (same budget)"),
     )
     for ax, (key, title) in zip(axes, panels, strict=True):
         ax.plot(gammas, [r[key] for r in rows], "o-", color="tab:blue")
@@ -116,7 +123,7 @@ def plot_comparison(
                 mfc="white",
                 mec="tab:red",
                 ms=9,
-                label="CE's standard error unreliable",
+                label=f"{label}: standard error unreliable",
             )
             ax.legend(fontsize="small")
         ax.axhline(1.0, color="grey", lw=0.8, ls="--")
