@@ -311,7 +311,9 @@ def result_document(
         :meth:`~avrisk.rare.results.SearchConvergence.to_dict` and its
         ``sentence``; null for a method without one), ``by_gamma`` with
         ``trust`` and
-        ``reasons`` per threshold, ``mechanisms`` at the main threshold),
+        ``reasons`` per threshold, ``mechanisms`` at the main threshold,
+        ``diagnostics``: the estimator's tables of the report, each
+        :meth:`~avrisk.rare.estimator.DiagnosticTable.to_dict`),
         ``comparison`` (or null) and ``report`` (or null).
     """
     docs = []
@@ -354,6 +356,7 @@ def result_document(
                 else search.to_dict() | {"sentence": search_sentence(search)},
                 "by_gamma": by_gamma,
                 "mechanisms": _mechanisms(summary),
+                "diagnostics": [t.to_dict() for t in estimator.diagnostics(est)],
             }
         )
     doc = {

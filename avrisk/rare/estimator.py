@@ -208,6 +208,14 @@ class DiagnosticTable:
         j = self.columns.index(name)
         return [row[j] for row in self.rows]
 
+    def to_dict(self) -> dict[str, Any]:
+        """``title``, ``columns`` and ``rows`` (lists), for a JSON document."""
+        return {
+            "title": self.title,
+            "columns": list(self.columns),
+            "rows": [list(row) for row in self.rows],
+        }
+
 
 class EstimationContext(NamedTuple):
     """How an estimator's samples are evaluated, recorded and replayed.

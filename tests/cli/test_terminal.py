@@ -197,6 +197,11 @@ def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
     assert run["n_rollouts"] == 220 and run["path"] == str(out)
     assert [g["gamma"] for g in run["by_gamma"]] == [0.5, 1.0, 2.0]
     assert {"p", "ci", "pareto_k", "trust", "reasons"} <= set(run["by_gamma"][0])
+    # the report's diagnostic tables: CE's search, one row per iteration
+    (search_table,) = run["diagnostics"]
+    assert search_table["columns"][0] == "CE iteration"
+    assert len(search_table["rows"]) == 2
+    assert all(len(row) == len(search_table["columns"]) for row in search_table["rows"])
     # 2 iterations of 60 do not take CE's level down to 1 s: said, and not trusted
     assert run["search"]["converged"] is False and run["search"]["reached_at"] is None
     assert answer["trust"] == "caution"
