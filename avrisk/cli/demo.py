@@ -164,9 +164,9 @@ def _scenario_part(
 
     ``rollouts // 10`` particles per level (about half the budget in levels and
     moves at gamma on ``highway_default``) and a final stage of half the
-    budget: the coverage benchmark's preset, about 110 times naive sampling's
-    precision at 0.1 s over 20 seeds, its intervals covering the 3-million-rollout
-    reference in 18 of 20 (BENCHMARKS.md, "Coverage"). CE on the same budget is
+    budget: the coverage benchmark's preset, about 120 times naive sampling's
+    precision at 0.1 s over 20 seeds, its intervals covering the 4.5-million-rollout
+    reference in 20 of 20 (BENCHMARKS.md, "Coverage"). CE on the same budget is
     about as precise in most seeds but far off, with too narrow an interval, in
     some.
     """
