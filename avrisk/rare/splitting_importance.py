@@ -133,6 +133,7 @@ __all__ = [
     "block_means",
     "SplittingISSettings",
     "informative_coordinates",
+    "moment_errors",
     "SplittingImportanceSampling",
     "particle_proposal",
     "shrink",
@@ -275,16 +276,15 @@ def particle_proposal(
     def fit(
         points: FloatArray, point_chain: np.ndarray, threshold: float, k: int
     ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
-        _, stderr = block_means(points, point_chain)
-        informative = informative_coordinates(points, point_chain, threshold)
-        shifted = allowed & informative
+        moments = moment_errors(points, point_chain)
+        shifted = allowed & _informative(moments, threshold)
         structure = StandardSpaceShift(base, searched=shifted)
         masked = np.where(shifted, points, 0.0)  # the others play no part in it
         weights = np.full(len(points), 1.0 / len(points))
         start = seed_components(structure, masked, weights, k, rng)
         mixture = fit_mixture(*start, masked, weights, settings.min_weight)
         components, shares = merge_overlapping(mixture.components, mixture.weights)
-        noise = float(np.nansum(stderr[shifted] ** 2))
+        noise = float(np.nansum(moments[0][1][shifted] ** 2))
         shrunk = [
             shrink(c, share, noise) for c, share in zip(components, shares, strict=True)
         ]
@@ -371,6 +371,29 @@ def block_means(z: FloatArray, chain: np.ndarray) -> tuple[FloatArray, FloatArra
     return z.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(blocks)
 
 
+def moment_errors(
+    z: FloatArray, chain: np.ndarray
+) -> tuple[tuple[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]:
+    """:func:`block_means` of the particles ``z`` and of ``z^2 - 1``, in that order.
+
+    Under ``N(0, 1)`` both moments are 0: what :func:`informative_coordinates`
+    tests, and the first one's standard errors are the noise of a fitted
+    shift (:func:`shrink`).
+    """
+    return block_means(z, chain), block_means(z * z - 1.0, chain)
+
+
+def _informative(
+    moments: tuple[tuple[FloatArray, FloatArray], ...], threshold: float
+) -> np.ndarray:
+    """Coordinates where a moment is off 0 by more than ``threshold`` errors."""
+    few_chains = np.isnan(moments[0][1]).all()  # no standard errors: keep all
+    informative = np.full(moments[0][0].shape, threshold == 0.0 or few_chains)
+    for mean, stderr in moments:
+        informative |= np.abs(mean) > threshold * stderr
+    return informative
+
+
 def informative_coordinates(
     z: FloatArray, chain: np.ndarray, threshold: float
 ) -> np.ndarray:
@@ -400,13 +423,7 @@ def informative_coordinates(
     >>> informative_coordinates(z, np.arange(2000) // 10, 3.0).tolist()
     [False, True, True, False]
     """
-    if threshold == 0.0 or np.unique(chain).size < 4:
-        return np.ones(z.shape[1], dtype=bool)
-    informative = np.zeros(z.shape[1], dtype=bool)
-    for moment in (z, z * z - 1.0):
-        mean, stderr = block_means(moment, chain)
-        informative |= np.abs(mean) > threshold * stderr
-    return informative
+    return _informative(moment_errors(z, chain), threshold)
 
 
 @register_estimator
