@@ -93,9 +93,9 @@ class CostMeter:
         before any is written
         (:func:`~avrisk.pipeline.store.estimated_row_bytes`); the chunk files
         hold as much again until they are gathered at the end of a run.
-    full_bytes_per_rollout : float, optional
+    full_bytes_per_rollout : float
         The same for a rollout stored in full (each run's
-        ``stored_in_full``); default ``bytes_per_rollout``.
+        ``stored_in_full``; ``bytes_per_rollout`` where nothing is left out).
 
     Attributes
     ----------
@@ -106,7 +106,7 @@ class CostMeter:
     console: Console
     plan: Sequence[PlannedRun]
     bytes_per_rollout: float
-    full_bytes_per_rollout: float | None = None
+    full_bytes_per_rollout: float
     done: int = 0
     measured_bytes: float | None = None
     _scale: float = 1.0
@@ -121,10 +121,9 @@ class CostMeter:
     @property
     def total_bytes(self) -> float:
         """Disk of every run's samples [B]: estimated, then scaled as measured."""
-        full = self.full_bytes_per_rollout or self.bytes_per_rollout
         estimate = sum(
             (run.rollouts - run.stored_in_full) * self.bytes_per_rollout
-            + run.stored_in_full * full
+            + run.stored_in_full * self.full_bytes_per_rollout
             for run in self.plan
         )
         return self._scale * estimate
@@ -152,7 +151,7 @@ class CostMeter:
 
     def _per_rollout_text(self) -> str:
         full = self.full_bytes_per_rollout
-        if full in (None, self.bytes_per_rollout) or not any(
+        if full == self.bytes_per_rollout or not any(
             run.stored_in_full for run in self.plan
         ):
             return f"{self.bytes_per_rollout:,.0f} B a rollout"
@@ -161,7 +160,7 @@ class CostMeter:
             "stored in full"
         )
 
-    def disk(self, row_bytes: float, *, full: bool = False) -> None:
+    def disk(self, row_bytes: float, *, full: bool) -> None:
         """The disk a rollout took in a chunk just written [B]: the first counts.
 
         It scales the estimate of its kind (``full``: a chunk that stored
@@ -169,11 +168,7 @@ class CostMeter:
         """
         if self.measured_bytes is None:
             self.measured_bytes = row_bytes
-            estimate = (
-                self.full_bytes_per_rollout or self.bytes_per_rollout
-                if full
-                else self.bytes_per_rollout
-            )
+            estimate = self.full_bytes_per_rollout if full else self.bytes_per_rollout
             self._scale = row_bytes / estimate
 
     def count(self, n: int, seconds: float | None) -> None:

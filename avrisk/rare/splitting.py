@@ -323,7 +323,7 @@ class SubsetSimulation:
 
     def budget_not_redrawn(self) -> int:
         """All of :meth:`budget`: its points are drawn in standard space and moved."""
-        return SubsetSimulation.budget(self)
+        return self.budget()
 
     def describe(self) -> str:
         """``"subset simulation, 2,000 particles per level, p0 0.1"``."""
