@@ -158,6 +158,29 @@ def run(args: argparse.Namespace) -> None:
         )
 
 
+def widened(
+    p: np.ndarray, lo: np.ndarray, hi: np.ndarray, se_ref: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each run's 95% interval widened by the reference's own error.
+
+    ``p -/+ sqrt(h^2 + (1.96 se_ref)^2)``, ``h`` that side's half-width: a run
+    covers when the reference lies within it.
+
+    Parameters
+    ----------
+    p, lo, hi : ndarray of shape (s,)
+        Each run's estimate and 95% interval.
+    se_ref : float
+        The reference's standard error.
+
+    Returns
+    -------
+    low, high : ndarray of shape (s,)
+    """
+    widen = (1.96 * se_ref) ** 2
+    return p - np.sqrt((p - lo) ** 2 + widen), p + np.sqrt((hi - p) ** 2 + widen)
+
+
 def judge(
     p: np.ndarray,
     lo: np.ndarray,
@@ -178,9 +201,7 @@ def judge(
         Mean rollouts per run (for the naive variance at the same budget).
     """
     s = len(p)
-    widen = (1.96 * se_ref) ** 2
-    low = p - np.sqrt((p - lo) ** 2 + widen)
-    high = p + np.sqrt((hi - p) ** 2 + widen)
+    low, high = widened(p, lo, hi, se_ref)
     rel = p / p_ref - 1
     spread = p.std(ddof=1)
     # The bias's standard error: the spread over seeds and the reference's own.

@@ -49,6 +49,7 @@ from avrisk.rare.problem import FINAL_STAGE, SAMPLE_CHUNK
 from avrisk.rare.stages import chunk_task
 from avrisk.scenario import load_spec
 
+#: Thresholds [s] counted by default (``--gammas`` chooses others).
 GAMMAS = (0.1, 0.14, 0.2, 0.3, 0.5, 1.0)
 MECHANISMS = ("no_contact", "rear_end", "hit_from_behind", "side")
 
@@ -121,7 +122,7 @@ def simulate(args: argparse.Namespace) -> None:
                         m: int(np.sum((f <= g) & ~failed & (contact == code)))
                         for code, m in enumerate(MECHANISMS)
                     }
-                    for g in GAMMAS
+                    for g in args.gammas
                 },
                 "seconds": seconds,
                 "defines_p": definition,
@@ -132,7 +133,11 @@ def simulate(args: argparse.Namespace) -> None:
             os.fsync(sink.fileno())
             print(
                 f"chunk {j}: {size / seconds:.0f} rollouts/s, "
-                f"hits at 0.1 s: {sum(line['hits']['0.1'].values())}",
+                "hits: "
+                + ", ".join(
+                    f"{sum(counts.values())} at {key} s"
+                    for key, counts in line["hits"].items()
+                ),
                 file=sys.stderr,
             )
 
@@ -156,8 +161,10 @@ def summarize(args: argparse.Namespace) -> None:
     used = [lines[j] for j in range(m)]
     n = sum(line["n"] for line in used)
     seconds = sum(line["seconds"] for line in used)
+    # the thresholds every line counted (lines of other --gammas may be mixed)
+    keys = set.intersection(*(set(line["hits"]) for line in used))
     by_gamma = []
-    for g in GAMMAS:
+    for g in sorted(float(key) for key in keys):
         key = f"{g:g}"
         mech = {k: sum(line["hits"][key][k] for line in used) for k in MECHANISMS}
         k = sum(mech.values())
@@ -194,7 +201,7 @@ def summarize(args: argparse.Namespace) -> None:
     out.write_text(json.dumps(summary, indent=2) + "\n")
     main = by_gamma[0]
     print(
-        f"{spec.name}: {n:,} rollouts, p(0.1 s) = {main['p']:.3e} "
+        f"{spec.name}: {n:,} rollouts, p({main['gamma']:g} s) = {main['p']:.3e} "
         f"[{main['ci'][0]:.3e}, {main['ci'][1]:.3e}] ({main['n_hits']} hits); "
         f"wrote {out}"
     )
@@ -210,6 +217,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--batch-size", type=int, default=4096)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument(
+        "--gammas",
+        type=lambda text: tuple(float(g) for g in text.split(",")),
+        default=GAMMAS,
+        help="Thresholds [s] to count hits at, comma-separated.",
+    )
     parser.add_argument("--summarize", action="store_true")
     args = parser.parse_args(argv)
     i, _, k = args.shard.partition("/")

@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from avrisk.agents.vision import INNER_BATCH, PilotNet, load_pilotnet
+from avrisk.agents.vision import PilotNet, inner_batch, load_pilotnet
 from avrisk.assembly.builder import (
     ScenarioSimulator,
     base_distribution,
@@ -117,7 +117,7 @@ def bench_pilotnet(
     net = _net(args).to(device).eval()
     for batch in batches:
         images = torch.rand(batch, 3, 66, 200, device=device)
-        inner = f"steer (inner batches of {INNER_BATCH})"
+        inner = f"steer (inner batches of {inner_batch(images.device)})"
         variants: dict[str, Any] = {inner: net.steer}
         if "eager" in modes:
             variants["forward"] = net

@@ -9,12 +9,15 @@ simulator (:mod:`avrisk.sim`), the drivers and ego policies
 * :mod:`~avrisk.assembly.objective` -- :class:`SimulationObjective`, the
   simulator as the estimation engine's black box;
 * :mod:`~avrisk.assembly.traces` -- rollouts as plain arrays, and the traces
-  of a run's most likely failures, recorded while it runs.
+  of a run's most likely failures, recorded while it runs;
+* :mod:`~avrisk.assembly.trace_camera` -- the ego camera's images of a
+  recorded rollout, rendered again from its trace.
 """
 
 from avrisk.assembly.builder import (
     ScenarioSimulator,
     base_distribution,
+    camera_from_spec,
     initial_state,
     param_layout,
 )
@@ -25,6 +28,7 @@ from avrisk.assembly.objective import (
     ObjectiveFactory,
     SimulationObjective,
 )
+from avrisk.assembly.trace_camera import CameraFrames, camera_frames
 from avrisk.assembly.traces import (
     FAILURES_FILE,
     FailureRecorder,
@@ -35,6 +39,7 @@ from avrisk.assembly.traces import (
 )
 
 __all__ = [
+    "CameraFrames",
     "EVENT_COLUMNS",
     "FACT_COLUMNS",
     "FAILURES_FILE",
@@ -45,6 +50,8 @@ __all__ = [
     "ScenarioSimulator",
     "SimulationObjective",
     "base_distribution",
+    "camera_from_spec",
+    "camera_frames",
     "initial_state",
     "param_layout",
     "read_failure_traces",

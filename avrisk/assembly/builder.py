@@ -299,6 +299,18 @@ def learned_drivers(
     return LaneChangingDriver(driver, road, params)
 
 
+def full_float32_on_gpus() -> None:
+    """Make float32 on a CUDA device full float32: no TensorFloat-32.
+
+    torch lets cuDNN convolutions (PilotNet's) round their inputs to TF32's
+    10-bit mantissa by default; a simulator records its precision as float32
+    (``SimulationObjective.computed_with``) and agrees with the CPU within the
+    stated tolerance only without it. The switches are process-wide.
+    """
+    torch.backends.cudnn.allow_tf32 = False
+    torch.backends.cuda.matmul.allow_tf32 = False
+
+
 class ScenarioSimulator:
     """A scenario bound to a simulator: flat ``X`` and seeds in, rollouts out.
 
@@ -341,6 +353,8 @@ class ScenarioSimulator:
         self.config = sim_config_from_spec(spec)
         self.device = torch.device(device)
         self.dtype = dtype
+        if self.device.type == "cuda":
+            full_float32_on_gpus()
         idm_ego = spec.ego.policy == IDM_MOBIL
         types = [spec.driver_type(j) for j in range(1, spec.n_vehicles)]
         # Per slot (A,): driven by the driver network / by IDM+MOBIL.

@@ -25,6 +25,7 @@ from avrisk.assembly.traces import FailureRecorder
 from avrisk.fingerprint import sha256_file, sha256_json
 from avrisk.scenario import ParamLayout, ScenarioSpec, spec_from_dict
 from avrisk.sim.collision import Contact
+from avrisk.sim.interfaces import weights_files
 
 __all__ = [
     "EVENT_COLUMNS",
@@ -111,7 +112,8 @@ class SimulationObjective:
         dict
             ``scenario_sha256``: the resolved spec's canonical JSON (its
             component names and params included); ``weights_sha256``: each
-            learned-weights file the simulation uses.
+            learned-weights file the simulation uses (the drivers', and the
+            ego's own: ``weights_files``).
         """
         spec = self.simulator.spec
         drivers = default_drivers_dir()
@@ -120,17 +122,20 @@ class SimulationObjective:
             files.append(DRIVER_NET_FILE)
         if spec.has_learned_drivers:
             files.append(XI_PRIOR_FILE)
+        paths = {name: drivers / name for name in files}
+        paths.update(weights_files(self.simulator.ego_policy))
         return {
             "scenario_sha256": sha256_json(spec.model_dump(mode="json")),
-            "weights_sha256": {name: sha256_file(drivers / name) for name in files},
+            "weights_sha256": {name: sha256_file(path) for name, path in paths.items()},
         }
 
     def computed_with(self) -> dict[str, Any]:
-        """How this objective computes (device and floating-point precision)."""
+        """How this objective computes (device, precision, compiled or eager)."""
         sim = self.simulator
         return {
             "device": str(sim.device),
             "precision": str(sim.dtype).removeprefix("torch."),
+            "compiled": sim.simulator.compile,
             "torch": torch.__version__,
         }
 

@@ -20,6 +20,8 @@ from avrisk.assembly import (
     ScenarioSimulator,
     SimulationObjective,
     base_distribution,
+    camera_frames,
+    camera_from_spec,
     param_layout,
     read_failure_traces,
 )
@@ -43,6 +45,7 @@ from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import WorkerError
 from avrisk.rare.splitting import SplittingError
 from avrisk.report.animate import animate_rollouts, animate_samples
+from avrisk.report.camera_video import animate_camera_rollout
 from avrisk.report.html import write_report
 from avrisk.scenario import ScenarioSpec, ScenarioSpecError, load_spec
 
@@ -222,20 +225,27 @@ def write_run_report(
 ) -> Path:
     """The HTML report of ``runs``; failures come from the first run.
 
-    A failure is animated from the trace recorded during the run; one without
-    (a run older than recorded traces) is simulated again when ``simulator``
-    is given, else shown without animation.
+    A failure is animated from the trace recorded during the run (with the ego
+    camera's RGB, depth and segmentation above the top-down view when the
+    scenario has a camera); one without (a run older than recorded traces) is
+    simulated again when ``simulator`` is given, else shown without animation.
     """
     failures_from = runs[0][1]
     recorded = failures_from.path / FAILURES_FILE
     traces = read_failure_traces(recorded) if recorded.is_file() else {}
+    # A scenario with an ego camera shows what the ego saw beside the top-down view.
+    camera = camera_from_spec(spec) if spec.camera is not None else None
 
     def animate(row: dict[str, Any], path: Path) -> Path | None:
         found = traces.get(int(row["seed"]))
         if found is not None:  # the title shows its min TTC; mark the vehicle hit
             trace = replace(found[1], hit=int(row.get("collision_with") or -1))
             path.parent.mkdir(parents=True, exist_ok=True)
-            return animate_rollouts([trace], spec.road, spec.simulation.dt, path)
+            dt = spec.simulation.dt
+            if camera is not None:
+                frames = camera_frames(trace, camera)
+                return animate_camera_rollout(trace, frames, spec.road, dt, path)
+            return animate_rollouts([trace], spec.road, dt, path)
         if simulator is not None:
             return animate_samples(simulator, [row], path)
         return None

@@ -20,9 +20,9 @@ which is exact), and only ``+ - * /`` and comparisons touch the rollouts'
 numbers (the ego's heading goes through :func:`avrisk.tensors.mathops.sincos`),
 so a rollout's image is bit-identical alone, in any batch, and in slices. One
 code path for CPU and GPU; under ``torch.compile`` the whole frame is one
-fused graph. Eager mode renders large batches in slices of about
+fused graph. Eager mode on a CPU renders large batches in slices of about
 :data:`EAGER_CHUNK_ELEMENTS` (ray, box) pairs, which keeps the temporaries
-cache-sized (see :mod:`avrisk.sim.simulator`).
+cache-sized (:mod:`avrisk.tensors.slices`).
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ from avrisk.sim.geometry import capped_reciprocal, hit_or_inf, min_argmin, step
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
 from avrisk.tensors.mathops import sincos
+from avrisk.tensors.slices import eager_slice
 
 __all__ = ["DEFAULT_VEHICLE_HEIGHT", "PALETTE", "RayCastCamera", "RoadPaint"]
 
@@ -197,9 +198,9 @@ class RayCastCamera:
             (B, 3, H, W) in [0, 1].
         """
         b, a = state.batch_size, state.n_vehicles
-        per_rollout = max(1, (a - 1) * self._ground_depth.shape[0])
-        chunk = max(1, EAGER_CHUNK_ELEMENTS // per_rollout)
-        if torch.compiler.is_compiling() or b <= chunk:
+        per_rollout = (a - 1) * self._ground_depth.shape[0]
+        chunk = eager_slice(b, per_rollout, EAGER_CHUNK_ELEMENTS, state.x.device)
+        if chunk is None:
             return self._render(state)
         return CameraFrame.cat(
             [self._render(state[i : i + chunk]) for i in range(0, b, chunk)]

@@ -71,8 +71,8 @@ def box_corners(
     return np.stack([cx, cy], axis=-1)
 
 
-class _Panel:
-    """The artists of one rollout's panel, updated in place frame by frame."""
+class TopDownPanel:
+    """The top-down view of one rollout on ``ax``, updated in place frame by frame."""
 
     def __init__(
         self, ax: Axes, trace: RolloutTrace, road: RoadLike, view_length: float
@@ -125,6 +125,7 @@ class _Panel:
         self.title = ax.set_title("", fontsize=9, loc="left")
 
     def draw(self, k: int, dt: float) -> None:
+        """Show recorded step ``k`` (the last one after the rollout ended)."""
         tr = self.trace
         i = min(k, tr.n_frames - 1)
         corners = box_corners(tr.x[i], tr.y[i], tr.heading[i], tr.length, tr.width)
@@ -152,7 +153,7 @@ class _Panel:
 
 def _figure(
     traces: Sequence[RolloutTrace], road: RoadLike, view_length: float
-) -> tuple[Figure, list[_Panel]]:
+) -> tuple[Figure, list[TopDownPanel]]:
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -165,7 +166,7 @@ def _figure(
         len(traces), 1, figsize=(width_in, panel_h * len(traces)), squeeze=False
     )
     panels = [
-        _Panel(ax, tr, road, view_length)
+        TopDownPanel(ax, tr, road, view_length)
         for ax, tr in zip(axes[:, 0], traces, strict=True)
     ]
     hit = "; vehicle hit outlined red" if any(tr.hit > 0 for tr in traces) else ""
@@ -174,7 +175,8 @@ def _figure(
     return fig, panels
 
 
-def _render(fig: Figure) -> Any:
+def figure_image(fig: Figure) -> Any:
+    """The figure drawn, as an RGB PIL image."""
     from PIL import Image
 
     fig.canvas.draw()
@@ -221,22 +223,39 @@ def animate_rollouts(
     if not traces:
         raise ValueError("animate_rollouts needs at least one trace")
     out = Path(out)
-    if stride is None:
-        stride = max(1, round(1.0 / (fps * dt)))
-    n_frames = max(tr.n_frames for tr in traces)
-    steps = list(range(0, n_frames, stride))
-    if steps[-1] != n_frames - 1:
-        steps.append(n_frames - 1)
+    steps = animation_steps(max(tr.n_frames for tr in traces), dt, fps, stride)
     fig, panels = _figure(traces, road, view_length)
     frames = []
     try:
         for k in steps:
             for panel in panels:
                 panel.draw(k, dt)
-            frames.append(_render(fig))
+            frames.append(figure_image(fig))
     finally:
         plt.close(fig)
-    # Hold the last frame a second so the ending can be read.
+    return write_gif(frames, fps, out)
+
+
+def animation_steps(
+    n_frames: int, dt: float, fps: int, stride: int | None
+) -> list[int]:
+    """Recorded steps an animation shows: every ``stride``-th, and the last.
+
+    ``stride`` None plays real time at ``fps`` (one shown step per ``1 / fps`` s).
+    """
+    if stride is None:
+        stride = max(1, round(1.0 / (fps * dt)))
+    steps = list(range(0, n_frames, stride))
+    if steps[-1] != n_frames - 1:
+        steps.append(n_frames - 1)
+    return steps
+
+
+def write_gif(frames: Sequence[Any], fps: int, out: Path) -> Path:
+    """Write PIL images as a looping GIF at ``fps``, the last held a second.
+
+    Written to a temporary name, then renamed: a reader never sees half a file.
+    """
     durations = [int(1000 / fps)] * (len(frames) - 1) + [1000]
     tmp = out.with_name(f".{out.name}.tmp")
     try:

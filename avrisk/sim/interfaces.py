@@ -76,6 +76,7 @@ rollout's carry untouched where ``alive`` is false (it stopped).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 import torch
@@ -85,7 +86,14 @@ from avrisk.sim.observation import Observation
 from avrisk.sim.state import VehicleState
 from avrisk.tensors.tensors import TensorDataclass
 
-__all__ = ["Action", "Actor", "NoiseRequest", "SafetyMeasure", "reads_lidar"]
+__all__ = [
+    "Action",
+    "Actor",
+    "NoiseRequest",
+    "SafetyMeasure",
+    "reads_lidar",
+    "weights_files",
+]
 
 
 @dataclass(frozen=True)
@@ -140,6 +148,8 @@ class Actor(Protocol):
     reads_lidar: bool
     #: The per-step noise :meth:`act` receives, or None for none.
     noise: NoiseRequest | None
+    #: Learned-weights files it acts by, name -> path (optional; default none):
+    #: :func:`weights_files`.
 
     def init(self, obs: Observation, params: Tensor | None) -> Any:
         """Initial actor state, from the observation at ``t = 0`` and ``params``."""
@@ -168,6 +178,20 @@ def reads_lidar(actor: Any) -> bool:
 def deterministic(actor: Any) -> bool:
     """Whether an actor vouches that it is repeatable (``deterministic``, or True)."""
     return bool(getattr(actor, "deterministic", True))
+
+
+def weights_files(actor: Any) -> dict[str, Path]:
+    """The learned-weights files an actor acts by (``weights_files``, or none).
+
+    An actor loaded from files names them (file name -> path), so that a
+    provenance stamp hashes what defines its behaviour.
+
+    Examples
+    --------
+    >>> weights_files(object())
+    {}
+    """
+    return dict(getattr(actor, "weights_files", {}))
 
 
 @runtime_checkable

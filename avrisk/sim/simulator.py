@@ -95,6 +95,7 @@ from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
 from avrisk.tensors.noise import normal
 from avrisk.tensors.rows import replace_rows
+from avrisk.tensors.slices import eager_slice
 
 __all__ = [
     "COMPILE_ENV",
@@ -252,13 +253,13 @@ class RolloutResult:
     trace: Trace | None = None
 
 
-# Eager ray casting works through the batch in slices of about this many
-# ray-box tests: the temporaries (128k floats, 512 KiB) then stay in the CPU's
-# L2 cache and below glibc's mmap threshold, instead of being mapped,
-# page-faulted and zeroed afresh by every operation, which makes it 3-4x faster
-# at large batches (2**17 scans 12% faster than 2**16, 2**18 50% slower, on an
-# AMD EPYC with 512 KiB of L2 per core). Results are the same: every operation
-# is elementwise along the batch.
+# Eager ray casting on a CPU works through the batch in slices of about this
+# many ray-box tests (avrisk.tensors.slices): the temporaries (128k floats,
+# 512 KiB) then stay in the CPU's L2 cache and below glibc's mmap threshold,
+# instead of being mapped, page-faulted and zeroed afresh by every operation,
+# which makes it 3-4x faster at large batches (2**17 scans 12% faster than
+# 2**16, 2**18 50% slower, on an AMD EPYC with 512 KiB of L2 per core).
+# Results are the same: every operation is elementwise along the batch.
 _EAGER_CHUNK_TESTS = 1 << 17
 
 
@@ -267,10 +268,9 @@ def _in_chunks(fn: Any, tests_per_rollout: Any) -> Any:
 
     def chunked(state: VehicleState, cos: Tensor, sin: Tensor) -> Any:
         n = state.batch_size
-        if torch.compiler.is_compiling():  # fused kernels stream; no slices
-            return fn(state, cos, sin)
-        step = max(1, _EAGER_CHUNK_TESTS // max(1, tests_per_rollout(state.n_vehicles)))
-        if n <= step:
+        per_rollout = tests_per_rollout(state.n_vehicles)
+        step = eager_slice(n, per_rollout, _EAGER_CHUNK_TESTS, cos.device)
+        if step is None:
             return fn(state, cos, sin)
         parts = [
             fn(state[i : i + step], cos[i : i + step], sin[i : i + step])

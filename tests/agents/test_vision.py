@@ -4,6 +4,7 @@ import torch
 
 from avrisk.agents.drivers import DriverNet, LearnedEgoPolicy
 from avrisk.agents.vision import IMAGE_SHAPE, PilotNet, PilotNetEgo
+from avrisk.assembly.builder import full_float32_on_gpus
 from avrisk.render import CameraModel, RayCastCamera
 from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
@@ -50,6 +51,26 @@ def test_an_images_steering_is_bit_identical_alone_and_anywhere_in_a_batch(net):
             assert torch.equal(net.steer(x[i : i + 1])[0], whole[i])
         perm = torch.randperm(45, generator=torch.Generator().manual_seed(1))
         assert torch.equal(net.steer(x[perm]), whole[perm])
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(
+    not torch.cuda.is_available(), reason="no CUDA device present (CPU-only torch)"
+)
+def test_on_a_gpu_steering_is_batch_independent_and_the_cpus_within_rounding(net):
+    # 600 images: one full inner batch of the GPU's and a padded second one.
+    full_float32_on_gpus()  # as the simulator does on a GPU
+    x = images(600)
+    gpu = PilotNet(steer_mean=0.01, steer_scale=0.02).eval()
+    gpu.load_state_dict(net.state_dict())
+    gpu = gpu.to("cuda")
+    with torch.no_grad():
+        whole = gpu.steer(x.to("cuda"))
+        for i in (0, 511, 599):
+            assert torch.equal(gpu.steer(x[i : i + 1].to("cuda"))[0], whole[i])
+        perm = torch.randperm(600, generator=torch.Generator().manual_seed(1))
+        assert torch.equal(gpu.steer(x[perm].to("cuda")), whole[perm.to("cuda")])
+        torch.testing.assert_close(whole.cpu(), net.steer(x), rtol=0, atol=1e-5)
 
 
 def test_pilotnet_refuses_images_of_another_size(net):

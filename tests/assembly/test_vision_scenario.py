@@ -29,3 +29,16 @@ def test_a_vision_rollout_is_the_same_alone_and_in_a_batch_in_any_order(tmp_path
 
 def test_a_scenario_whose_ego_reads_no_camera_gets_none():
     assert ScenarioSimulator(load_spec("highway_default")).camera is None
+
+
+def test_what_defines_p_for_the_vision_scenario_hashes_pilotnets_weights():
+    from avrisk.agents.vision.store import PILOTNET_FILE, default_vision_dir
+    from avrisk.assembly import SimulationObjective
+    from avrisk.fingerprint import sha256_file
+
+    weights = SimulationObjective(load_spec("highway_vision")).definition()
+    assert weights["weights_sha256"][PILOTNET_FILE] == sha256_file(
+        default_vision_dir() / PILOTNET_FILE
+    )
+    lidar = SimulationObjective(load_spec("highway_default")).definition()
+    assert PILOTNET_FILE not in lidar["weights_sha256"]

@@ -10,7 +10,19 @@ Training lives in :mod:`avrisk.learning.vision`.
 """
 
 from avrisk.agents.vision.ego import PilotNetEgo
-from avrisk.agents.vision.pilotnet import IMAGE_SHAPE, INNER_BATCH, PilotNet
+from avrisk.agents.vision.pilotnet import (
+    IMAGE_SHAPE,
+    INNER_BATCH,
+    PilotNet,
+    inner_batch,
+)
 from avrisk.agents.vision.store import load_pilotnet
 
-__all__ = ["IMAGE_SHAPE", "INNER_BATCH", "PilotNet", "PilotNetEgo", "load_pilotnet"]
+__all__ = [
+    "IMAGE_SHAPE",
+    "INNER_BATCH",
+    "PilotNet",
+    "PilotNetEgo",
+    "inner_batch",
+    "load_pilotnet",
+]

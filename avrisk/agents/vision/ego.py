@@ -17,6 +17,8 @@ weights (:func:`~avrisk.agents.vision.store.load_pilotnet`).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import torch
 from torch import Tensor
 
@@ -39,11 +41,14 @@ class PilotNetEgo:
         On the simulator's device.
     throttle : LearnedEgoPolicy
         The lidar ego whose acceleration it takes (its steering is not used).
+    weights_files : dict of str to Path, optional
+        The files ``net`` was loaded from (a provenance stamp hashes them).
 
     Attributes
     ----------
     controlled : Tensor of bool, shape (A,)
         Vehicle 0 only.
+    weights_files : dict of str to Path
     """
 
     #: The throttle reads the ego's lidar; the steering reads the camera.
@@ -51,10 +56,16 @@ class PilotNetEgo:
     reads_camera = True
     noise = None
 
-    def __init__(self, net: PilotNet, throttle: LearnedEgoPolicy) -> None:
+    def __init__(
+        self,
+        net: PilotNet,
+        throttle: LearnedEgoPolicy,
+        weights_files: dict[str, Path] | None = None,
+    ) -> None:
         if throttle.noise is not None:
             raise ValueError("the throttle ego must act with its mean action")
         self.net = net.eval()
+        self.weights_files = dict(weights_files or {})
         self.throttle = throttle
         self.controlled = throttle.controlled
 
@@ -90,11 +101,18 @@ def _vision_ego_factory(
 ) -> PilotNetEgo:
     """The shipped PilotNet with the shipped lidar ego's throttle."""
     from avrisk.agents.drivers.store import load_driver_net
-    from avrisk.agents.vision.store import load_pilotnet
+    from avrisk.agents.vision.store import (
+        PILOTNET_FILE,
+        default_vision_dir,
+        load_pilotnet,
+    )
 
     driver_net = load_driver_net().to(device) if net is None else net
+    path = default_vision_dir() / PILOTNET_FILE
     return PilotNetEgo(
-        load_pilotnet().to(device), LearnedEgoPolicy(driver_net, n_vehicles)
+        load_pilotnet(path).to(device),
+        LearnedEgoPolicy(driver_net, n_vehicles),
+        {PILOTNET_FILE: path},
     )
 
 

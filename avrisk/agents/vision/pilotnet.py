@@ -22,7 +22,11 @@ and different kernels may round differently in the last bit.
 :meth:`PilotNet.steer` therefore runs the network on fixed inner batches of
 :data:`INNER_BATCH` images (the last one zero-padded), so that an image's
 steering is bit-identical alone, in any batch and at any position (on one
-machine; the tests check it).
+machine; the tests check it). The inner batch is the device's: 8 images on a
+CPU, where larger passes gain nothing (their activations leave the cache), and
+512 on a GPU, where each pass is a dozen kernel launches and small passes would
+leave the device idle (BENCHMARKS.md, "The vision ego"). CPU and GPU steering
+then agree within rounding, not bit for bit, as any two devices do.
 
 References
 ----------
@@ -39,12 +43,25 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-__all__ = ["IMAGE_SHAPE", "INNER_BATCH", "PilotNet"]
+__all__ = ["IMAGE_SHAPE", "INNER_BATCH", "PilotNet", "inner_batch"]
 
 #: Input shape (channels, height, width) of the published network.
 IMAGE_SHAPE = (3, 66, 200)
-#: Images per network pass in :meth:`PilotNet.steer` (batch independence).
-INNER_BATCH = 8
+#: Images per network pass in :meth:`PilotNet.steer` (batch independence), by
+#: device type; a device type not named here takes the CPU's.
+INNER_BATCH = {"cpu": 8, "cuda": 512}
+
+
+def inner_batch(device: torch.device) -> int:
+    """Images per network pass on ``device`` (:data:`INNER_BATCH`).
+
+    Examples
+    --------
+    >>> inner_batch(torch.device("cpu")), inner_batch(torch.device("cuda", 1))
+    (8, 512)
+    """
+    return INNER_BATCH.get(device.type, INNER_BATCH["cpu"])
+
 
 _CONVS = ((3, 24, 5, 2), (24, 36, 5, 2), (36, 48, 5, 2), (48, 64, 3, 1), (64, 64, 3, 1))
 _DENSE = (64 * 1 * 18, 1164, 100, 50, 10, 1)
@@ -97,15 +114,16 @@ class PilotNet(nn.Module):
             x = F.relu(layer(x))
         return self.dense[-1](x).squeeze(-1)
 
-    def steer(self, rgb: Tensor, *, inner_batch: int = INNER_BATCH) -> Tensor:
+    def steer(self, rgb: Tensor, *, inner: int | None = None) -> Tensor:
         """Steering angle [rad] of every image, batch-independent.
 
         Parameters
         ----------
         rgb : Tensor of shape (B, 3, 66, 200)
             Colour in ``[0, 1]``, on the network's device.
-        inner_batch : int, default=INNER_BATCH
-            Images per network pass (the last pass zero-padded).
+        inner : int, optional
+            Images per network pass (the last pass zero-padded); default
+            :func:`inner_batch` of the images' device.
 
         Returns
         -------
@@ -124,10 +142,11 @@ class PilotNet(nn.Module):
                 "height 66)"
             )
         n = rgb.shape[0]
-        pad = (-n) % inner_batch
+        inner = inner_batch(rgb.device) if inner is None else inner
+        pad = (-n) % inner
         if pad:
             rgb = torch.cat([rgb, rgb.new_zeros(pad, *IMAGE_SHAPE)])
-        out = torch.cat([self(part) for part in rgb.split(inner_batch)])[:n]
+        out = torch.cat([self(part) for part in rgb.split(inner)])[:n]
         return self.steer_mean + self.steer_scale * out
 
     def to_arrays(self, dtype: type = np.float16) -> dict[str, np.ndarray]:

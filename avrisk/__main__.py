@@ -1,0 +1,5 @@
+"""``python -m avrisk``: the ``avrisk`` command without its console script."""
+
+from avrisk.cli import main
+
+main()
