@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> None:
 
     torch.set_num_threads(args.threads)
     spec = load_spec(args.scenario)
-    objective = SimulationObjective(spec)
+    objective = SimulationObjective(spec, device=args.device)
     base = base_distribution(spec)
     method, settings = PRESETS[args.preset]
     overrides = dict(_assignment(text) for text in args.set)
@@ -144,6 +144,12 @@ def run(args: argparse.Namespace) -> None:
             "n_evals": estimate.n_evals,
             "seconds": seconds,
             "by_gamma": [g.to_dict() for g in estimate.by_gamma.values()],
+            # the proposal's choices, where the estimator makes some
+            "fit": {
+                key: estimate.details[key]
+                for key in ("informative_threshold", "along_slope", "n_components")
+                if key in (estimate.details or {})
+            },
             "defines_p": objective.definition(),
             "computed_with": objective.computed_with(),
             "commit": commit,
@@ -311,6 +317,7 @@ def main(argv: list[str] | None = None) -> None:
     runner.add_argument("--gamma-test", default="0.3,0.5")
     runner.add_argument("--batch-size", type=int, default=4096)
     runner.add_argument("--threads", type=int, default=1)
+    runner.add_argument("--device", default="cpu", help="cpu, cuda or cuda:N.")
     runner.add_argument("--out", type=Path, required=True)
     runner.set_defaults(action=run)
     tabler = commands.add_parser("table", help="Judge the runs against a reference.")

@@ -39,7 +39,14 @@ and estimates ``p`` by importance sampling from it:
    (from 1 to ``n_components``), is the one whose fits to the particles of one
    half of the chains give the other half's particles the highest mean
    log-likelihood, summed over both ways round (ties to the sparser fit); the
-   proposal is then fitted to all particles with those choices. Chains are
+   proposal is then fitted to all particles with those choices, unless one
+   more candidate scores higher still. It has one component and shifts along a
+   single direction: ``f``'s
+   average slope, fitted by least squares to the last level's particles and
+   their values (:func:`slope_direction`; exact for a linear limit state), by
+   the particles' mean along it. Its noise is ``1 / n_eff`` against ``D /
+   n_eff`` for a shift of every coordinate, which is what a failure set that
+   depends a little on each of many coordinates needs. Chains are
    numbered in the order of their ancestors at every level, so the two halves
    descend from different draws of ``P0`` and are close to independent. The
    held-out likelihood of a mean shift falls with its squared distance from
@@ -128,6 +135,7 @@ from avrisk.rare.stages import BatchCache, BatchRecorder
 from avrisk.rare.stopping import StoppingRule
 
 __all__ = [
+    "SLOPE",
     "THRESHOLDS",
     "ParticleFit",
     "block_means",
@@ -137,6 +145,7 @@ __all__ = [
     "SplittingImportanceSampling",
     "particle_proposal",
     "shrink",
+    "slope_direction",
     "splitting_is",
 ]
 
@@ -147,6 +156,10 @@ __all__ = [
 THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
 #: Blocks of chains whose means give those standard errors.
 N_BLOCKS = 20
+#: The candidate of :func:`particle_proposal` that shifts along ``f``'s slope,
+#: where a threshold stands in its fit (one component; it must beat the best
+#: per-coordinate mixture).
+SLOPE = -1.0
 
 #: Remedies of an unreliable importance-sampling stage, in its settings' names.
 ADVICE = Advice(
@@ -217,14 +230,58 @@ class ParticleFit(NamedTuple):
         and ``P0`` with weight ``settings.defensive``.
     threshold : float
         The standard errors beyond which a coordinate was shifted (one of
-        ``THRESHOLDS``).
+        ``THRESHOLDS``; 0 for a shift along the slope).
     n_shifted : int
         Coordinates shifted.
+    along_slope : bool
+        Whether the shift is the particles' mean along the direction in which
+        ``f`` falls (:func:`slope_direction`) rather than per coordinate.
     """
 
     proposal: MixtureProposal
     threshold: float
     n_shifted: int
+    along_slope: bool = False
+
+
+def slope_direction(z: FloatArray, values: FloatArray) -> FloatArray | None:
+    """The unit direction in which ``f`` falls, by least squares over particles.
+
+    ``f ~ b + w . z`` fitted to the particles with finite values; the direction
+    is ``-w / |w|``. For a linear limit state it is exact (whatever the
+    particles' correlation, once they span the space); otherwise it is ``f``'s
+    average slope over the particles, a candidate the held-out likelihood of
+    :func:`particle_proposal` weighs against the per-coordinate fits.
+
+    Parameters
+    ----------
+    z : ndarray of shape (n, D)
+        Particles in standard-normal space (e.g. the last level's).
+    values : ndarray of shape (n,)
+        Their ``f``.
+
+    Returns
+    -------
+    ndarray of shape (D,) or None
+        None with fewer than ``D + 2`` finite values or ``f`` constant on them.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> z = rng.standard_normal((50, 3))
+    >>> slope_direction(z, 5.0 - 2.0 * z[:, 0]).round(6).tolist()
+    [1.0, 0.0, -0.0]
+    """
+    finite = np.isfinite(values)
+    if np.count_nonzero(finite) < z.shape[1] + 2:
+        return None
+    points, f = z[finite], values[finite]
+    f = f - f.mean()
+    if not f.any():
+        return None
+    w, *_ = np.linalg.lstsq(points - points.mean(axis=0), f, rcond=None)
+    norm = float(np.linalg.norm(w))
+    return None if norm == 0.0 or not np.isfinite(norm) else -w / norm
 
 
 def particle_proposal(
@@ -233,6 +290,7 @@ def particle_proposal(
     base: ExponentialFamily,
     settings: SplittingISSettings,
     rng: np.random.Generator,
+    slope: FloatArray | None = None,
 ) -> ParticleFit:
     """The importance-sampling proposal fitted to particles (steps 3-4 above).
 
@@ -250,6 +308,12 @@ def particle_proposal(
         ``n_components``, ``min_weight``, ``defensive`` and ``shift``.
     rng : numpy.random.Generator
         For the k-means++ seeding.
+    slope : ndarray of shape (D,), optional
+        A unit direction in which ``f`` falls (:func:`slope_direction`): one
+        more candidate, a single shift along it by the particles' mean, shrunk
+        by its noise. It wins where many coordinates each matter a little and
+        the per-coordinate mean is mostly noise (``D / n_eff`` in squared norm
+        against ``1 / n_eff`` along one direction).
 
     Returns
     -------
@@ -273,9 +337,26 @@ def particle_proposal(
         else np.asarray(base.searched_coordinates(), dtype=bool)
     )
 
+    along = None
+    if slope is not None and np.any(allowed & (slope != 0)):
+        along = np.where(allowed, slope, 0.0)
+        along = along / np.linalg.norm(along)
+
+    def fit_along(
+        points: FloatArray, point_chain: np.ndarray
+    ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
+        """One shift along ``along``: the particles' mean there, shrunk."""
+        shifted = along != 0
+        (mean, stderr), _ = moment_errors(points @ along[:, None], point_chain)
+        shift = StandardSpaceShift(base, mean[0] * along, searched=shifted)
+        noise = float(np.nan_to_num(stderr[0] ** 2))
+        return [shrink(shift, 1.0, noise)], np.ones(1), shifted
+
     def fit(
         points: FloatArray, point_chain: np.ndarray, threshold: float, k: int
     ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
+        if threshold < 0:  # the candidate along the slope
+            return fit_along(points, point_chain)
         moments = moment_errors(points, point_chain)
         shifted = allowed & _informative(moments, threshold)
         structure = StandardSpaceShift(base, searched=shifted)
@@ -304,12 +385,21 @@ def particle_proposal(
     threshold, k = THRESHOLDS[0], 1
     if first.any() and not first.all():  # max keeps the first of ties
         threshold = max(THRESHOLDS, key=lambda t: held_out(t, 1))
-        k = max(
-            range(1, settings.n_components + 1), key=lambda k: held_out(threshold, k)
-        )
+        scores = {
+            k: held_out(threshold, k) for k in range(1, settings.n_components + 1)
+        }
+        k = max(scores, key=scores.__getitem__)
+        # the shift along the slope, against the best per-coordinate mixture
+        if along is not None and held_out(SLOPE, 1) > scores[k]:
+            threshold, k = SLOPE, 1
     components, weights, shifted = fit(z, chain, threshold, k)
     proposal = MixtureProposal(components, weights, base, settings.defensive)
-    return ParticleFit(proposal, threshold, int(np.count_nonzero(shifted)))
+    return ParticleFit(
+        proposal,
+        max(threshold, 0.0),
+        int(np.count_nonzero(shifted)),
+        along_slope=threshold == SLOPE,
+    )
 
 
 def shrink(
@@ -473,6 +563,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         main = next(g for g in by_gamma if g["gamma"] == estimate["gamma"])
         fit = (
             details["n_components"],
+            "along f's slope" if details.get("along_slope") else "per coordinate",
             details["n_shifted"],
             details["informative_threshold"],
             details["fit_acceptance"],
@@ -480,7 +571,7 @@ class SplittingImportanceSampling(SubsetSimulation):
             main["ess"],
             main["pareto_k"],
         )
-        columns = ("components", "shifted coordinates", "threshold [SE]")
+        columns = ("components", "shift", "shifted coordinates", "threshold [SE]")
         columns += ("acceptance at gamma", "hits", "ESS", "Pareto k")
         own = [details["splitting"].get(str(g["gamma"]), {}) for g in by_gamma]
         return [
@@ -514,7 +605,8 @@ class SplittingImportanceSampling(SubsetSimulation):
             np.random.SeedSequence([context.seed], spawn_key=(FIT_STREAM,))
         )
         chain = np.nonzero(~np.isnan(moved.values))[0]
-        fitted = particle_proposal(moved.z, chain, problem.base, s, rng)
+        slope = slope_direction(state.z, state.sets[-1].flat)
+        fitted = particle_proposal(moved.z, chain, problem.base, s, rng, slope)
         proposal = fitted.proposal
         n_evals = state.n_evals + moved.n_calls
         stage = context.stage(
@@ -533,6 +625,7 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "fit_acceptance": moved.acceptance,
                 "n_components": proposal.n_components,
                 "informative_threshold": fitted.threshold,
+                "along_slope": fitted.along_slope,
                 "n_shifted": fitted.n_shifted,
                 "splitting": {
                     str(g): {"p": e.p, "ci": list(e.ci)}

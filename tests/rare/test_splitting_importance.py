@@ -21,6 +21,7 @@ from avrisk.rare.splitting_importance import (
     SplittingImportanceSampling,
     SplittingISSettings,
     particle_proposal,
+    slope_direction,
 )
 from avrisk.report.plots import table_cells
 from avrisk.testing import (
@@ -112,6 +113,54 @@ def test_a_shift_spread_over_many_coordinates_is_shrunk_towards_the_truth():
     assert shrunk_error < 0.9 * raw_error
     scale = component.mean @ z.mean(axis=0) / np.sum(z.mean(axis=0) ** 2)
     assert scale == pytest.approx(22.5 / (22.5 + d / 400), abs=0.03)
+
+
+def test_f_falls_along_the_least_squares_slope():
+    rng = np.random.default_rng(3)
+    z = rng.standard_normal((300, 20))
+    u = rng.standard_normal(20)
+    u /= np.linalg.norm(u)
+    assert slope_direction(z, 3.0 - z @ u) == pytest.approx(u, abs=1e-9)
+    values = 3.0 - z @ u
+    values[::2] = np.inf  # failed evaluations are left out
+    assert slope_direction(z, values) == pytest.approx(u, abs=1e-9)
+    assert slope_direction(z[:21], 3.0 - z[:21] @ u) is None  # fewer than D + 2
+    assert slope_direction(z, np.ones(300)) is None  # flat
+
+
+def test_a_shift_spread_over_many_coordinates_is_found_along_the_slope():
+    # 0.15 sd on each of 1000 coordinates, 400 particles (as above), and f's
+    # slope known: the held-out half prefers one shift along it, whose noise is
+    # 1 / 400 against the per-coordinate fit's 1000 / 400
+    d, rng = 1000, np.random.default_rng(2)
+    base = FixedCovNormal(np.zeros(d), cov=np.eye(d))
+    z = rng.standard_normal((400, d)) + 0.15
+    chain = np.arange(400) // 4
+    settings = SplittingISSettings(n_components=1)
+    slope = np.ones(d) / np.sqrt(d)
+    fit = particle_proposal(z, chain, base, settings, rng, slope)
+    assert fit.along_slope and fit.n_shifted == d
+    (component,) = fit.proposal.components
+    coordinates = particle_proposal(z, chain, base, settings, rng)
+    assert not coordinates.along_slope
+    error = np.sum((component.mean - 0.15) ** 2)
+    assert error < 0.1 * np.sum((coordinates.proposal.components[0].mean - 0.15) ** 2)
+    assert error < 0.05
+
+
+def test_a_slope_that_misses_the_failure_regions_is_not_chosen():
+    # two regions at +-4 along coordinate 0; a slope along coordinate 1 says
+    # nothing of them (a nonlinear f's average slope can point anywhere)
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    rng = np.random.default_rng(0)
+    z = np.vstack(
+        [rng.normal((4, 0), 0.3, (500, 2)), rng.normal((-4, 0), 0.3, (500, 2))]
+    )
+    chain = rng.permutation(1000) // 10
+    fit = particle_proposal(
+        z, chain, base, SplittingISSettings(), rng, np.array([0.0, 1.0])
+    )
+    assert not fit.along_slope and fit.proposal.n_components == 2
 
 
 def test_shift_searched_leaves_unsearched_coordinates_at_zero():
@@ -214,6 +263,9 @@ def test_diagnostics_show_the_levels_the_proposal_and_the_cross_check():
     assert shown["components"] == details["n_components"] >= 1
     assert shown["shifted coordinates"] == details["n_shifted"] <= 2
     assert shown["threshold [SE]"] == details["informative_threshold"]
+    assert shown["shift"] == (
+        "along f's slope" if details["along_slope"] else "per coordinate"
+    )
     assert shown["acceptance at gamma"] == details["fit_acceptance"]
     assert shown["hits"] == est.n_hits > 0
     assert shown["ESS"] == pytest.approx(est.ess)
