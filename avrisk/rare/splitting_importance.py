@@ -269,8 +269,8 @@ def slope_direction(z: FloatArray, values: FloatArray) -> FloatArray | None:
     --------
     >>> rng = np.random.default_rng(0)
     >>> z = rng.standard_normal((50, 3))
-    >>> slope_direction(z, 5.0 - 2.0 * z[:, 0]).round(6).tolist()
-    [1.0, 0.0, -0.0]
+    >>> (slope_direction(z, 5.0 - 2.0 * z[:, 0]).round(6) + 0.0).tolist()
+    [1.0, 0.0, 0.0]
     """
     finite = np.isfinite(values)
     if np.count_nonzero(finite) < z.shape[1] + 2:
