@@ -52,13 +52,10 @@ from avrisk.cli.workflow import (
 from avrisk.pipeline import RunSettings
 from avrisk.pipeline.store import SAMPLES_FILE
 from avrisk.rare import estimator_names
-from avrisk.rare.estimator import estimator_class
+from avrisk.rare.estimator import DEFAULT_METHOD, estimator_class
 from avrisk.scenario import load_spec, spec_from_dict
 
 DEFAULT_SCENARIO = "highway_default"
-#: The best estimator of the coverage benchmark on both simulator scenarios
-#: (BENCHMARKS.md, "Coverage"); ``--method ce`` is the paper's.
-DEFAULT_METHOD = "splitting_is"
 #: Where the command line's defaults differ from an estimator's own.
 CLI_DEFAULTS = {"n_iter": 20}
 #: ``compare``'s: a budget that finishes in minutes on a laptop. splitting_is

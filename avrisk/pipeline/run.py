@@ -35,6 +35,7 @@ from avrisk.rare import (
     get_estimator,
     run_estimator,
 )
+from avrisk.rare.estimator import DEFAULT_METHOD
 from avrisk.rare.evaluation import EvalResult, EvalTask, Evaluator, LocalEvaluator
 from avrisk.rare.problem import threshold_list
 from avrisk.rare.stopping import StoppingRule
@@ -45,9 +46,10 @@ class RunSettings:
 
     Parameters
     ----------
-    method : str, default="ce"
-        A registered estimator (:func:`avrisk.rare.estimator_names`): ``"ce"``
-        (the paper's cross-entropy), ``"naive"``, ``"defensive"`` ...
+    method : str, default=DEFAULT_METHOD
+        A registered estimator (:func:`avrisk.rare.estimator_names`):
+        ``"splitting_is"`` (the default, :data:`avrisk.rare.estimator.DEFAULT_METHOD`),
+        ``"ce"`` (the paper's cross-entropy), ``"naive"``, ``"defensive"`` ...
     gamma : float, default=0.14
         Threshold of the event ``f <= gamma`` [unit of f, s for TTC].
     gamma_test : sequence of float, default=()
@@ -78,7 +80,7 @@ class RunSettings:
 
     def __init__(
         self,
-        method: str = "ce",
+        method: str = DEFAULT_METHOD,
         *,
         gamma: float = 0.14,
         gamma_test: Any = (),

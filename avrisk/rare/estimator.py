@@ -55,6 +55,7 @@ from avrisk.rare.stopping import StoppingRule
 from avrisk.registry import Registry
 
 __all__ = [
+    "DEFAULT_METHOD",
     "DiagnosticTable",
     "EstimationContext",
     "Estimator",
@@ -69,6 +70,11 @@ __all__ = [
 
 State = TypeVar("State")
 Info = TypeVar("Info")
+
+#: The estimator a run uses unless told otherwise: the best of the coverage
+#: benchmark on both simulator scenarios and on the analytic problems'
+#: high-dimensional cases (BENCHMARKS.md, "Coverage"); ``"ce"`` is the paper's.
+DEFAULT_METHOD = "splitting_is"
 
 #: Share of a stage's samples that may fail before a run stops (see
 #: :mod:`avrisk.rare.evaluation`): failed samples bracket the estimate, and

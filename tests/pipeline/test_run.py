@@ -137,7 +137,10 @@ def test_an_interrupted_run_resumes_to_the_uninterrupted_result(tmp_path):
 
 def test_bad_settings_are_rejected_by_name():
     with pytest.raises(ValueError, match="estimator 'ce': rho: .* less than 1"):
-        RunSettings(rho=2.0)
+        RunSettings("ce", rho=2.0)
+    # the default is splitting_is, which has no rho
+    with pytest.raises(ValueError, match="'splitting_is': rho: Extra inputs"):
+        RunSettings(rho=0.1)
     with pytest.raises(ValueError, match="method must be one of .*'naive'"):
         RunSettings(method="no_such_method")
     with pytest.raises(ValueError, match="n_final: .* greater than or equal to 1"):
