@@ -114,7 +114,7 @@ def animate_camera_rollout(
     ----------
     trace : RolloutTrace
     frames : CameraFrames
-        The ego camera's images of ``trace`` (:func:`camera_frames`).
+        The ego camera's images of ``trace`` (:func:`avrisk.assembly.camera_frames`).
     road : RoadLike
         Lane count, lane width [m] and length [m].
     dt : float

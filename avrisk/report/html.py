@@ -237,6 +237,7 @@ def write_report(
         mark=UNRELIABLE_MARK,
         failures=failures,
         failures_gamma=gamma,
+        camera=spec is not None and spec.camera is not None,
         settings={**first.config().get("settings", {})},
         footer=f"avrisk {first.summary()['versions']['avrisk']} - "
         f"generated {dt.datetime.now().isoformat(timespec='seconds')}",

@@ -37,4 +37,5 @@ def test_avrisk_run_estimates_with_the_vision_ego(tmp_path):
     top_down = animate_rollouts([trace], spec.road, 0.1, tmp_path / "top.gif")
     with Image.open(gif) as video, Image.open(top_down) as plain:
         assert video.width == plain.width and video.height > plain.height + 80
-    assert gif.name in (out / "report.html").read_text()
+    report = (out / "report.html").read_text()
+    assert gif.name in report and "what the ego's camera saw" in report
