@@ -40,8 +40,10 @@ and estimates ``p`` by importance sampling from it:
    half of the chains give the other half's particles the highest mean
    log-likelihood, summed over both ways round (ties to the sparser fit); the
    proposal is then fitted to all particles with those choices, unless one
-   more candidate scores higher still. It has one component and shifts along a
-   single direction: ``f``'s
+   more candidate scores higher by more than two standard errors of the
+   paired difference (from blocks of chains; a close call goes to the
+   per-coordinate fit). It has one component and shifts along a single
+   direction: ``f``'s
    average slope, fitted by least squares to the last level's particles and
    their values (:func:`slope_direction`; exact for a linear limit state), by
    the particles' mean along it. Its noise is ``1 / n_eff`` against ``D /
@@ -373,24 +375,39 @@ def particle_proposal(
 
     first = chain < (chain.max() + 1) / 2
 
-    def held_out(threshold: float, k: int) -> float:
-        """Mean log-likelihood of each half under the fit to the other, summed."""
-        score = 0.0
+    def held_out_points(threshold: float, k: int) -> FloatArray:
+        """Each particle's log-likelihood under the fit to the other half, (n,)."""
+        scores = np.empty(len(z))
         for train in (first, ~first):
             components, weights, _ = fit(z[train], chain[train], threshold, k)
             log_joint = np.log(weights) + component_log_kernels(components, z[~train])
-            score += float(logsumexp(log_joint, axis=1).mean())
-        return score
+            scores[~train] = logsumexp(log_joint, axis=1)
+        return scores
+
+    def summed(scores: FloatArray) -> float:
+        """Mean held-out log-likelihood of each half, summed over the halves."""
+        return float(scores[~first].mean() + scores[first].mean())
+
+    def clearly_better(a: FloatArray, b: FloatArray) -> bool:
+        """Whether held-out scores ``a`` beat ``b`` by two standard errors.
+
+        The paired differences' mean over particles, its standard error from
+        blocks of chains (:func:`block_means`, the chains' correlation in it).
+        """
+        (mean, stderr), _ = moment_errors((a - b)[:, None], chain)
+        return bool(mean[0] > 2.0 * np.nan_to_num(stderr[0], nan=np.inf))
 
     threshold, k = THRESHOLDS[0], 1
     if first.any() and not first.all():  # max keeps the first of ties
-        threshold = max(THRESHOLDS, key=lambda t: held_out(t, 1))
-        scores = {
-            k: held_out(threshold, k) for k in range(1, settings.n_components + 1)
+        threshold = max(THRESHOLDS, key=lambda t: summed(held_out_points(t, 1)))
+        points = {
+            k: held_out_points(threshold, k)
+            for k in range(1, settings.n_components + 1)
         }
-        k = max(scores, key=scores.__getitem__)
-        # the shift along the slope, against the best per-coordinate mixture
-        if along is not None and held_out(SLOPE, 1) > scores[k]:
+        k = max(points, key=lambda k: summed(points[k]))
+        # the shift along the slope, if clearly better than the best
+        # per-coordinate mixture (a close call goes to the mixture)
+        if along is not None and clearly_better(held_out_points(SLOPE, 1), points[k]):
             threshold, k = SLOPE, 1
     components, weights, shifted = fit(z, chain, threshold, k)
     proposal = MixtureProposal(components, weights, base, settings.defensive)
