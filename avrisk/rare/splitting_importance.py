@@ -73,9 +73,11 @@ calls; BENCHMARKS.md). Splitting's particles need no weights, so ``n`` is the
 particles' effective number, and the shift can include coordinates a CE box
 leaves alone (``shift="all"``: the learned drivers' 404-d ``xi``, of which the
 particles show few to matter). Where many coordinates each matter a little,
-no coordinate selection helps; the shrunk shift over all of them does, as long
-as the noise ``D / n_eff`` it leaves in the weights' second moment, a factor of
-about ``exp(c^2 D / n_eff)``, stays moderate.
+no coordinate selection helps; the shrunk shift over all of them leaves noise
+``D / n_eff`` in the weights' second moment, a factor of about
+``exp(c^2 D / n_eff)`` (about ``e^5`` for that linear limit state with 7,142
+particles per level: relative RMSE 0.17). Where ``f`` falls along one
+direction, the shift along its fitted slope leaves ``1 / n_eff``.
 
 The estimate is that of the importance-sampling stage alone: the proposal is
 fixed before its samples are drawn, so it is unbiased whatever the particles,
@@ -565,9 +567,10 @@ class SplittingImportanceSampling(SubsetSimulation):
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
         """The levels, the proposal fitted to the particles, and the cross-check.
 
-        The levels as subset simulation's; the proposal's components, the
-        coordinates it shifts, the threshold that chose them [standard
-        errors], the acceptance of the moves at ``gamma`` that made its
+        The levels as subset simulation's; the proposal's components, its
+        shift (``"coords"``: fitted per coordinate; ``"slope"``: along ``f``'s
+        slope), the coordinates it shifts, the threshold that chose them
+        [standard errors], the acceptance of the moves at ``gamma`` that made its
         particles, and its samples' hits, ESS and Pareto k at ``gamma``; then,
         per threshold, the importance-sampling estimate beside subset
         simulation's own of the same run (``details["splitting"]``).
@@ -580,7 +583,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         main = next(g for g in by_gamma if g["gamma"] == estimate["gamma"])
         fit = (
             details["n_components"],
-            "along f's slope" if details.get("along_slope") else "per coordinate",
+            "slope" if details.get("along_slope") else "coords",
             details["n_shifted"],
             details["informative_threshold"],
             details["fit_acceptance"],

@@ -264,7 +264,7 @@ def test_diagnostics_show_the_levels_the_proposal_and_the_cross_check():
     assert shown["shifted coordinates"] == details["n_shifted"] <= 2
     assert shown["threshold [SE]"] == details["informative_threshold"]
     assert shown["shift"] == (
-        "along f's slope" if details["along_slope"] else "per coordinate"
+        "slope" if details["along_slope"] else "coords"
     )
     assert shown["acceptance at gamma"] == details["fit_acceptance"]
     assert shown["hits"] == est.n_hits > 0
