@@ -43,13 +43,12 @@ and estimates ``p`` by importance sampling from it:
    more candidate scores higher by more than two standard errors of the
    paired difference (from blocks of chains; a close call goes to the
    per-coordinate fit). It has one component and shifts along a single
-   direction: ``f``'s
-   average slope, fitted by least squares to the last level's particles and
-   their values (:func:`slope_direction`; exact for a linear limit state), by
-   the particles' mean along it. Its noise is ``1 / n_eff`` against ``D /
-   n_eff`` for a shift of every coordinate, which is what a failure set that
-   depends a little on each of many coordinates needs. Chains are
-   numbered in the order of their ancestors at every level, so the two halves
+   direction, ``f``'s average slope, fitted by least squares to the last
+   level's particles and their values (:func:`slope_direction`; exact for a
+   linear limit state), by the particles' mean along it. Its noise is ``1 /
+   n_eff`` against ``D / n_eff`` for a shift of every coordinate, which is what
+   a failure set that depends a little on each of many coordinates needs.
+   Chains are numbered in the order of their ancestors at every level, so the two halves
    descend from different draws of ``P0`` and are close to independent. The
    held-out likelihood of a mean shift falls with its squared distance from
    the other half's mean, so it scores noise admitted and signal dropped
