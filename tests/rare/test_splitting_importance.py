@@ -263,9 +263,7 @@ def test_diagnostics_show_the_levels_the_proposal_and_the_cross_check():
     assert shown["components"] == details["n_components"] >= 1
     assert shown["shifted coordinates"] == details["n_shifted"] <= 2
     assert shown["threshold [SE]"] == details["informative_threshold"]
-    assert shown["shift"] == (
-        "slope" if details["along_slope"] else "coords"
-    )
+    assert shown["shift"] == ("slope" if details["along_slope"] else "coords")
     assert shown["acceptance at gamma"] == details["fit_acceptance"]
     assert shown["hits"] == est.n_hits > 0
     assert shown["ESS"] == pytest.approx(est.ess)
