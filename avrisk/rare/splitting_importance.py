@@ -138,7 +138,6 @@ from avrisk.rare.stages import BatchCache, BatchRecorder
 from avrisk.rare.stopping import StoppingRule
 
 __all__ = [
-    "SLOPE",
     "THRESHOLDS",
     "ParticleFit",
     "block_means",
@@ -159,10 +158,13 @@ __all__ = [
 THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
 #: Blocks of chains whose means give those standard errors.
 N_BLOCKS = 20
-#: The candidate of :func:`particle_proposal` that shifts along ``f``'s slope,
-#: where a threshold stands in its fit (one component; it must beat the best
-#: per-coordinate mixture).
-SLOPE = -1.0
+
+#: A proposal's fit to particles and their chains: its components, their
+#: weights and the coordinates it shifts (inside :func:`particle_proposal`).
+Fitter = Callable[
+    [FloatArray, np.ndarray],
+    tuple[list[ExponentialFamily], FloatArray, np.ndarray],
+]
 
 #: Remedies of an unreliable importance-sampling stage, in its settings' names.
 ADVICE = Advice(
@@ -350,7 +352,7 @@ def particle_proposal(
     ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
         """One shift along ``along``: the particles' mean there, shrunk."""
         shifted = along != 0
-        (mean, stderr), _ = moment_errors(points @ along[:, None], point_chain)
+        mean, stderr = block_means(points @ along[:, None], point_chain)
         shift = StandardSpaceShift(base, mean[0] * along, searched=shifted)
         noise = float(np.nan_to_num(stderr[0] ** 2))
         return [shrink(shift, 1.0, noise)], np.ones(1), shifted
@@ -358,8 +360,7 @@ def particle_proposal(
     def fit(
         points: FloatArray, point_chain: np.ndarray, threshold: float, k: int
     ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
-        if threshold < 0:  # the candidate along the slope
-            return fit_along(points, point_chain)
+        """Shifts of the informative coordinates, ``k`` components, shrunk."""
         moments = moment_errors(points, point_chain)
         shifted = allowed & _informative(moments, threshold)
         structure = StandardSpaceShift(base, searched=shifted)
@@ -376,11 +377,11 @@ def particle_proposal(
 
     first = chain < (chain.max() + 1) / 2
 
-    def held_out_points(threshold: float, k: int) -> FloatArray:
+    def held_out_points(fitter: Fitter) -> FloatArray:
         """Each particle's log-likelihood under the fit to the other half, (n,)."""
         scores = np.empty(len(z))
         for train in (first, ~first):
-            components, weights, _ = fit(z[train], chain[train], threshold, k)
+            components, weights, _ = fitter(z[train], chain[train])
             log_joint = np.log(weights) + component_log_kernels(components, z[~train])
             scores[~train] = logsumexp(log_joint, axis=1)
         return scores
@@ -395,28 +396,34 @@ def particle_proposal(
         The paired differences' mean over particles, its standard error from
         blocks of chains (:func:`block_means`, the chains' correlation in it).
         """
-        (mean, stderr), _ = moment_errors((a - b)[:, None], chain)
+        mean, stderr = block_means((a - b)[:, None], chain)
         return bool(mean[0] > 2.0 * np.nan_to_num(stderr[0], nan=np.inf))
 
-    threshold, k = THRESHOLDS[0], 1
+    def per_coordinate(threshold: float, k: int) -> Fitter:
+        """:func:`fit` with its threshold and number of components set."""
+        return lambda points, point_chain: fit(points, point_chain, threshold, k)
+
+    threshold = THRESHOLDS[0]
+    chosen = per_coordinate(threshold, 1)
+    along_slope = False
     if first.any() and not first.all():  # max keeps the first of ties
-        threshold = max(THRESHOLDS, key=lambda t: summed(held_out_points(t, 1)))
+        threshold = max(
+            THRESHOLDS, key=lambda t: summed(held_out_points(per_coordinate(t, 1)))
+        )
         points = {
-            k: held_out_points(threshold, k)
+            k: held_out_points(per_coordinate(threshold, k))
             for k in range(1, settings.n_components + 1)
         }
         k = max(points, key=lambda k: summed(points[k]))
+        chosen = per_coordinate(threshold, k)
         # the shift along the slope, if clearly better than the best
         # per-coordinate mixture (a close call goes to the mixture)
-        if along is not None and clearly_better(held_out_points(SLOPE, 1), points[k]):
-            threshold, k = SLOPE, 1
-    components, weights, shifted = fit(z, chain, threshold, k)
+        if along is not None and clearly_better(held_out_points(fit_along), points[k]):
+            chosen, threshold, along_slope = fit_along, 0.0, True
+    components, weights, shifted = chosen(z, chain)
     proposal = MixtureProposal(components, weights, base, settings.defensive)
     return ParticleFit(
-        proposal,
-        max(threshold, 0.0),
-        int(np.count_nonzero(shifted)),
-        along_slope=threshold == SLOPE,
+        proposal, threshold, int(np.count_nonzero(shifted)), along_slope=along_slope
     )
 
 
