@@ -10,7 +10,7 @@ last frame, marked in red.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -151,18 +151,27 @@ class TopDownPanel:
         self.title.set_color(CRASH_COLOUR if ended else "black")
 
 
-def _figure(
-    traces: Sequence[RolloutTrace], road: RoadLike, view_length: float
-) -> tuple[Figure, list[TopDownPanel]]:
+def pyplot() -> Any:
+    """``matplotlib.pyplot``, on the file-only Agg backend unless one is chosen."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def top_down_height(road: RoadLike, view_length: float, width_in: float) -> float:
+    """Height [in] of a top-down panel ``width_in`` wide showing ``view_length`` m."""
+    return width_in * (road.n_lanes * road.lane_width + 2.0) / view_length + 0.55
+
+
+def _figure(
+    traces: Sequence[RolloutTrace], road: RoadLike, view_length: float
+) -> tuple[Figure, list[TopDownPanel]]:
     width_in = 10.0
-    road_w = road.n_lanes * road.lane_width + 2.0
-    panel_h = width_in * road_w / view_length + 0.55
-    fig, axes = plt.subplots(
+    panel_h = top_down_height(road, view_length, width_in)
+    fig, axes = pyplot().subplots(
         len(traces), 1, figsize=(width_in, panel_h * len(traces)), squeeze=False
     )
     panels = [
@@ -175,7 +184,7 @@ def _figure(
     return fig, panels
 
 
-def figure_image(fig: Figure) -> Any:
+def _figure_image(fig: Figure) -> Any:
     """The figure drawn, as an RGB PIL image."""
     from PIL import Image
 
@@ -218,22 +227,16 @@ def animate_rollouts(
     pathlib.Path
         ``out``.
     """
-    import matplotlib.pyplot as plt
-
     if not traces:
         raise ValueError("animate_rollouts needs at least one trace")
-    out = Path(out)
     steps = animation_steps(max(tr.n_frames for tr in traces), dt, fps, stride)
     fig, panels = _figure(traces, road, view_length)
-    frames = []
-    try:
-        for k in steps:
-            for panel in panels:
-                panel.draw(k, dt)
-            frames.append(figure_image(fig))
-    finally:
-        plt.close(fig)
-    return write_gif(frames, fps, out)
+
+    def draw(k: int) -> None:
+        for panel in panels:
+            panel.draw(k, dt)
+
+    return play(fig, steps, draw, fps, out)
 
 
 def animation_steps(
@@ -251,11 +254,41 @@ def animation_steps(
     return steps
 
 
-def write_gif(frames: Sequence[Any], fps: int, out: Path) -> Path:
-    """Write PIL images as a looping GIF at ``fps``, the last held a second.
+def play(
+    fig: Figure,
+    steps: Sequence[int],
+    draw: Callable[[int], None],
+    fps: int,
+    out: str | Path,
+) -> Path:
+    """Write ``fig`` as a looping GIF, one frame per step, and close it.
 
-    Written to a temporary name, then renamed: a reader never sees half a file.
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    steps : sequence of int
+        Recorded steps to show (:func:`animation_steps`).
+    draw : callable
+        ``draw(k)`` updates the figure's artists to step ``k``.
+    fps : int
+        Frames per second; the last frame is held a second.
+    out : str or pathlib.Path
+        GIF file, written to a temporary name, then renamed: a reader never
+        sees half a file.
+
+    Returns
+    -------
+    pathlib.Path
+        ``out``.
     """
+    frames = []
+    try:
+        for k in steps:
+            draw(k)
+            frames.append(_figure_image(fig))
+    finally:
+        pyplot().close(fig)
+    out = Path(out)
     durations = [int(1000 / fps)] * (len(frames) - 1) + [1000]
     tmp = out.with_name(f".{out.name}.tmp")
     try:
@@ -303,8 +336,6 @@ def save_frame_png(
     -------
     pathlib.Path
     """
-    import matplotlib.pyplot as plt
-
     out = Path(out)
     if step is None:
         first = traces[0]
@@ -318,7 +349,7 @@ def save_frame_png(
             panel.draw(step, dt)
         fig.savefig(out, dpi=100)
     finally:
-        plt.close(fig)
+        pyplot().close(fig)
     return out
 
 

@@ -21,8 +21,9 @@ from avrisk.report.animate import (
     RoadLike,
     TopDownPanel,
     animation_steps,
-    figure_image,
-    write_gif,
+    play,
+    pyplot,
+    top_down_height,
 )
 
 if TYPE_CHECKING:
@@ -141,21 +142,15 @@ def animate_camera_rollout(
     ValueError
         If ``frames`` does not hold one image per recorded step of ``trace``.
     """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
     if frames.depth.shape[0] != trace.n_frames:
         raise ValueError(
             f"{frames.depth.shape[0]} camera images for a trace of "
             f"{trace.n_frames} recorded steps"
         )
-    out = Path(out)
     width_in = 10.0
-    road_h = width_in * (road.n_lanes * road.lane_width + 2.0) / view_length + 0.55
+    road_h = top_down_height(road, view_length, width_in)
     image_h = (width_in / 3.6) * frames.depth.shape[1] / frames.depth.shape[2] + 0.35
-    fig = plt.figure(figsize=(width_in, image_h + road_h))
+    fig = pyplot().figure(figsize=(width_in, image_h + road_h))
     grid = fig.add_gridspec(
         2, 3, height_ratios=[image_h, road_h], width_ratios=[1.0, 1.0, 1.0]
     )
@@ -164,12 +159,9 @@ def animate_camera_rollout(
     panel = TopDownPanel(top_down, trace, road, view_length)
     top_down.set_xlabel("x along the road [m]   (ego orange)", fontsize=8)
     fig.tight_layout(pad=0.5, h_pad=0.6, w_pad=0.4, rect=(0.0, 0.0, 0.92, 1.0))
-    images = []
-    try:
-        for k in animation_steps(trace.n_frames, dt, fps, stride):
-            cameras.draw(k)
-            panel.draw(k, dt)
-            images.append(figure_image(fig))
-    finally:
-        plt.close(fig)
-    return write_gif(images, fps, out)
+
+    def draw(k: int) -> None:
+        cameras.draw(k)
+        panel.draw(k, dt)
+
+    return play(fig, animation_steps(trace.n_frames, dt, fps, stride), draw, fps, out)
