@@ -40,7 +40,7 @@ from avrisk.sim.geometry import capped_reciprocal, hit_or_inf, min_argmin, step
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
 from avrisk.tensors.mathops import sincos
-from avrisk.tensors.slices import eager_slice
+from avrisk.tensors.slices import in_slices
 
 __all__ = ["DEFAULT_VEHICLE_HEIGHT", "PALETTE", "RayCastCamera", "RoadPaint"]
 
@@ -197,13 +197,9 @@ class RayCastCamera:
             ``depth`` (B, H, W) [m], ``segmentation`` (B, H, W) int8, ``rgb``
             (B, 3, H, W) in [0, 1].
         """
-        b, a = state.batch_size, state.n_vehicles
-        per_rollout = (a - 1) * self._ground_depth.shape[0]
-        chunk = eager_slice(b, per_rollout, EAGER_CHUNK_ELEMENTS, state.x.device)
-        if chunk is None:
-            return self._render(state)
-        return CameraFrame.cat(
-            [self._render(state[i : i + chunk]) for i in range(0, b, chunk)]
+        per_rollout = (state.n_vehicles - 1) * self._ground_depth.shape[0]
+        return in_slices(
+            self._render, (state,), per_rollout, EAGER_CHUNK_ELEMENTS, state.x.device
         )
 
     def _heights_of(self, state: VehicleState) -> Tensor:

@@ -95,7 +95,7 @@ from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
 from avrisk.tensors.noise import normal
 from avrisk.tensors.rows import replace_rows
-from avrisk.tensors.slices import eager_slice
+from avrisk.tensors.slices import in_slices
 
 __all__ = [
     "COMPILE_ENV",
@@ -267,18 +267,9 @@ def _in_chunks(fn: Any, tests_per_rollout: Any) -> Any:
     """``fn(state, cos, sin)`` evaluated on batch slices and concatenated."""
 
     def chunked(state: VehicleState, cos: Tensor, sin: Tensor) -> Any:
-        n = state.batch_size
         per_rollout = tests_per_rollout(state.n_vehicles)
-        step = eager_slice(n, per_rollout, _EAGER_CHUNK_TESTS, cos.device)
-        if step is None:
-            return fn(state, cos, sin)
-        parts = [
-            fn(state[i : i + step], cos[i : i + step], sin[i : i + step])
-            for i in range(0, n, step)
-        ]
-        if isinstance(parts[0], Tensor):
-            return torch.cat(parts)
-        return type(parts[0]).cat(parts)
+        args = (state, cos, sin)
+        return in_slices(fn, args, per_rollout, _EAGER_CHUNK_TESTS, cos.device)
 
     return chunked
 

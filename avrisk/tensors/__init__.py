@@ -9,8 +9,8 @@ A leaf layer: it imports nothing from avrisk.
   noise alone or in any batch;
 * :mod:`~avrisk.tensors.rows` -- some rows of a batch replaced in nested
   containers of tensors (rollouts restarted while the others go on);
-* :mod:`~avrisk.tensors.slices` -- how large a batch slice eager work on a
-  CPU takes (the whole batch on a GPU or compiled);
+* :mod:`~avrisk.tensors.slices` -- eager work on a CPU in cache-sized slices
+  of the batch (the whole batch on a GPU or compiled);
 * :mod:`~avrisk.tensors.mathops` -- elementary functions from IEEE basic
   operations only, bit-identical on any batch, device or compiler.
 """

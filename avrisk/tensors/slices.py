@@ -11,9 +11,13 @@ the work is element-wise along the batch.
 
 from __future__ import annotations
 
-import torch
+from collections.abc import Callable, Sequence
+from typing import Any
 
-__all__ = ["eager_slice"]
+import torch
+from torch import Tensor
+
+__all__ = ["eager_slice", "in_slices"]
 
 
 def eager_slice(
@@ -50,3 +54,43 @@ def eager_slice(
         return None
     step = max(1, budget // max(1, per_rollout))
     return step if batch > step else None
+
+
+def in_slices(
+    fn: Callable[..., Any],
+    args: Sequence[Any],
+    per_rollout: int,
+    budget: int,
+    device: torch.device,
+) -> Any:
+    """``fn(*args)``, on slices of the batch where :func:`eager_slice` says so.
+
+    Parameters
+    ----------
+    fn : callable
+        Element-wise along the batch; returns a tensor or a tensor dataclass
+        (anything with a ``cat`` class method) with the batch first.
+    args : sequence
+        Tensors or tensor dataclasses with the batch first (``shape[0]``).
+    per_rollout, budget, device
+        As for :func:`eager_slice`.
+
+    Returns
+    -------
+    Any
+        ``fn(*args)``, the slices' results concatenated along the batch.
+
+    Examples
+    --------
+    >>> x = torch.arange(6.0)
+    >>> in_slices(torch.square, (x,), 1, 2, torch.device("cpu")).tolist()
+    [0.0, 1.0, 4.0, 9.0, 16.0, 25.0]
+    """
+    n = args[0].shape[0]
+    step = eager_slice(n, per_rollout, budget, device)
+    if step is None:
+        return fn(*args)
+    parts = [fn(*(a[i : i + step] for a in args)) for i in range(0, n, step)]
+    if isinstance(parts[0], Tensor):
+        return torch.cat(parts)
+    return type(parts[0]).cat(parts)
