@@ -21,7 +21,8 @@ IDM+MOBIL drivers (:class:`~avrisk.agents.idm.IDMDriver`, one batched pass for
 all their slots; an ``idm_mobil`` ego is one more of them, slot 0), the
 learned drivers (:class:`~avrisk.agents.drivers.LearnedDriver`, one batched
 pass, parameter block the rollout's ``xi`` columns of ``X``, shared by all
-learned drivers of the rollout), and any other ego policy (registered by name,
+learned drivers of the rollout, and their ``noise`` columns when the action
+noise is in ``X``), and any other ego policy (registered by name,
 e.g. ``lidar_imitation``), which controls slot 0.
 """
 
@@ -292,7 +293,12 @@ def learned_drivers(
     LearnedDriver or LaneChangingDriver
     """
     settings = spec.learned_drivers
-    driver = LearnedDriver(net, controlled=controlled, stochastic=settings.stochastic)
+    driver = LearnedDriver(
+        net,
+        controlled=controlled,
+        stochastic=settings.stochastic,
+        noise_steps=spec.simulation.n_steps if settings.noise_in_x else None,
+    )
     if settings.lane_changes is None:
         return driver
     params = LaneChangeParams(**settings.lane_changes.settings())
@@ -542,7 +548,8 @@ class ScenarioSimulator:
         Parameters
         ----------
         params : ScenarioParams
-            The batch; the learned drivers of rollout ``b`` use ``params.xi[b]``.
+            The batch; the learned drivers of rollout ``b`` use ``params.xi[b]``
+            (and ``params.noise[b]``).
 
         Returns
         -------
@@ -552,7 +559,8 @@ class ScenarioSimulator:
             control every slot.
         blocks : list of (Tensor of shape (B, P) or None)
             Each actor's parameter block: ``xi`` (B, XI_DIM) for the learned
-            drivers, None for the others.
+            drivers, followed by their innovations when they are in ``X``
+            (``P = XI_DIM + 2 T C``), None for the others.
         """
         actors: list[Actor] = []
         blocks: list[torch.Tensor | None] = []
@@ -571,7 +579,8 @@ class ScenarioSimulator:
             blocks.append(None)
         if self._learned_driver is not None:
             actors.append(self._learned_driver)
-            blocks.append(torch.from_numpy(np.ascontiguousarray(params.xi)))
+            block = np.concatenate([params.xi, params.noise], axis=1)
+            blocks.append(torch.from_numpy(block))
         actors += self._other_drivers
         blocks += [None] * len(self._other_drivers)
         if self.ego_policy is not None:

@@ -4,7 +4,8 @@
   into a :class:`ScenarioSpec` (:mod:`avrisk.scenario.spec`; its parts in
   :mod:`~avrisk.scenario.scene` and :mod:`~avrisk.scenario.components`);
 * :func:`build_base_distribution` -- ``P0`` as an :class:`avrisk.rare.Product`
-  (:func:`xi_base_family`: its learned-driver block, from a given prior);
+  (:func:`xi_base_family`: its learned-driver block, from a given prior;
+  :func:`noise_base_family`: their action innovations, when in ``X``);
 * :class:`ParamLayout`, :class:`ScenarioParams` -- flat ``X`` (B, D) <-> named
   per-vehicle parameters.
 
@@ -17,6 +18,7 @@ from avrisk.scenario.base_distribution import (
     NormalPrior,
     build_base_distribution,
     marginal_family,
+    noise_base_family,
     xi_base_family,
 )
 from avrisk.scenario.errors import ScenarioSpecError
@@ -47,6 +49,7 @@ __all__ = [
     "bundled_scenarios",
     "load_spec",
     "marginal_family",
+    "noise_base_family",
     "spec_from_dict",
     "xi_base_family",
 ]

@@ -17,7 +17,10 @@ with learned drivers appends one more block, the driver network's last layer
 with the ensemble mean ``mu0`` and the sparse graphical-lasso precision
 ``Sigma0^-1`` of the shipped driver model (:func:`xi_base_family`), which the
 caller passes in (:func:`avrisk.assembly.base_distribution` passes the shipped
-one).
+one); and, when the drivers' action noise is part of ``X``
+(``actions: sampled_in_x``), its innovations (:func:`noise_base_family`)::
+
+    noise ~ N(0, I)                      in R^(2 T C), one per driver, step, action
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import sparse
 
 from avrisk.rare import ExponentialFamily, FixedCovNormal, Product, ScaledBeta
 from avrisk.scenario.params import ParamLayout
@@ -116,6 +120,36 @@ def xi_base_family(
     return family.with_max_shift(max_shift)
 
 
+def noise_base_family(dim: int) -> FixedCovNormal:
+    """The learned drivers' action innovations: ``N(0, I)`` in ``dim`` dimensions.
+
+    Its cross-entropy search box is the single point 0 (CE leaves the block
+    at ``P0``: a mean update in ``2 T C`` dimensions is noise); samples are
+    rounded to float32, the precision the drivers read them in.
+
+    Parameters
+    ----------
+    dim : int
+        ``2 T C`` (:attr:`~avrisk.scenario.spec.ScenarioSpec.noise_dim`).
+
+    Returns
+    -------
+    avrisk.rare.FixedCovNormal
+
+    Examples
+    --------
+    >>> fam = noise_base_family(4)
+    >>> fam.dim, bool(fam.searched_coordinates().any())
+    (4, False)
+    """
+    return FixedCovNormal(
+        np.zeros(dim),
+        precision=sparse.eye_array(dim, format="csr"),
+        max_shift=0.0,
+        float32_samples=True,
+    )
+
+
 def build_base_distribution(
     spec: ScenarioSpec, xi_prior: NormalPrior | None = None
 ) -> Product:
@@ -134,7 +168,8 @@ def build_base_distribution(
         ``4 A`` one-dimensional :class:`~avrisk.rare.ScaledBeta` blocks in the
         column order of ``ParamLayout.from_spec(spec)``, then, if the scenario
         has learned drivers, the 404-dimensional :func:`xi_base_family` with
-        the search box of ``spec.learned_drivers``;
+        the search box of ``spec.learned_drivers``, then, if their action
+        noise is in ``X``, :func:`noise_base_family`;
         ``dim == layout.dim``. ``sample(n, rng)`` gives ``X`` of shape (n, D);
         ``log_prob(X)`` gives ``log p0`` of shape (n,) [log of 1 / (m m deg
         m/s) per vehicle, plus the log-density of ``xi``].
@@ -172,6 +207,8 @@ def build_base_distribution(
         )
         blocks.append(xi)
         xi_dim = xi.dim
+        if spec.noise_dim:
+            blocks.append(noise_base_family(spec.noise_dim))
     p0 = Product(blocks)
     layout = ParamLayout.from_spec(spec, xi_dim)
     if p0.dim != layout.dim:  # pragma: no cover - guards the two orderings

@@ -290,10 +290,15 @@ class LearnedDriversSpec(SpecModel):
     ``actions: sampled`` draws every action from the network's Gaussians with
     per-rollout noise (the paper's generative model); the noise is not part of
     ``X``, so importance sampling cannot steer it and ``f(X)`` stays random
-    given ``X``. ``actions: mean`` drives with the mean actions: the drivers'
-    randomness is then all in ``X`` (the per-rollout ``xi``, the ensemble's
-    uncertainty about the policy) and ``f(X)`` is a deterministic function of
-    ``X``.
+    given ``X``. ``actions: sampled_in_x`` samples the same way, but the
+    innovations are columns of ``X`` (``noise.K``: one standard normal per
+    learned driver, step and action, ``2 T C`` in all, independent under
+    ``P0``): ``f(X)`` is then a deterministic function of ``X`` and
+    estimators can steer the noise (``splitting_is`` tilts it like any
+    coordinate; the cross-entropy method leaves it at ``P0``, as a mean
+    update in that many dimensions is noise). ``actions: mean`` drives with
+    the mean actions: the drivers' randomness is then all in ``xi`` (the
+    per-rollout draw, the ensemble's uncertainty about the policy).
 
     ``xi_search`` is the half-width of the cross-entropy search box for the
     mean of ``xi`` around ``mu0``, per coordinate: in the units of ``xi``
@@ -306,10 +311,12 @@ class LearnedDriversSpec(SpecModel):
     out, they keep their lanes (and the spec dumps as before the option).
     """
 
-    actions: Literal["sampled", "mean"] = Field(
+    actions: Literal["sampled", "sampled_in_x", "mean"] = Field(
         "sampled",
         description="'sampled' (the paper: actions drawn from the network's "
-        "Gaussians) or 'mean' (the mean actions; f deterministic given X).",
+        "Gaussians, noise from the rollout's seed), 'sampled_in_x' (the same, "
+        "the noise's innovations columns of X) or 'mean' (the mean actions); f "
+        "is deterministic given X except with 'sampled'.",
     )
     xi_search: float = Field(
         0.01,
@@ -332,5 +339,10 @@ class LearnedDriversSpec(SpecModel):
 
     @property
     def stochastic(self) -> bool:
-        """Whether actions are sampled (``actions: sampled``)."""
-        return self.actions == "sampled"
+        """Whether actions are sampled (``sampled`` or ``sampled_in_x``)."""
+        return self.actions != "mean"
+
+    @property
+    def noise_in_x(self) -> bool:
+        """Whether the action noise's innovations are columns of ``X``."""
+        return self.actions == "sampled_in_x"

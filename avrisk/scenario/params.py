@@ -5,10 +5,13 @@ length ``D``; everything else sees it by name. The layout is vehicle-major,
 four coordinates per vehicle, then the learned-driver block ``xi`` (the
 learned drivers' per-rollout parameters: the ``Dxi = 404`` numbers of the
 driver network's last layer, in the order of :mod:`avrisk.agents.drivers.xi`;
-empty when no vehicle is a learned driver)::
+empty when no vehicle is a learned driver), then the learned drivers' action
+innovations when the scenario puts them in ``X`` (``actions: sampled_in_x``:
+``Dn = 2 T C`` standard normals, step-major, then the ``C`` learned drivers
+in slot order, then acceleration and steering; empty otherwise)::
 
     veh0.s, veh0.t, veh0.heading, veh0.speed, veh1.s, ..., veh{A-1}.speed,
-    xi.0, ..., xi.{Dxi-1}
+    xi.0, ..., xi.{Dxi-1}, noise.0, ..., noise.{Dn-1}
 
 =============  ======  ===================================================
 coordinate     unit    meaning
@@ -18,6 +21,7 @@ coordinate     unit    meaning
 ``vehJ.heading`` deg   heading relative to the lane direction (ccw > 0)
 ``vehJ.speed`` m/s     initial speed
 ``xi.K``       -       last-layer weights of the environment driver network
+``noise.K``    -       standard-normal innovation of a learned driver's action
 =============  ======  ===================================================
 
 The column names double as Parquet column names.
@@ -43,6 +47,8 @@ FIELD_UNITS: dict[str, str] = {"s": "m", "t": "m", "heading": "deg", "speed": "m
 
 #: Prefix of the driver-network columns ``xi.K`` of ``X``.
 XI_PREFIX = "xi."
+#: Prefix of the learned drivers' action innovations ``noise.K`` of ``X``.
+NOISE_PREFIX = "noise."
 
 
 @dataclass(frozen=True)
@@ -55,13 +61,15 @@ class ParamLayout:
         Number of vehicles ``A`` (ego included).
     xi_dim : int, default=0
         Length of the learned-driver parameter block ``xi`` (0: none yet).
+    noise_dim : int, default=0
+        Length of the learned drivers' innovations block (0: none in ``X``).
 
     Attributes
     ----------
     columns : tuple of str
         The ``D`` column names, in order.
     dim : int
-        ``D = 4 A + xi_dim``.
+        ``D = 4 A + xi_dim + noise_dim``.
 
     Examples
     --------
@@ -74,6 +82,7 @@ class ParamLayout:
 
     n_vehicles: int
     xi_dim: int = 0
+    noise_dim: int = 0
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -81,6 +90,11 @@ class ParamLayout:
             raise ValueError(f"n_vehicles must be >= 1; got {self.n_vehicles}")
         if self.xi_dim < 0:
             raise ValueError(f"xi_dim must be >= 0; got {self.xi_dim}")
+        if self.noise_dim < 0 or (self.noise_dim and not self.xi_dim):
+            raise ValueError(
+                f"noise_dim must be >= 0, and 0 without learned drivers (xi_dim 0); "
+                f"got noise_dim={self.noise_dim}, xi_dim={self.xi_dim}"
+            )
         object.__setattr__(
             self, "_index", {name: i for i, name in enumerate(self.columns)}
         )
@@ -96,7 +110,8 @@ class ParamLayout:
             Length of the learned drivers' parameter block; required when any
             vehicle is a learned driver (:attr:`ScenarioSpec.has_learned_drivers`),
             unused otherwise. :func:`avrisk.assembly.param_layout` passes the
-            driver network's.
+            driver network's. The innovations block follows from the spec
+            (:attr:`ScenarioSpec.noise_dim`).
 
         Raises
         ------
@@ -110,18 +125,19 @@ class ParamLayout:
                 f"scenario {spec.name!r} has learned drivers: pass xi_dim, the "
                 "length of their parameter block (avrisk.assembly.param_layout does)"
             )
-        return cls(n_vehicles=spec.n_vehicles, xi_dim=xi_dim)
+        return cls(n_vehicles=spec.n_vehicles, xi_dim=xi_dim, noise_dim=spec.noise_dim)
 
     @cached_property
     def columns(self) -> tuple[str, ...]:
-        """Column names ``vehJ.<field>`` then ``xi.K``, length ``D``."""
+        """Column names ``vehJ.<field>``, ``xi.K`` then ``noise.K``, length ``D``."""
         veh = [f"veh{j}.{f}" for j in range(self.n_vehicles) for f in VEHICLE_FIELDS]
-        return tuple(veh + [f"{XI_PREFIX}{k}" for k in range(self.xi_dim)])
+        xi = [f"{XI_PREFIX}{k}" for k in range(self.xi_dim)]
+        return tuple(veh + xi + [f"{NOISE_PREFIX}{k}" for k in range(self.noise_dim)])
 
     @property
     def dim(self) -> int:
         """Dimension ``D`` of one flat sample."""
-        return len(VEHICLE_FIELDS) * self.n_vehicles + self.xi_dim
+        return len(VEHICLE_FIELDS) * self.n_vehicles + self.xi_dim + self.noise_dim
 
     @property
     def xi_slice(self) -> slice:
@@ -129,10 +145,16 @@ class ParamLayout:
         start = len(VEHICLE_FIELDS) * self.n_vehicles
         return slice(start, start + self.xi_dim)
 
+    @property
+    def noise_slice(self) -> slice:
+        """Columns of the innovations block."""
+        start = self.xi_slice.stop
+        return slice(start, start + self.noise_dim)
+
     def unit(self, column: str) -> str:
         """Unit of a column (``"m"``, ``"deg"``, ``"m/s"`` or ``"-"``)."""
         self.index(column)
-        if column.startswith("xi."):
+        if column.startswith((XI_PREFIX, NOISE_PREFIX)):
             return "-"
         return FIELD_UNITS[column.split(".", 1)[1]]
 
@@ -181,6 +203,9 @@ class ScenarioParams:
         Initial speed [m/s].
     xi : ndarray of shape (B, Dxi)
         Learned-driver parameters (``Dxi = 0`` for IDM+MOBIL drivers).
+    noise : ndarray of shape (B, Dn)
+        The learned drivers' action innovations (``Dn = 0`` unless the
+        scenario puts them in ``X``).
     """
 
     s: FloatArray
@@ -188,6 +213,7 @@ class ScenarioParams:
     heading: FloatArray
     speed: FloatArray
     xi: FloatArray
+    noise: FloatArray
 
     def __post_init__(self) -> None:
         shape = np.shape(self.s)
@@ -197,11 +223,13 @@ class ScenarioParams:
                     f"ScenarioParams.{name} must have shape (B, A) = {shape}; got "
                     f"{np.shape(getattr(self, name))}"
                 )
-        if np.ndim(self.xi) != 2 or np.shape(self.xi)[0] != shape[0]:
-            raise ValueError(
-                f"ScenarioParams.xi must have shape (B, Dxi) with B = {shape[0]}; "
-                f"got {np.shape(self.xi)}"
-            )
+        for name in ("xi", "noise"):
+            block = getattr(self, name)
+            if np.ndim(block) != 2 or np.shape(block)[0] != shape[0]:
+                raise ValueError(
+                    f"ScenarioParams.{name} must have shape (B, D{name}) with "
+                    f"B = {shape[0]}; got {np.shape(block)}"
+                )
 
     @property
     def batch_size(self) -> int:
@@ -216,7 +244,9 @@ class ScenarioParams:
     @property
     def layout(self) -> ParamLayout:
         """The flat layout these parameters map to."""
-        return ParamLayout(self.n_vehicles, int(np.shape(self.xi)[1]))
+        return ParamLayout(
+            self.n_vehicles, int(np.shape(self.xi)[1]), int(np.shape(self.noise)[1])
+        )
 
     def __len__(self) -> int:
         return self.batch_size
@@ -226,7 +256,10 @@ class ScenarioParams:
     ) -> ScenarioParams:
         """Select realisations (rows) by slice, index list or boolean mask."""
         return ScenarioParams(
-            **{name: getattr(self, name)[rows] for name in (*VEHICLE_FIELDS, "xi")}
+            **{
+                name: getattr(self, name)[rows]
+                for name in (*VEHICLE_FIELDS, "xi", "noise")
+            }
         )
 
     @classmethod
@@ -247,11 +280,13 @@ class ScenarioParams:
         if x.ndim != 2 or x.shape[1] != layout.dim:
             raise ValueError(
                 f"X must have shape (B, {layout.dim}) for {layout.n_vehicles} "
-                f"vehicles and xi_dim={layout.xi_dim}; got {x.shape}"
+                f"vehicles, xi_dim={layout.xi_dim} and noise_dim={layout.noise_dim}; "
+                f"got {x.shape}"
             )
         return cls(
             **{name: x[:, layout.field_columns(name)] for name in VEHICLE_FIELDS},
             xi=x[:, layout.xi_slice],
+            noise=x[:, layout.noise_slice],
         )
 
     def to_flat(self) -> FloatArray:
@@ -261,6 +296,7 @@ class ScenarioParams:
         for name in VEHICLE_FIELDS:
             x[:, layout.field_columns(name)] = getattr(self, name)
         x[:, layout.xi_slice] = self.xi
+        x[:, layout.noise_slice] = self.noise
         return x
 
     def to_columns(self) -> dict[str, FloatArray]:

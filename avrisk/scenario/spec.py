@@ -323,6 +323,17 @@ class ScenarioSpec(SpecModel):
         """Whether any environment vehicle is a learned driver (``X`` has ``xi``)."""
         return any(self.learned_slots)
 
+    @property
+    def noise_dim(self) -> int:
+        """Columns of the learned drivers' innovations in ``X``: ``2 T C``, or 0.
+
+        ``T`` time steps, ``C`` learned drivers, two actions; 0 unless
+        ``learned_drivers: {actions: sampled_in_x}``.
+        """
+        if not (self.has_learned_drivers and self.learned_drivers.noise_in_x):
+            return 0
+        return 2 * self.simulation.n_steps * sum(self.learned_slots)
+
     def import_paths(self) -> list[str]:
         """The components this spec names by import path, each once, in order.
 

@@ -13,13 +13,15 @@ non-vision ego, DESIGN.md §5), by default with its mean action.
 
 Sampling: ``action_t = mean_t + c * std_t * eps_t`` with standardised noise
 ``eps_t = rho eps_{t-1} + sqrt(1 - rho^2) z_t``, ``z_t ~ N(0, 1)`` the
-simulator's noise, ``rho = net.noise_correlation`` and ``c = net.noise_scale``
-per action. With ``rho = 0`` and ``c = 1`` (the paper) every step is an
-independent draw from the network's Gaussian. A fitted ``rho > 0`` keeps a
-Gaussian marginal at every step but makes the noise as persistent as human
-residuals are (independent draws at 10 Hz give a jerk far above human jerk); a
-calibrated ``c < 1`` tempers the variance that behaviour cloning inflates on
-states it cannot predict. ``eps`` and ``xi`` are the actor's state
+simulator's noise (or, with ``noise_steps``, the innovations the parameter
+block carries after ``xi``: columns of ``X``), ``rho = net.noise_correlation``
+and ``c = net.noise_scale`` per action. With ``rho = 0`` and ``c = 1`` (the
+paper) every step is an independent draw from the network's Gaussian. A fitted
+``rho > 0`` keeps a Gaussian marginal at every step but makes the noise as
+persistent as human residuals are (independent draws at 10 Hz give a jerk far
+above human jerk); a calibrated ``c < 1`` tempers the variance that behaviour
+cloning inflates on states it cannot predict. ``eps`` and ``xi`` are the
+actor's state
 (:class:`LearnedState`) in the simulator loop.
 
 Examples
@@ -60,6 +62,7 @@ __all__ = [
     "LearnedEgoPolicy",
     "LearnedState",
     "ar1_noise",
+    "innovations_at",
     "reproducible_exp",
     "sample_actions",
 ]
@@ -155,6 +158,25 @@ def ar1_noise(
     return torch.where(start.reshape(start.shape + (1,) * (z.dim() - 1)), z, mixed)
 
 
+def innovations_at(innovations: Tensor, step: int | Tensor) -> Tensor:
+    """Each rollout's innovations at its step.
+
+    Parameters
+    ----------
+    innovations : Tensor of shape (B, T, C, 2)
+        Every step's standard-normal innovations of ``C`` vehicles.
+    step : int or Tensor of int64, shape () or (B,)
+        The step, one for all or one per rollout (``0 <= step < T``).
+
+    Returns
+    -------
+    Tensor of shape (B, C, 2)
+    """
+    batch = innovations.shape[0]
+    index = torch.as_tensor(step, device=innovations.device).expand(batch)
+    return innovations[torch.arange(batch, device=innovations.device), index]
+
+
 def sample_actions(
     dist: ActionDistribution, eps: Tensor | None, scale: Tensor | None = None
 ) -> tuple[Tensor, Tensor]:
@@ -198,10 +220,15 @@ class LearnedState(NamedTuple):
     eps : Tensor of shape (B, ..., 2) or None
         Last step's standardised noise; None before the first step and
         without sampling.
+    innovations : Tensor of shape (B, T, C, 2) or None
+        Every step's innovations of the noise when they come with the
+        parameter block (:class:`LearnedDriver` with ``noise_steps``), else
+        None (the simulator draws them).
     """
 
     xi: Tensor
     eps: Tensor | None
+    innovations: Tensor | None = None
 
 
 def _as_xi(net: DriverNet, xi: Tensor | None) -> Tensor:
@@ -263,6 +290,13 @@ class LearnedDriver:
         Sample the actions (the paper's generative model), with noise of
         shape (B, A, 2) drawn by the simulator; False drives with the mean
         actions (no noise).
+    noise_steps : int or None, default=None
+        Take the noise's innovations from the parameter block instead of the
+        simulator: ``params`` of :meth:`init` is then ``xi`` followed by
+        ``T = noise_steps`` steps of innovations, shape (B, XI_DIM + 2 T C)
+        (:attr:`params_dim`; step-major, then the controlled vehicles in
+        order, then acceleration and steering), so that they are columns of
+        ``X``. Requires ``stochastic``.
     allow_reverse : bool, default=False
         False clips braking so that a vehicle stops rather than reverses
         within a step (speed noise around 0 in congested traffic would
@@ -279,8 +313,14 @@ class LearnedDriver:
         *,
         controlled: Tensor,
         stochastic: bool = True,
+        noise_steps: int | None = None,
         allow_reverse: bool = False,
     ) -> None:
+        if noise_steps is not None and (not stochastic or noise_steps < 1):
+            raise ValueError(
+                "noise_steps (innovations in the parameter block) needs "
+                f"stochastic=True and at least 1 step; got {noise_steps}"
+            )
         self.net = net
         self.xi = _as_xi(net, xi)
         self.controlled = controlled
@@ -288,6 +328,7 @@ class LearnedDriver:
         # an index so the compiled step selects them without a host sync).
         self.columns = None if bool(controlled.all()) else controlled.nonzero()[:, 0]
         self.stochastic = stochastic
+        self.noise_steps = noise_steps
         self.allow_reverse = allow_reverse
         self.noise = (
             NoiseRequest(
@@ -295,20 +336,52 @@ class LearnedDriver:
                 (controlled.shape[0], 2),
                 dtype=net.input_mean.dtype,
             )
-            if stochastic
+            if stochastic and noise_steps is None
             else None
         )
+
+    @property
+    def params_dim(self) -> int:
+        """Columns of the parameter block: ``XI_DIM``, plus ``2 T C`` innovations."""
+        steps = self.noise_steps or 0
+        return XI_DIM + 2 * steps * int(self.controlled.sum())
 
     def init(self, obs: Observation, params: Tensor | None) -> LearnedState:
         """``xi`` of every rollout (``params``, shape (B, XI_DIM), or the default).
 
+        With ``noise_steps``, ``params`` (B, :attr:`params_dim`) also holds
+        the innovations, which the state keeps.
+
         Raises
         ------
         ValueError
-            If ``xi`` has the wrong shape or another batch size than ``obs``.
+            If ``xi`` has the wrong shape or another batch size than ``obs``,
+            or the innovations are missing.
         """
-        return _initial_state(
-            "LearnedDriver", self.net, self.xi, params, obs.state.batch_size, self.noise
+        batch = obs.state.batch_size
+        if self.noise_steps is None:
+            state = _initial_state(
+                "LearnedDriver", self.net, self.xi, params, batch, None
+            )
+            if self.noise is None:
+                return state
+            mine = (batch, int(self.controlled.sum()), 2)
+            return LearnedState(
+                state.xi, state.xi.new_zeros(mine, dtype=self.noise.dtype)
+            )
+        if params is None or params.dim() != 2 or params.shape[1] != self.params_dim:
+            got = None if params is None else tuple(params.shape)
+            raise ValueError(
+                f"LearnedDriver with noise_steps={self.noise_steps} takes params of "
+                f"shape (B, {self.params_dim}) (xi, then the innovations); got {got}"
+            )
+        state = _initial_state(
+            "LearnedDriver", self.net, self.xi, params[:, :XI_DIM], batch, None
+        )
+        innovations = params[:, XI_DIM:].to(state.xi.device, state.xi.dtype)
+        innovations = innovations.reshape(batch, self.noise_steps, -1, 2)
+        return LearnedState(
+            state.xi, torch.zeros_like(innovations[:, 0]), innovations.contiguous()
         )
 
     def distribution(self, obs: Observation, xi: Tensor) -> ActionDistribution:
@@ -334,18 +407,22 @@ class LearnedDriver:
     ) -> tuple[Action, LearnedState]:
         """Sampled (or mean) actions of every vehicle, fields of shape (B, A)."""
         dist = self.distribution(obs, state.xi)
+        z = None  # the controlled vehicles' innovations, (B, C, 2)
+        if state.innovations is not None:
+            z = innovations_at(state.innovations, obs.step)
+        elif noise is not None:
+            z = self._mine(noise)
         eps = None
-        if noise is not None:
+        if z is not None:
             rho = self.net.noise_correlation
-            eps = ar1_noise(state.eps, noise, rho, start=obs.step == 0)
-        mine = None if eps is None else self._mine(eps)
-        accel, steer = sample_actions(dist, mine, self.net.noise_scale)
+            eps = ar1_noise(state.eps, z, rho, start=obs.step == 0)
+        accel, steer = sample_actions(dist, eps, self.net.noise_scale)
         dtype = obs.state.x.dtype
         accel, steer = accel.to(dtype), steer.to(dtype)
         if not self.allow_reverse:
             accel = _no_reverse(accel, self._mine(obs.state.speed), obs.dt)
         action = Action(accel=self._spread(accel), steer=self._spread(steer))
-        return action, LearnedState(state.xi, eps)
+        return action, LearnedState(state.xi, eps, state.innovations)
 
 
 class LearnedEgoPolicy:

@@ -90,6 +90,9 @@ class FixedCovNormal(ExponentialFamily):
             which = "cov" if cov is not None else "precision"
             raise ValueError(f"{which} must be symmetric positive definite") from err
         self._log_det_precision = 2.0 * float(np.log(np.diag(self._chol)).sum())
+        # N(mu, I) (a block of standard-normal innovations): the Cholesky
+        # factor is I, so the transforms skip the products by it.
+        self._identity = bool(np.array_equal(dense, np.eye(self.dim)))
         self.max_shift = _as_shift(max_shift, self.dim)
         self.float32_samples = bool(float32_samples)
 
@@ -124,6 +127,8 @@ class FixedCovNormal(ExponentialFamily):
 
     def _quad(self, d: FloatArray) -> FloatArray:
         """Row-wise ``d_i^T P d_i`` for ``d`` of shape (n, D) (``P`` symmetric)."""
+        if self._identity:
+            return (d * d).sum(axis=1)
         pd = np.asarray(self.precision @ d.T).T if self._sparse else d @ self.precision
         return (pd * d).sum(axis=1)
 
@@ -138,13 +143,17 @@ class FixedCovNormal(ExponentialFamily):
         ``L`` is the Cholesky factor of the precision (dense, also when the
         precision was given sparse), the one :meth:`sample` uses.
         """
-        return (as_sample_array(x, self.dim) - self.mean) @ self._chol
+        d = as_sample_array(x, self.dim) - self.mean
+        return d if self._identity else d @ self._chol
 
     def from_standard_normal(self, z: FloatArray) -> FloatArray:
         """``x = mu + L^-T z`` per row, shape (n, D) (rounded like :meth:`sample`)."""
         z = as_sample_array(z, self.dim, "z")
-        y = linalg.solve_triangular(self._chol, z.T, lower=True, trans="T")
-        x = self.mean + y.T
+        if self._identity:
+            x = self.mean + z
+        else:
+            y = linalg.solve_triangular(self._chol, z.T, lower=True, trans="T")
+            x = self.mean + y.T
         if self.float32_samples:
             x = x.astype(np.float32).astype(np.float64)
         return x
