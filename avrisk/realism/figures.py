@@ -108,8 +108,9 @@ def draw_lane_changes(
         color="0.85",
         label=f"target: held-out rate +-{RATE_TOLERANCE:.0%}",
     )
-    for yy, (name, s) in zip(y, rows, strict=True):
-        color = "black" if name.startswith("human") else None
+    # One colour per model in every panel (C0, C1, ...), the humans in black.
+    colors = ["black"] + [f"C{i}" for i in range(len(rows) - 1)]
+    for yy, (_, s), color in zip(y, rows, colors, strict=True):
         ax_rate.errorbar(
             s["rate"],
             yy,
@@ -128,13 +129,13 @@ def draw_lane_changes(
         (ax_peak, human_peak, "peak_lateral_speed", "peak lateral speed [m/s]"),
     ):
         _cdf(ax, x_human, label="human, held-out US-101", color="black", lw=2.0)
-        for name, m in results.items():
+        for (name, m), color in zip(results.items(), colors[1:], strict=True):
             if len(m.changes):
-                _cdf(ax, getattr(m.changes, field), label=name)
+                _cdf(ax, getattr(m.changes, field), label=name, color=color)
         ax.set_xlabel(label)
         ax.set_ylabel("fraction <= x")
         ax.grid(alpha=0.3)
-    ax_dur.legend(fontsize=7, loc="lower right")
+    ax_dur.legend(fontsize=7, loc="upper left")
     fig.suptitle(
         "Lane changes in six-lane traffic: learned drivers and IDM+MOBIL against "
         "held-out US-101 vehicles"

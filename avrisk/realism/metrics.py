@@ -169,7 +169,8 @@ def ks_w1(sample: NDArray[Any], reference: NDArray[Any]) -> tuple[float, float] 
     >>> x = np.arange(10.0)
     >>> ks_w1(x, x)
     (0.0, 0.0)
-    >>> ks_w1(x, x + 100.0)
+    >>> ks, w1 = ks_w1(x, x + 100.0)
+    >>> ks, round(w1, 6)
     (1.0, 100.0)
     """
     if sample.size == 0 or reference.size == 0:

@@ -45,15 +45,25 @@ class TargetResult:
     human : float or None
         The humans' (None where the target is not relative to them).
     passed : bool
-    text : str
-        The figure as the tables show it, e.g. ``"4.19 (human 3.45)"``.
+    figure : str
+        ``value`` as the tables show it, e.g. ``"4.19"`` (``"n/a"`` for None).
+    human_figure : str or None
+        ``human`` likewise.
     """
 
     target: str
     value: float | None
     human: float | None
     passed: bool
-    text: str
+    figure: str
+    human_figure: str | None = None
+
+    @property
+    def text(self) -> str:
+        """The figure with the humans', e.g. ``"4.19 (human 3.45)"``."""
+        if self.human_figure is None:
+            return self.figure
+        return f"{self.figure} (human {self.human_figure})"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready fields."""
@@ -69,7 +79,7 @@ def _percentile_target(
             return TargetResult(name, None, None, False, "n/a")
         a, b = model[key][p], human[key][p]
         ok = relative_gap(a, b) <= tol
-        return TargetResult(name, a, b, ok, f"{a:.2f} (human {b:.2f})")
+        return TargetResult(name, a, b, ok, f"{a:.2f}", f"{b:.2f}")
 
     return check
 
@@ -88,7 +98,8 @@ def _stopped(model: dict, human: dict, _: dict) -> TargetResult:
         a,
         b,
         relative_gap(a, b) <= 0.25,
-        f"{a:.3f} (human {b:.3f})",
+        f"{a:.3f}",
+        f"{b:.3f}",
     )
 
 
