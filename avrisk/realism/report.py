@@ -267,7 +267,10 @@ def _provenance(result: RealismResult, command: str) -> dict[str, Any]:
                 f"non-overlapping {a['window_s']:g} s windows",
                 "windows_available": result.windows_available,
                 "windows": a["windows"],
-                "indices": result.part_a.labels.tolist(),
+                # None: every window; else the held-out indices drawn.
+                "indices": None
+                if a["windows"] == result.windows_available
+                else result.part_a.labels.tolist(),
             },
             "part_b": {
                 "what": "US-101 vehicles held out at random before any fitting "
