@@ -20,7 +20,6 @@ exact Poisson intervals, where the collisions happened).
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -262,8 +261,6 @@ class PartA:
         The recorded followers.
     models : dict of str to Followers
         Per model, over ``W * replicates`` replays.
-    seconds : dict of str to float
-        Wall time of each model's replays [s].
     """
 
     windows: CarFollowingWindows
@@ -271,7 +268,6 @@ class PartA:
     replicates: int
     human: Followers
     models: dict[str, Followers]
-    seconds: dict[str, float]
 
 
 def run_part_a(
@@ -319,19 +315,17 @@ def run_part_a(
         IDMParams.full((n, 2), **{**IDM_NORMAL, "lane_change_threshold": 1e3}),
         road,
     )
-    models, seconds = {}, {}
+    models = {}
     for done, (name, drv) in enumerate(drivers.items()):
         if progress is not None:
             progress(name, done, len(drivers))
-        t0 = time.perf_counter()
         models[name] = followers(
             win, replay(win, drv, road, seed=seed), road, win_labels
         )
-        seconds[name] = time.perf_counter() - t0
     if progress is not None:
         progress("", len(drivers), len(drivers))
     human = followers(windows, recorded(windows), road, labels)
-    return PartA(windows, labels, replicates, human, models, seconds)
+    return PartA(windows, labels, replicates, human, models)
 
 
 def _figures(f: Followers) -> dict[str, Any]:

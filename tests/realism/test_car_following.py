@@ -81,7 +81,6 @@ def part(windows, **models):
         replicates=1,
         human=followers(windows, recorded(windows), road, labels),
         models={k: followers(windows, r, road, labels) for k, r in models.items()},
-        seconds={k: 0.0 for k in models},
     )
 
 
