@@ -3,7 +3,7 @@
 Starts from the shipped behaviour-cloned (+ DAgger) network, fine-tunes its
 acceleration head by GAIL with PPO (:func:`avrisk.learning.gail.gail_finetune`)
 on the NGSIM I-80 *training* car-following windows, and compares both networks
-on the *held-out* windows exactly as section A of ``driver_realism.py`` does
+on the *held-out* windows exactly as part A of ``avrisk realism`` does
 (15 s windows, leader replayed, same evaluation seed, ``mu0`` and ``xi ~ P0``;
 the GAIL change of the head is carried over to the prior by
 :func:`avrisk.learning.gail.translate_prior`). Nothing is tuned on the
@@ -19,64 +19,21 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from driver_realism import (  # noqa: E402
-    DT,
-    distances,
-    hard_brake_events,
-    held_out_windows,
-    kinematics,
-    ttc_samples,
-)
-
-from avrisk.agents.drivers.driver import LearnedDriver  # noqa: E402
-from avrisk.agents.drivers.store import load_driver_net, load_xi_prior  # noqa: E402
-from avrisk.learning.gail import GailConfig, gail_finetune, translate_prior  # noqa: E402
-from avrisk.learning.replay import ReplayResult, replay  # noqa: E402
-from avrisk.learning.training_data import training_windows  # noqa: E402
-from avrisk.scenario import xi_base_family  # noqa: E402
-from avrisk.sim import Road  # noqa: E402
-
-KEYS = ("speed", "accel", "jerk", "gap", "ttc", "offset")
-
-
-def samples(win, res) -> dict:
-    """Distribution samples and event counts of one replay (or the human record)."""
-    v, a, j, a_full, ok = kinematics(res.v, res.alive)
-    lat = win.has_lateral
-    return {
-        "speed": v,
-        "accel": a,
-        "jerk": j,
-        "gap": res.gap[res.alive],
-        "ttc": ttc_samples(res.gap, res.v, res.v_l, res.alive),
-        "offset": res.offset[lat][res.alive[lat]],
-        "hard": hard_brake_events(a_full, ok),
-        "crash": int(res.crash.sum()),
-        "offroad": int(res.offroad.sum()),
-    }
-
-
-def human_samples(win) -> dict:
-    none = np.zeros(len(win), bool)
-    record = ReplayResult(
-        v=win.v_f,
-        v_l=win.v_l,
-        gap=win.gap,
-        offset=win.offset,
-        alive=np.ones_like(win.v_f, bool),
-        crash=none,
-        offroad=none,
-    )
-    return samples(win, record)
+from avrisk.agents.drivers.driver import LearnedDriver
+from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
+from avrisk.learning.gail import GailConfig, gail_finetune, translate_prior
+from avrisk.learning.replay import replay
+from avrisk.learning.training_data import training_windows
+from avrisk.realism.car_following import QUANTITIES, Followers, followers, recorded
+from avrisk.realism.held_out import held_out_windows
+from avrisk.realism.metrics import DT, ks_w1
+from avrisk.scenario import xi_base_family
+from avrisk.sim import Road
 
 
 def drivers(bc, gail, fam_bc, fam_gail, n: int, seed: int) -> dict:
@@ -93,23 +50,31 @@ def drivers(bc, gail, fam_bc, fam_gail, n: int, seed: int) -> dict:
     return out
 
 
-def table(win, results: dict, human: dict, hours: float) -> str:
+def distance(f: Followers, human: Followers, key: str) -> str:
+    d = ks_w1(f.samples[key], human.samples[key])
+    return "n/a" if d is None else f"{d[0]:.3f} / {d[1]:.3g}"
+
+
+def table(win, results: dict[str, Followers], human: Followers) -> str:
     names = list(results)
     lines = [
         "| metric | " + " | ".join(names) + " |",
         "|---|" + "---|" * len(names),
     ]
-    for key in KEYS:
-        cells = [distances(r[key], human[key]) for r in results.values()]
+    for key in QUANTITIES:
+        cells = [distance(r, human, key) for r in results.values()]
         lines.append(f"| {key} KS / W1 | " + " | ".join(cells) + " |")
     for key, label in (
-        ("hard", f"hard brakes [1/veh-h] (human {human['hard'] / hours:.1f})"),
-        ("crash", "collisions [1/veh-h] (human 0)"),
-        ("offroad", "road departures [1/veh-h] (human 0)"),
+        (
+            "hard_brakes",
+            f"hard brakes [1/veh-h] (human {human.hard_brakes / human.hours:.1f})",
+        ),
+        ("collisions", "collisions [1/veh-h] (human 0)"),
+        ("road_departures", "road departures [1/veh-h] (human 0)"),
     ):
-        cells = [f"{r[key] / hours:.1f}" for r in results.values()]
+        cells = [f"{getattr(r, key) / r.hours:.1f}" for r in results.values()]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    cells = [f"{r['crash']} / {len(win)}" for r in results.values()]
+    cells = [f"{r.collisions} / {len(win)}" for r in results.values()]
     lines.append("| windows ending in a collision | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -143,9 +108,10 @@ def main() -> None:
     fam_gail = xi_base_family(translate_prior(prior, bc, gail))
     win = held_out_windows(n_steps, road)
     hours = len(win) * n_steps * DT / 3600
+    labels = np.arange(len(win))
     models = drivers(bc, gail, fam_bc, fam_gail, len(win), args.seed)
     results = {
-        name: samples(win, replay(win, drv, road, seed=args.seed))
+        name: followers(win, replay(win, drv, road, seed=args.seed), road, labels)
         for name, drv in models.items()
     }
     first, last = history[0], history[-1]
@@ -154,7 +120,7 @@ def main() -> None:
         f"windows of {args.window:.0f} s, {hours:.2f} vehicle-hours; KS / W1 vs "
         "the human followers)\n"
     )
-    print(table(win, results, human_samples(win), hours))
+    print(table(win, results, followers(win, recorded(win), road, labels)))
     print(
         f"\nGAIL training ({args.iterations} iterations, {t_train:.0f} s): "
         f"discriminator accuracy {first['disc_accuracy']:.3f} -> "

@@ -52,6 +52,17 @@ ALLOWED = {
     "testing": {"rare"},
     # the Gymnasium environment: a scenario built and stepped by hand
     "gym": {"assembly", "agents", "scenario", "sim"},
+    # the realism report: learned drivers against held-out human data, in the
+    # simulator; no estimator (the scenario layer gives it the xi prior)
+    "realism": {
+        "learning",
+        "agents",
+        "sim",
+        "safety",
+        "scenario",
+        "pipeline",
+        "fingerprint",
+    },
 }
 
 

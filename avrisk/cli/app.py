@@ -6,6 +6,7 @@ Command modules define plain functions and know nothing of this application.
 import typer
 
 from avrisk.cli.demo import demo
+from avrisk.cli.realism import realism_command
 from avrisk.cli.run import compare, report, run
 from avrisk.cli.scenarios import list_scenarios, show_scenario
 from avrisk.cli.serve_ego import serve_ego
@@ -50,6 +51,7 @@ for command in (run, compare, report, simulate, replay, demo):
 app.command("train-drivers")(train_drivers_command)
 app.command("train-vision")(train_vision_command)
 app.command("serve-ego")(serve_ego)
+app.command("realism")(realism_command)
 
 scenarios = typer.Typer(
     help="The bundled scenarios: list them (no command), or show one.",

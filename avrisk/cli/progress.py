@@ -23,6 +23,7 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    ProgressColumn,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -33,6 +34,23 @@ from rich.table import Column
 BAR_WIDTH = 12
 #: Consoles at least this wide also show the time elapsed [characters].
 WIDE = 100
+
+
+def stage_columns(field: str) -> tuple[ProgressColumn, ...]:
+    """Columns of a bar per stage: name, bar, count, time, then ``task.fields[field]``.
+
+    The field comes last: a narrow terminal cuts it, not the bar or the count.
+    """
+    return (
+        TextColumn("[bold]{task.description}"),
+        BarColumn(bar_width=10, table_column=Column(min_width=10)),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(table_column=Column(min_width=7)),
+        TextColumn(
+            f"{{task.fields[{field}]}}",
+            table_column=Column(no_wrap=True, overflow="ellipsis"),
+        ),
+    )
 
 
 def duration(seconds: float) -> str:

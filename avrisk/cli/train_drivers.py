@@ -30,15 +30,7 @@ import pyarrow as pa
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import (
-    BarColumn,
-    MofNCompleteColumn,
-    Progress,
-    TaskID,
-    TextColumn,
-    TimeElapsedColumn,
-)
-from rich.table import Column
+from rich.progress import Progress, TaskID
 
 from avrisk.agents.drivers.store import (
     DRIVER_NET_FILE,
@@ -46,6 +38,7 @@ from avrisk.agents.drivers.store import (
     default_drivers_dir,
 )
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
+from avrisk.cli.progress import stage_columns
 from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
 
 if TYPE_CHECKING:
@@ -94,18 +87,7 @@ def training_progress(console: Console) -> Iterator[Callable[[TrainEvent], None]
     Each event sets its stage's bar to ``step / total`` and shows the stage's
     key metrics (:data:`SHOWN_METRICS`).
     """
-    # Metrics last: a narrow terminal cuts them, not the bar or the count.
-    columns = (
-        TextColumn("[bold]{task.description}"),
-        BarColumn(bar_width=10, table_column=Column(min_width=10)),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(table_column=Column(min_width=7)),
-        TextColumn(
-            "{task.fields[metrics]}",
-            table_column=Column(no_wrap=True, overflow="ellipsis"),
-        ),
-    )
-    with Progress(*columns, console=console) as progress:
+    with Progress(*stage_columns("metrics"), console=console) as progress:
         tasks: dict[str, TaskID] = {}
 
         def update(event: TrainEvent) -> None:

@@ -23,7 +23,8 @@ to all. Lanes are the 12 ft bands of the NGSIM frame
 exact Poisson interval, and the quantiles of duration and peak lateral speed;
 the training split's rate is the hazard of the learned drivers' lane-change
 layer (:mod:`avrisk.agents.drivers.lane_change`), the held-out split is what
-the simulator is checked against (``benchmarks/lane_change_realism.py``).
+the simulator is checked against (``avrisk realism``, part B:
+:mod:`avrisk.realism.lane_changes`).
 """
 
 from __future__ import annotations

@@ -1,0 +1,111 @@
+"""The held-out human data of the realism report, chosen before any training.
+
+* Part A: the NGSIM I-80 car-following episodes of the ``test`` split (the
+  ``split`` column of the pairs file, and :func:`~avrisk.learning.ngsim.
+  lateral_pair_split` for the lateral file; training never reads them), cut
+  into non-overlapping windows (:func:`held_out_windows`);
+* Part B: the third of the US-101 vehicles held out at random with seed 21
+  (:func:`~avrisk.learning.us101_lane_changes.us101_split`), as two small
+  lane-change tables.
+
+Only the files shipped in the package (``avrisk/data/ngsim/``,
+:func:`data_files`) are read, whatever ``$AVRISK_NGSIM_DIR`` says.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from avrisk.learning.ngsim import lateral_pair_split, load_i80_lateral, load_i80_pairs
+from avrisk.learning.ngsim_files import (
+    I80_LATERAL,
+    I80_PAIRS,
+    default_ngsim_dir,
+    ngsim_file,
+)
+from avrisk.learning.ngsim_lateral import LaneCentres
+from avrisk.learning.replay import CarFollowingWindows, car_following_windows
+from avrisk.learning.us101_lane_changes import EVENTS_FILE, VEHICLES_FILE
+from avrisk.sim import Road
+
+__all__ = ["data_files", "held_out_windows", "select_windows"]
+
+
+def data_files() -> dict[str, Path]:
+    """The shipped files the report reads, by role.
+
+    Returns
+    -------
+    dict of str to Path
+        ``i80_pairs``, ``i80_lateral`` (part A), ``us101_vehicles``,
+        ``us101_lane_changes`` (part B).
+    """
+    folder = default_ngsim_dir()
+    return {
+        "i80_pairs": ngsim_file(I80_PAIRS, folder),
+        "i80_lateral": ngsim_file(I80_LATERAL, folder),
+        "us101_vehicles": folder / VEHICLES_FILE,
+        "us101_lane_changes": folder / EVENTS_FILE,
+    }
+
+
+def held_out_windows(n_steps: int, road: Road) -> CarFollowingWindows:
+    """Windows of ``n_steps`` of the I-80 test splits (lane centres: training split).
+
+    Parameters
+    ----------
+    n_steps : int
+        ``T``, steps of :data:`~avrisk.realism.metrics.DT` per window (150 for
+        15 s).
+    road : Road
+        The road the windows are replayed on (lanes mapped onto it).
+
+    Returns
+    -------
+    CarFollowingWindows
+        ``W`` windows, those of the pairs file first (202 of 150 steps).
+    """
+    files = data_files()
+    pairs = load_i80_pairs(files["i80_pairs"])
+    lat = load_i80_lateral(files["i80_lateral"])
+    split = lateral_pair_split(lat, pairs)
+    centres = LaneCentres.fit(lat.take(split == "train"))
+    return car_following_windows(
+        pairs.take(pairs.split == "test"),
+        lat.take(split == "test"),
+        centres,
+        n_steps,
+        road,
+    )
+
+
+def select_windows(
+    windows: CarFollowingWindows, n: int | None, seed: int
+) -> tuple[CarFollowingWindows, NDArray[np.int64]]:
+    """All windows, or ``n`` of them drawn at random (for tests and quick looks).
+
+    Parameters
+    ----------
+    windows : CarFollowingWindows
+        ``W`` windows.
+    n : int or None
+        How many to keep (all when None or ``n >= W``).
+    seed : int
+        Seeds the draw (``numpy.random.default_rng``).
+
+    Returns
+    -------
+    windows : CarFollowingWindows
+        The kept windows, in their order.
+    labels : ndarray of int64, shape (n,)
+        Index of each in ``windows``: the window's name in the tables.
+    """
+    if n is None or n >= len(windows):
+        labels = np.arange(len(windows), dtype=np.int64)
+    else:
+        pick = np.random.default_rng(seed).permutation(len(windows))[:n]
+        labels = np.sort(pick).astype(np.int64)
+    return windows.take(labels), labels

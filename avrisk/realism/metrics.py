@@ -1,0 +1,223 @@
+"""Measures of driving shared by the realism checks, on plain arrays.
+
+A trajectory batch is an array of shape (N, T+1): ``N`` vehicles (or replayed
+windows) at ``T + 1`` frames :data:`DT` apart, with a boolean ``alive`` of the
+same shape (the frame was simulated; false after a collision ends a replay).
+Samples are flat arrays of the frames that count; event counts are integers;
+rates are counts over vehicle-hours.
+
+Examples
+--------
+>>> import numpy as np
+>>> v = np.array([[10.0, 10.0, 9.0, 8.0, 8.0]])   # one vehicle, 5 frames
+>>> k = kinematics(v, np.ones_like(v, bool))
+>>> k.accel.tolist()                               # [m/s^2]
+[0.0, -10.0, -10.0, 0.0]
+>>> hard_brake_events(k.accel_all, k.accel_ok)     # one episode below -3
+1
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from avrisk.learning.lane_changes import poisson_rate_interval
+
+__all__ = [
+    "DT",
+    "HARD_BRAKE",
+    "PERCENTILES",
+    "STOPPED_SPEED",
+    "TTC_CAP",
+    "Kinematics",
+    "event_rate",
+    "hard_brake_events",
+    "kinematics",
+    "ks_w1",
+    "lane_index_changes",
+    "percentiles",
+    "relative_gap",
+    "stopped_fraction",
+    "ttc_samples",
+]
+
+#: Frame interval of NGSIM and of the simulator [s].
+DT = 0.1
+#: Deceleration below which a frame is hard braking [m/s^2].
+HARD_BRAKE = -3.0
+#: Time-to-collision samples are capped here [s].
+TTC_CAP = 20.0
+#: Speed below which a vehicle counts as stopped [m/s].
+STOPPED_SPEED = 0.1
+#: Percentiles reported of every distribution.
+PERCENTILES = (5, 10, 50, 95)
+
+
+class Kinematics(NamedTuple):
+    """Speed, acceleration and jerk of a trajectory batch.
+
+    Attributes
+    ----------
+    speed : ndarray of shape (n_alive,)
+        Speed of the alive frames [m/s].
+    accel, jerk : ndarray of shape (n_a,), (n_j,)
+        Finite differences over frames alive at both ends [m/s^2], [m/s^3].
+    accel_all : ndarray of shape (N, T)
+        Every acceleration, alive or not [m/s^2].
+    accel_ok : ndarray of bool, shape (N, T)
+        Where ``accel_all`` is between two alive frames.
+    """
+
+    speed: NDArray[np.float64]
+    accel: NDArray[np.float64]
+    jerk: NDArray[np.float64]
+    accel_all: NDArray[np.float64]
+    accel_ok: NDArray[np.bool_]
+
+
+def kinematics(v: NDArray[Any], alive: NDArray[np.bool_]) -> Kinematics:
+    """Speed, acceleration and jerk samples of ``v`` [m/s], shape (N, T+1)."""
+    a = np.diff(v, axis=1) / DT
+    j = np.diff(a, axis=1) / DT
+    ok_a = alive[:, 1:] & alive[:, :-1]
+    ok_j = ok_a[:, 1:] & ok_a[:, :-1]
+    return Kinematics(v[alive], a[ok_a], j[ok_j], a, ok_a)
+
+
+def ttc_samples(
+    gap: NDArray[Any], v: NDArray[Any], v_l: NDArray[Any], alive: NDArray[np.bool_]
+) -> NDArray[np.float64]:
+    """Time to collision with the leader at alive frames closing at > 0.05 m/s.
+
+    Parameters
+    ----------
+    gap, v, v_l : ndarray of shape (N, T+1)
+        Bumper gap [m], follower and leader speed [m/s].
+    alive : ndarray of bool, shape (N, T+1)
+
+    Returns
+    -------
+    ndarray of shape (n,)
+        ``gap / (v - v_l)``, capped at :data:`TTC_CAP` [s].
+    """
+    closing = v - v_l
+    m = alive & (closing > 0.05)
+    return np.minimum(gap[m] / closing[m], TTC_CAP)
+
+
+def hard_brake_events(accel: NDArray[Any], ok: NDArray[np.bool_]) -> int:
+    """Episodes of hard braking: onsets of ``accel < HARD_BRAKE``, shape (N, T).
+
+    A run of consecutive hard-braking frames of one vehicle is one event
+    (one that is already under way at the first frame counts too).
+    """
+    hard = (accel < HARD_BRAKE) & ok
+    onset = hard[:, 1:] & ~hard[:, :-1]
+    return int(onset.sum() + hard[:, 0].sum())
+
+
+def lane_index_changes(
+    lane_pos: NDArray[Any], alive: NDArray[np.bool_], margin: float = 0.3
+) -> int:
+    """Changes of lane index with hysteresis, over alive frames.
+
+    Parameters
+    ----------
+    lane_pos : ndarray of shape (N, T+1)
+        Lateral position in lane widths (lane ``k`` is ``[k, k + 1)``).
+    alive : ndarray of bool, shape (N, T+1)
+    margin : float, default=0.3
+        A vehicle in lane ``k`` has changed once it is more than ``margin``
+        [lane widths] beyond the lane's edge.
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> pos = np.array([[0.5, 0.9, 1.2, 1.4, 1.5]])   # lane 0 to lane 1
+    >>> lane_index_changes(pos, np.ones_like(pos, bool))
+    1
+    """
+    count = 0
+    for row, ok in zip(lane_pos, alive, strict=True):
+        row = row[ok]
+        if row.size == 0:
+            continue
+        cur = np.floor(row[0])
+        for p in row:
+            if p > cur + 1 + margin or p < cur - margin:
+                count += 1
+                cur = np.floor(p)
+    return count
+
+
+def ks_w1(sample: NDArray[Any], reference: NDArray[Any]) -> tuple[float, float] | None:
+    """Kolmogorov-Smirnov statistic [-] and 1-Wasserstein distance of two samples.
+
+    The distance is in the samples' unit; None where either is empty.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.arange(10.0)
+    >>> ks_w1(x, x)
+    (0.0, 0.0)
+    >>> ks, w1 = ks_w1(x, x + 100.0)
+    >>> ks, round(w1, 6)
+    (1.0, 100.0)
+    """
+    if sample.size == 0 or reference.size == 0:
+        return None
+    ks = stats.ks_2samp(sample, reference).statistic
+    return float(ks), float(stats.wasserstein_distance(sample, reference))
+
+
+def percentiles(x: NDArray[Any]) -> dict[str, float] | None:
+    """The :data:`PERCENTILES` of ``x``: ``{"p5": ..., "p10": ...}``, None if empty."""
+    if x.size == 0:
+        return None
+    q = np.percentile(x, PERCENTILES)
+    return {f"p{p}": float(v) for p, v in zip(PERCENTILES, q, strict=True)}
+
+
+def stopped_fraction(speed: NDArray[Any]) -> float:
+    """Share of speed samples below :data:`STOPPED_SPEED` (NaN for none) [-]."""
+    return float(np.mean(speed < STOPPED_SPEED)) if speed.size else float("nan")
+
+
+def event_rate(count: int, hours: float) -> dict[str, Any]:
+    """``count`` events in ``hours``: the count, the rate and its exact 95% interval.
+
+    Returns
+    -------
+    dict
+        ``count``, ``per_hour`` [1/h] and ``ci95`` (Garwood, ``[low, high]``
+        [1/h], :func:`~avrisk.learning.lane_changes.poisson_rate_interval`).
+
+    Examples
+    --------
+    >>> event_rate(0, 2.0)["per_hour"], round(event_rate(0, 2.0)["ci95"][1], 3)
+    (0.0, 1.844)
+    """
+    low, high = poisson_rate_interval(count, hours)
+    return {"count": count, "per_hour": count / hours, "ci95": [low, high]}
+
+
+def relative_gap(x: float, reference: float) -> float:
+    """``|x - reference| / |reference|`` (0 or infinite for a zero reference).
+
+    Examples
+    --------
+    >>> relative_gap(0.9, 1.0) < 0.11, relative_gap(0.0, 0.0), relative_gap(1.0, 0.0)
+    (True, 0.0, inf)
+    """
+    if reference != 0:
+        return abs(x - reference) / abs(reference)
+    return 0.0 if x == 0 else float("inf")

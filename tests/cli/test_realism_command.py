@@ -1,0 +1,161 @@
+"""``avrisk realism`` through the Typer app: the files it writes, and bad input."""
+
+import functools
+import json
+import shutil
+
+import pytest
+from PIL import Image
+from typer.testing import CliRunner
+
+import avrisk
+import avrisk.realism
+from avrisk.agents.drivers.store import default_drivers_dir
+from avrisk.cli.app import app
+from avrisk.fingerprint import sha256_file
+from avrisk.realism import FILES, RealismSettings
+from tests.cli.test_terminal import assert_whole_at_80_columns
+
+TINY = ("--windows", "3", "--replicates", "1", "--scenes", "1")
+
+
+def realism(*args):
+    return CliRunner().invoke(
+        app, ["realism", *[str(a) for a in args]], env={"COLUMNS": "80"}
+    )
+
+
+@pytest.fixture
+def short_parts(monkeypatch):
+    """Part A's windows cut to 3 s and part B's scenes to 6 s: seconds, not minutes."""
+    monkeypatch.setattr(
+        avrisk.realism,
+        "RealismSettings",
+        functools.partial(RealismSettings, window_s=3.0, horizon=6.0),
+    )
+
+
+@pytest.fixture
+def drivers_copy(tmp_path):
+    """A folder holding a copy of the shipped driver files."""
+    folder = tmp_path / "drivers"
+    folder.mkdir()
+    for name in ("driver_net.npz", "xi_prior.npz"):
+        shutil.copy(default_drivers_dir() / name, folder / name)
+    return folder
+
+
+def test_the_report_is_written_whole_with_its_provenance(
+    tmp_path, short_parts, drivers_copy
+):
+    out = tmp_path / "report"
+    result = realism(*TINY, "--seed", "5", "--drivers", drivers_copy, "--out", out)
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in out.iterdir()) == sorted(FILES.values())
+    figures = json.loads((out / "realism.json").read_text())
+    prov = figures["provenance"]
+    assert prov["avrisk"] == avrisk.__version__
+    assert prov["drivers"]["shipped"] is False
+    assert prov["drivers"]["sha256"] == {
+        name: sha256_file(default_drivers_dir() / name)
+        for name in ("driver_net.npz", "xi_prior.npz")
+    }
+    assert prov["settings"] == {
+        "seed": 5,
+        "replicates": 1,
+        "windows": 3,
+        "scenes": 1,
+        "window_s": 3.0,
+        "horizon": 6.0,
+    }
+    held_out = prov["held_out"]["part_a"]
+    assert held_out["windows"] == 3 and len(held_out["indices"]) == 3
+    assert held_out["windows_available"] > 3
+    assert prov["held_out"]["part_b"]["split_seed"] == 21
+    assert "us101_lane_changes.parquet" in prov["data_sha256"]
+    assert prov["vehicle_hours"]["part_a_per_model"] == pytest.approx(3 * 3 / 3600)
+    assert set(figures["part_a"]["models"]) == {
+        "learned mu0",
+        "learned xi~P0",
+        "learned xi~P0, mean actions",
+        "IDM",
+    }
+    assert len(figures["part_a_targets"]["learned mu0"]) == 7
+    assert "IDM+MOBIL" in figures["part_b"]["models"]
+    text = (out / "realism.md").read_text()
+    for title in ("**A. Car following", "**Targets of issue 21", "**Collisions of "):
+        assert title in text
+    assert "**B. Lane changes** (1 random six-lane scenes x 6 vehicles x 6 s" in text
+    assert "--drivers" in text and "--seed 5" in text
+    for name in ("part_a_cdfs.png", "lane_changes.png"):
+        with Image.open(out / name) as image:
+            assert image.format == "PNG" and image.size[0] > 1000
+    assert_whole_at_80_columns(result.stdout)
+    assert "Issue 21's targets, part A" in result.stdout
+    assert "wrote realism.md, realism.json" in " ".join(result.stdout.split())
+
+
+def test_the_same_seed_gives_the_same_figures(tmp_path, short_parts):
+    runs = []
+    for name in ("a", "b"):
+        assert realism(*TINY, "--out", tmp_path / name).exit_code == 0
+        figures = json.loads((tmp_path / name / "realism.json").read_text())
+        runs.append({k: v for k, v in figures.items() if k != "provenance"})
+    assert runs[0] == runs[1]
+
+
+@pytest.mark.slow
+def test_the_report_at_the_real_window_and_scene_lengths(tmp_path):
+    out = tmp_path / "report"
+    result = realism(
+        "--windows", "2", "--replicates", "1", "--scenes", "1", "--out", out
+    )
+    assert result.exit_code == 0, result.output
+    figures = json.loads((out / "realism.json").read_text())
+    assert figures["part_a"]["window_s"] == 15.0
+    assert figures["provenance"]["drivers"]["shipped"] is True
+    assert figures["part_b"]["models"]["IDM+MOBIL"]["driven_hours"] == pytest.approx(
+        6 * 60.0 / 3600
+    )
+
+
+def one_line_error(result):
+    assert result.exit_code == 2, result.output
+    assert result.output.count("\n") == 1, result.output
+    assert result.output.startswith("error: ")
+    return result.output
+
+
+def test_a_missing_drivers_folder_is_a_one_line_error(tmp_path):
+    out = one_line_error(realism("--drivers", tmp_path / "nowhere", "--out", tmp_path))
+    assert "no such folder" in out
+
+
+def test_a_drivers_folder_without_the_prior_is_a_one_line_error(tmp_path, drivers_copy):
+    (drivers_copy / "xi_prior.npz").unlink()
+    out = one_line_error(realism("--drivers", drivers_copy, "--out", tmp_path / "o"))
+    assert "lacks xi_prior.npz" in out
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "name, what",
+    [("driver_net.npz", "not a driver network"), ("xi_prior.npz", "not an xi prior")],
+)
+def test_a_corrupt_driver_file_is_a_one_line_error(tmp_path, drivers_copy, name, what):
+    (drivers_copy / name).write_bytes(b"this is not a numpy archive")
+    out = one_line_error(realism("--drivers", drivers_copy, "--out", tmp_path / "o"))
+    assert what in out and name in out
+
+
+def test_an_archive_with_the_wrong_arrays_is_a_one_line_error(tmp_path, drivers_copy):
+    shutil.copy(drivers_copy / "xi_prior.npz", drivers_copy / "driver_net.npz")
+    out = one_line_error(realism("--drivers", drivers_copy, "--out", tmp_path / "o"))
+    assert "not a driver network" in out
+
+
+def test_an_out_path_that_is_a_file_is_refused_before_any_work(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    out = one_line_error(realism("--out", blocker))
+    assert "is a file" in out
