@@ -26,6 +26,7 @@ def test_scenarios_lists_every_bundled_scenario_with_its_whole_description():
             "highway_idm",
             "highway_lane_changes",
             "highway_rare",
+            "highway_sampled",
             "highway_vision",
         ]
     )
