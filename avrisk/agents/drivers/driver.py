@@ -21,8 +21,7 @@ paper) every step is an independent draw from the network's Gaussian. A fitted
 persistent as human residuals are (independent draws at 10 Hz give a jerk far
 above human jerk); a calibrated ``c < 1`` tempers the variance that behaviour
 cloning inflates on states it cannot predict. ``eps`` and ``xi`` are the
-actor's state
-(:class:`LearnedState`) in the simulator loop.
+actor's state (:class:`LearnedState`) in the simulator loop.
 
 Examples
 --------
@@ -327,6 +326,7 @@ class LearnedDriver:
         # Columns of the controlled vehicles, or None for all of them (kept as
         # an index so the compiled step selects them without a host sync).
         self.columns = None if bool(controlled.all()) else controlled.nonzero()[:, 0]
+        self.n_controlled = int(controlled.sum())
         self.stochastic = stochastic
         self.noise_steps = noise_steps
         self.allow_reverse = allow_reverse
@@ -343,8 +343,7 @@ class LearnedDriver:
     @property
     def params_dim(self) -> int:
         """Columns of the parameter block: ``XI_DIM``, plus ``2 T C`` innovations."""
-        steps = self.noise_steps or 0
-        return XI_DIM + 2 * steps * int(self.controlled.sum())
+        return XI_DIM + 2 * (self.noise_steps or 0) * self.n_controlled
 
     def init(self, obs: Observation, params: Tensor | None) -> LearnedState:
         """``xi`` of every rollout (``params``, shape (B, XI_DIM), or the default).
@@ -359,30 +358,30 @@ class LearnedDriver:
             or the innovations are missing.
         """
         batch = obs.state.batch_size
-        if self.noise_steps is None:
-            state = _initial_state(
-                "LearnedDriver", self.net, self.xi, params, batch, None
-            )
-            if self.noise is None:
-                return state
-            mine = (batch, int(self.controlled.sum()), 2)
-            return LearnedState(
-                state.xi, state.xi.new_zeros(mine, dtype=self.noise.dtype)
-            )
-        if params is None or params.dim() != 2 or params.shape[1] != self.params_dim:
-            got = None if params is None else tuple(params.shape)
-            raise ValueError(
-                f"LearnedDriver with noise_steps={self.noise_steps} takes params of "
-                f"shape (B, {self.params_dim}) (xi, then the innovations); got {got}"
-            )
-        state = _initial_state(
-            "LearnedDriver", self.net, self.xi, params[:, :XI_DIM], batch, None
-        )
-        innovations = params[:, XI_DIM:].to(state.xi.device, state.xi.dtype)
-        innovations = innovations.reshape(batch, self.noise_steps, -1, 2)
-        return LearnedState(
-            state.xi, torch.zeros_like(innovations[:, 0]), innovations.contiguous()
-        )
+        xi, innovations = params, None
+        if self.noise_steps is not None:
+            if (
+                params is None
+                or params.dim() != 2
+                or params.shape[1] != self.params_dim
+            ):
+                got = None if params is None else tuple(params.shape)
+                raise ValueError(
+                    f"LearnedDriver with noise_steps={self.noise_steps} takes params "
+                    f"of shape (B, {self.params_dim}) (xi, then the innovations); "
+                    f"got {got}"
+                )
+            xi, innovations = params[:, :XI_DIM], params[:, XI_DIM:]
+        state = _initial_state("LearnedDriver", self.net, self.xi, xi, batch, None)
+        if not self.stochastic:
+            return state
+        if innovations is not None:
+            innovations = innovations.to(state.xi.device, state.xi.dtype)
+            innovations = innovations.reshape(batch, self.noise_steps, -1, 2)
+            innovations = innovations.contiguous()
+        # Zeros, so that the state has the same structure at every step.
+        eps = state.xi.new_zeros((batch, self.n_controlled, 2))
+        return LearnedState(state.xi, eps, innovations)
 
     def distribution(self, obs: Observation, xi: Tensor) -> ActionDistribution:
         """The controlled vehicles' action distributions, fields of shape (B, C).
