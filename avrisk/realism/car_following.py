@@ -40,6 +40,7 @@ from avrisk.realism.metrics import (
     ks_w1,
     lane_index_changes,
     percentiles,
+    road_departures,
     stopped_fraction,
     ttc_samples,
 )
@@ -143,7 +144,9 @@ class Followers:
     hours : float
         Vehicle-hours driven, ``W T DT / 3600`` [h].
     hard_brakes, lane_changes, collisions, road_departures : int
-        Event counts (collisions with the leader; windows ending off the road).
+        Event counts (collisions with the leader; windows in which the
+        follower crosses a road edge,
+        :func:`~avrisk.realism.metrics.road_departures`).
     gap_rmse : float
         Root mean square of the gap's difference to the record after ``T``
         steps [m].
@@ -204,7 +207,7 @@ def followers(
     r = result
     kin = kinematics(r.v, r.alive)
     lat = windows.has_lateral
-    lane_pos = (r.offset + road.lane_center_y(windows.lane)[:, None]) / road.lane_width
+    y = r.offset + road.lane_center_y(windows.lane)[:, None]  # [m]
     return Followers(
         samples={
             "speed": kin.speed,
@@ -216,9 +219,9 @@ def followers(
         },
         hours=len(windows) * windows.n_steps * DT / 3600,
         hard_brakes=hard_brake_events(kin.accel_all, kin.accel_ok),
-        lane_changes=lane_index_changes(lane_pos, r.alive),
+        lane_changes=lane_index_changes(y / road.lane_width, r.alive),
         collisions=int(r.crash.sum()),
-        road_departures=int(r.offroad.sum()),
+        road_departures=road_departures(y, 0.5 * windows.width_f, road.width, r.alive),
         gap_rmse=float(np.sqrt(np.mean((r.gap[:, -1] - windows.gap[:, -1]) ** 2))),
         impacts=_impacts(windows, r, labels),
     )

@@ -41,6 +41,7 @@ __all__ = [
     "lane_index_changes",
     "percentiles",
     "relative_gap",
+    "road_departures",
     "stopped_fraction",
     "ttc_samples",
 ]
@@ -118,6 +119,45 @@ def hard_brake_events(accel: NDArray[Any], ok: NDArray[np.bool_]) -> int:
     hard = (accel < HARD_BRAKE) & ok
     onset = hard[:, 1:] & ~hard[:, :-1]
     return int(onset.sum() + hard[:, 0].sum())
+
+
+def road_departures(
+    y: NDArray[Any], half_width: NDArray[Any], road_width: float, alive: NDArray[Any]
+) -> int:
+    """Vehicles that cross a road edge: off the road after being on it.
+
+    A vehicle is off the road at a frame when a side lies beyond an edge
+    (``y - half_width < 0`` or ``y + half_width > road_width``; heading left
+    out, so that recorded and simulated tracks are measured alike). A
+    departure is a frame off the road after an alive frame on it; a vehicle
+    counts once however often it leaves, and one that starts over an edge
+    counts only if it comes back and leaves again.
+
+    Parameters
+    ----------
+    y : ndarray of shape (N, T+1)
+        Lateral position of the vehicle's centre [m].
+    half_width : ndarray of shape (N,)
+        Half its width [m].
+    road_width : float
+        [m]; the road spans ``0 <= y <= road_width``.
+    alive : ndarray of bool, shape (N, T+1)
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> y = np.array([[1.2, 1.0, 0.8], [0.9, 1.5, 1.5]])  # one leaves, one returns
+    >>> road_departures(y, np.array([1.0, 1.0]), 10.0, np.ones_like(y, bool))
+    1
+    """
+    hw = np.asarray(half_width)[:, None]
+    off = (y - hw < 0.0) | (y + hw > road_width)
+    onset = off[:, 1:] & ~off[:, :-1] & alive[:, 1:] & alive[:, :-1]
+    return int(onset.any(axis=1).sum())
 
 
 def lane_index_changes(

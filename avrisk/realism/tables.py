@@ -103,7 +103,11 @@ def part_a_table(summary: dict[str, Any]) -> str:
                 for c in (m["collisions"] for m in models.values())
             ],
         ),
-        _row("road departures [1/veh-h]", "0", rate("road_departures")),
+        _row(
+            "road departures [1/veh-h]",
+            f"{human['road_departures']['per_hour']:.1f}",
+            rate("road_departures"),
+        ),
         _row(
             f"RMSE of the gap after {summary['window_s']:.0f} s [m]",
             "0",

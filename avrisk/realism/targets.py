@@ -113,7 +113,7 @@ def _closer(model: dict, human: dict, reference: dict) -> TargetResult:
         ks, ks_ref = _ks(model, key), _ks(reference, key)
         wins += ks is not None and ks_ref is not None and ks < ks_ref
     for key in RATE_METRICS:
-        h = human[key]["per_hour"]  # 0 collisions, 0 departures on record
+        h = human[key]["per_hour"]  # measured on the record like the models
         d = abs(model[key]["per_hour"] - h)
         d_ref = abs(reference[key]["per_hour"] - h)
         wins += d < d_ref or d == 0

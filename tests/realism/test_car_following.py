@@ -44,6 +44,29 @@ def crash_in_second_window(windows):
     )
 
 
+def test_road_departures_are_measured_alike_on_the_record_and_in_replays():
+    # A follower recorded with a side over the right edge (lane 0's centre
+    # is 1.85 m from it; half width 1.15 m): the record and a replay that
+    # stays there have no departure; a replay that drives on the road, then
+    # over the edge, has one.
+    windows = two_windows()
+    windows = dataclasses.replace(
+        windows,
+        lane=np.zeros(2, np.int64),
+        width_f=np.full(2, 2.3),
+        offset=np.full((2, T + 1), -0.9),
+    )
+    road = Road()
+    assert (
+        followers(windows, recorded(windows), road, np.arange(2)).road_departures == 0
+    )
+    leaves = recorded(windows)
+    offset = np.zeros((2, T + 1))
+    offset[1, 5:] = -0.9
+    leaves = dataclasses.replace(leaves, offset=offset)
+    assert followers(windows, leaves, road, np.arange(2)).road_departures == 1
+
+
 def test_the_record_has_no_collision_and_no_gap_error():
     windows = two_windows()
     human = followers(windows, recorded(windows), Road(), np.arange(2))

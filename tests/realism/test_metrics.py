@@ -13,6 +13,7 @@ from avrisk.realism.metrics import (
     lane_index_changes,
     percentiles,
     relative_gap,
+    road_departures,
     stopped_fraction,
     ttc_samples,
 )
@@ -96,3 +97,18 @@ def test_percentiles_stopped_share_and_relative_gap():
     assert relative_gap(-0.85, -1.0) == pytest.approx(0.15)
     assert relative_gap(0.0, 0.0) == 0.0
     assert relative_gap(0.1, 0.0) == np.inf
+
+
+def test_a_road_departure_is_an_onset_over_either_edge_while_alive():
+    hw = np.array([1.0, 1.0, 1.0, 1.0])
+    y = np.array(
+        [
+            [5.0, 5.0, 9.5, 9.5],  # over the left edge (10 m road): one
+            [5.0, 0.5, 5.0, 0.5],  # leaves twice: still one vehicle
+            [0.5, 0.5, 5.0, 5.0],  # starts over the edge, comes back: none
+            [5.0, 5.0, 0.5, 0.5],  # leaves after its last alive frame: none
+        ]
+    )
+    alive = np.ones_like(y, bool)
+    alive[3, 2:] = False
+    assert road_departures(y, hw, 10.0, alive) == 2
