@@ -3,9 +3,10 @@
 Runs :func:`avrisk.learning.train.train_drivers` on the NGSIM I-80 data
 shipped with the package (``avrisk/data/ngsim/``) or in ``--data-dir`` (behaviour
 cloning, DAgger, the bootstrap ensemble of heads, the graphical-lasso prior of
-``xi``; about two to ten minutes on two cores) with one torch thread, so that
-the same seed, data and machine give the same files, and writes into
-``--out``::
+``xi``; about four minutes on one core) with one torch thread, so that the
+same seed, data and CPU kernels give the same files (the shipped ones were
+trained with ``ATEN_CPU_CAPABILITY=avx2 OPENBLAS_CORETYPE=Haswell``; the
+command warns when the kernels here differ), and writes into ``--out``::
 
     driver_net.npz          the driver network (avrisk.agents.drivers.DriverNet)
     xi_prior.npz            xi ~ N(mu0, Sigma0): mean, sparse precision, heads
@@ -18,6 +19,7 @@ only when ``--out`` names that folder.
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 import zlib
@@ -153,6 +155,34 @@ def _check_writable(out: Path) -> None:
         raise CliError(f"cannot write to --out {out}: {reason}") from None
 
 
+def _warn_other_kernels() -> None:
+    """Say so when this machine's CPU kernels are not the shipped files'.
+
+    The shipped ``training_report.json`` records the kernels that trained
+    them; with others the run is a training like theirs, not their copy.
+    """
+    from avrisk.learning.training_report import (
+        KERNEL_PINS,
+        TRAINING_REPORT_FILE,
+        cpu_kernels,
+    )
+
+    shipped = json.loads((default_drivers_dir() / TRAINING_REPORT_FILE).read_text())
+    theirs = shipped["environment"].get("cpu_kernels")
+    here = cpu_kernels()
+    if theirs is None or here == theirs:
+        return
+    pins = " ".join(f"{k}={v}" for k, v in KERNEL_PINS.items())
+    err_console.print(
+        f"[yellow]warning:[/] CPU kernels here (torch {here['torch']}, BLAS "
+        f"{', '.join(here['blas'])}) differ from those that trained the shipped "
+        f"files (torch {theirs['torch']}, BLAS {', '.join(theirs['blas'])}): "
+        "this run is a training like theirs, not a byte-for-byte copy. To "
+        f"reproduce them, run with {pins} set.",
+        highlight=False,
+    )
+
+
 def _number(value: float) -> str:
     """Counts with thousands separators, other values to 4 significant digits."""
     return f"{value:,.0f}" if float(value).is_integer() else f"{value:.4g}"
@@ -199,6 +229,7 @@ def train_drivers_command(
         # command needs at start-up.
         from avrisk.learning import train
 
+        _warn_other_kernels()
         with training_progress(err_console) as progress:
             train.train_drivers(seed, out, data_dir=folder, progress=progress)
         written = ", ".join(

@@ -7,9 +7,11 @@ import pytest
 from typer.testing import CliRunner
 
 import avrisk.learning.train as training
+import avrisk.learning.training_report as training_report
 from avrisk.agents.drivers import XiPrior, load_driver_net
 from avrisk.agents.drivers.store import default_drivers_dir
 from avrisk.cli.app import app
+from avrisk.cli.train_drivers import _warn_other_kernels
 
 runner = CliRunner()
 
@@ -67,3 +69,20 @@ def test_an_out_path_that_cannot_be_a_folder_is_refused_before_training(
     result = _train("--data-dir", str(fake_ngsim), "--out", str(blocker / "drivers"))
     assert result.exit_code == 2 and result.output.count("\n") == 1
     assert "error: cannot write to --out" in result.output
+
+
+def test_training_on_other_cpu_kernels_than_the_shipped_files_says_how_to_match(
+    monkeypatch, capsys
+):
+    report = json.loads((default_drivers_dir() / "training_report.json").read_text())
+    theirs = report["environment"]["cpu_kernels"]
+    monkeypatch.setattr(training_report, "cpu_kernels", lambda: theirs)
+    _warn_other_kernels()
+    assert capsys.readouterr().err == ""
+    other = {"torch": "AVX512", "blas": ["SkylakeX"]}
+    monkeypatch.setattr(training_report, "cpu_kernels", lambda: other)
+    _warn_other_kernels()
+    said = " ".join(capsys.readouterr().err.split())
+    assert "torch AVX512, BLAS SkylakeX" in said
+    assert f"torch {theirs['torch']}, BLAS {', '.join(theirs['blas'])}" in said
+    assert "ATEN_CPU_CAPABILITY=avx2 OPENBLAS_CORETYPE=Haswell" in said

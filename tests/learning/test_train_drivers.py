@@ -1,6 +1,7 @@
 import json
 
 import pytest
+import torch
 
 from avrisk.agents.drivers.store import XiPrior, load_driver_net
 from avrisk.agents.drivers.xi import XI_DIM
@@ -25,3 +26,6 @@ def test_train_drivers_writes_loadable_weights_a_prior_and_a_report(
     }
     assert len(saved["trunk_history"]) == 1 and len(saved["dagger_history"]) == 1
     assert [row["iteration"] for row in saved["closed_loop_history"]] == [0, 1, 2]
+    kernels = saved["environment"]["cpu_kernels"]
+    assert kernels["torch"] == torch.backends.cpu.get_cpu_capability()
+    assert kernels["blas"]  # numpy's OpenBLAS at least
