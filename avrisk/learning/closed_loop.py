@@ -31,6 +31,12 @@ and as differentiable-simulation imitation does (e.g. Scheel et al. 2021,
             simulated transitions into the policy, as in model-based GAIL
             (Baram et al. 2017) with the simulator as the model, and the
             barriers play the part of RAIL's collision penalty
+    stress (if stress_windows > 0): that many hard-braking training windows
+        (drawn with replacement), their leaders braking stress_factor times
+        as hard (:func:`stressed`), replayed under the barriers alone (their
+        recorded follower no longer belongs to them) and added to the loss: the
+        emergencies of the held-out data (leaders braking at -3 m/s^2 into
+        a standing queue) are harder than nearly all training windows
     one Adam step on every weight of the network (trunk and shared head)
 
 Early stopping on validation windows (a fixed part of the training windows,
@@ -43,6 +49,7 @@ moves from one iteration to the next. The noise buffers
 from __future__ import annotations
 
 import copy
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,6 +71,7 @@ __all__ = [
     "closed_loop_loss",
     "differentiable_replay",
     "simulated_transitions",
+    "stressed",
 ]
 
 
@@ -256,6 +264,25 @@ def _split(n: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return np.sort(order[n_val:]), np.sort(order[:n_val])
 
 
+def stressed(windows: CarFollowingWindows, factor: float) -> CarFollowingWindows:
+    """``windows`` whose leaders change speed ``factor`` times as fast.
+
+    The leader's speed becomes ``max(v0 + factor (v_l(t) - v0), 0)``, ``v0``
+    its first speed: a leader that brakes brakes ``factor`` times as hard
+    and stops sooner. The follower's record no longer belongs to that
+    leader, so such windows are for the barriers only.
+    """
+    v0 = windows.v_l[:, :1]
+    v_l = np.maximum(v0 + factor * (windows.v_l - v0), 0.0)
+    return dataclasses.replace(windows, v_l=v_l)
+
+
+def _hard_braking(windows: CarFollowingWindows, config: ClosedLoopConfig) -> np.ndarray:
+    """Whether each window's leader brakes harder than ``hard_brake_decel``."""
+    leader_decel = np.diff(windows.v_l, axis=1).min(axis=1) / DT
+    return leader_decel < config.hard_brake_decel
+
+
 def _minibatch_weights(
     windows: CarFollowingWindows, config: ClosedLoopConfig
 ) -> np.ndarray | None:
@@ -266,8 +293,7 @@ def _minibatch_weights(
     """
     if config.hard_brake_oversample == 1.0:
         return None
-    leader_decel = np.diff(windows.v_l, axis=1).min(axis=1) / DT
-    hard = leader_decel < config.hard_brake_decel
+    hard = _hard_braking(windows, config)
     weight = np.where(hard, config.hard_brake_oversample, 1.0)
     return weight / weight.sum()
 
@@ -327,6 +353,8 @@ def closed_loop_finetune(
     history: list[dict[str, float]] = [{"iteration": 0.0, **first}]
     net.train()
     draw = _minibatch_weights(windows.take(train_idx), config)
+    hard_idx = train_idx[_hard_braking(windows.take(train_idx), config)]
+    barriers_only = dataclasses.replace(config, imitation_weight=0.0, offset_weight=0.0)
     for it in range(config.iterations):
         size = min(config.batch_windows, len(train_idx))
         batch = rng.choice(train_idx, size=size, p=draw)
@@ -342,6 +370,14 @@ def closed_loop_finetune(
             accuracy = disc.update(x[valid], config.disc_epochs, config.disc_batch)
             disc_row = {"disc_accuracy": accuracy}
         loss, parts = closed_loop_loss(trace, part, config, disc)
+        if config.stress_windows > 0 and len(hard_idx) > 0:
+            pick = rng.choice(hard_idx, size=config.stress_windows)
+            harder = stressed(windows.take(pick), config.stress_factor)
+            stress_seeds = seeds[0] + 7 + torch.arange(len(pick))
+            trace = differentiable_replay(harder, net, road, stress_seeds)
+            stress, stress_parts = closed_loop_loss(trace, harder, barriers_only)
+            loss = loss + stress
+            parts["stress_crash_rate"] = stress_parts["crash_rate"]
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(net.parameters(), config.grad_clip)

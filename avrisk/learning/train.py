@@ -15,7 +15,9 @@ Pipeline of :func:`train_drivers` (DESIGN.md §4), one module a stage::
     sampling noise  = again, for the final network
     closed loop     = back-propagation through replays of       closed-loop
                       training windows: imitation + MGAIL        realism
-                      reward + gap and TTC barriers
+                      reward + gap and TTC barriers, and
+                      hard-braking windows with their leaders
+                      braking harder, under the barriers
                                               (closed_loop.py, mgail.py)
     heads 1..m      = the head refitted on m bootstrap resamples of the
                       episodes (trunk frozen, so the heads are comparable),

@@ -74,6 +74,14 @@ class ClosedLoopConfig:
         Steps between validations.
     grad_clip : float, default=1.0
         Maximal gradient norm per step.
+    stress_windows : int, default=16
+        Hard-braking training windows replayed per step besides the
+        minibatch with their leaders braking ``stress_factor`` times as hard
+        (:func:`~avrisk.learning.closed_loop.stressed`), under the barriers
+        alone (the recorded follower no longer belongs to them): emergencies
+        harder than the data hold, in which to learn to stop (0: none).
+    stress_factor : float, default=1.5
+        How much harder their leaders brake.
     """
 
     iterations: int = 120
@@ -96,6 +104,8 @@ class ClosedLoopConfig:
     validation_fraction: float = 0.2
     validate_every: int = 10
     grad_clip: float = 1.0
+    stress_windows: int = 16
+    stress_factor: float = 1.5
 
     def __post_init__(self) -> None:
         if (
@@ -113,6 +123,11 @@ class ClosedLoopConfig:
             raise ValueError(
                 "iterations must be >= 0 and batch_windows, window_steps, "
                 "validate_every and the disc_ sizes >= 1"
+            )
+        if self.stress_windows < 0 or self.stress_factor < 1.0:
+            raise ValueError(
+                "stress_windows must be >= 0 and stress_factor >= 1; got "
+                f"{self.stress_windows} and {self.stress_factor}"
             )
         if self.hard_brake_oversample < 1.0:
             raise ValueError(

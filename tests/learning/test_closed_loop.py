@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -11,6 +13,7 @@ from avrisk.learning.closed_loop import (
     closed_loop_loss,
     differentiable_replay,
     simulated_transitions,
+    stressed,
 )
 from avrisk.learning.gail import human_transitions
 from avrisk.learning.mgail import Discriminator
@@ -111,6 +114,38 @@ def test_closed_loop_training_teaches_a_crashing_driver_to_stop_in_time():
     assert int(after.crash.sum()) < crash_before
 
 
+def test_stressed_leaders_brake_harder_and_stop_sooner():
+    win = queue_windows(n=3, steps=40)
+    harder = stressed(win, 1.5)
+    decel, decel_h = np.diff(win.v_l, axis=1), np.diff(harder.v_l, axis=1)
+    moving = harder.v_l[:, 1:] > 0
+    np.testing.assert_allclose(decel_h[moving], 1.5 * decel[moving])
+    assert harder.v_l.min() == 0.0 and np.array_equal(harder.v_l[:, 0], win.v_l[:, 0])
+    stop, stop_h = (win.v_l == 0).argmax(1), (harder.v_l == 0).argmax(1)
+    assert np.all(stop_h < stop)
+    assert np.array_equal(harder.v_f, win.v_f) and np.array_equal(harder.gap, win.gap)
+
+
+def test_stress_windows_add_barrier_replays_of_harder_emergencies():
+    win = queue_windows(n=10, steps=30)
+    config = ClosedLoopConfig(
+        iterations=2, batch_windows=4, validate_every=1, stress_windows=3
+    )
+    runs = []
+    for _ in range(2):
+        net = load_driver_net()
+        history = closed_loop_finetune(net, win, config, seed=1)
+        runs.append((history, net.default_xi.clone()))
+    (hist, xi), (hist2, xi2) = runs
+    assert hist == hist2 and torch.equal(xi, xi2)
+    assert all("stress_crash_rate" in row for row in hist[1:])
+    plain = load_driver_net()
+    closed_loop_finetune(
+        plain, win, dataclasses.replace(config, stress_windows=0), seed=1
+    )
+    assert not torch.equal(plain.default_xi, xi)
+
+
 def test_centred_heads_keep_their_spread_around_the_network_head():
     net = load_driver_net()
     rng = np.random.default_rng(0)
@@ -131,6 +166,8 @@ def test_centred_heads_keep_their_spread_around_the_network_head():
         {"adversarial_weight": -0.5},
         {"disc_batch": 0},
         {"hard_brake_oversample": 0.5},
+        {"stress_windows": -1},
+        {"stress_factor": 0.9},
     ],
 )
 def test_closed_loop_config_refuses_bad_settings(kwargs):

@@ -1,4 +1,7 @@
+import dataclasses
+
 import numpy as np
+import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
 
@@ -110,3 +113,21 @@ def test_the_shipped_tables_agree_with_each_other_and_the_split():
 def test_the_shipped_tables_are_reproduced_from_the_original_file():
     tables = lane_change_tables(load_us101(original_file(US101_FILE)))
     assert tables.equals(load_lane_change_tables())
+
+
+def test_tables_agree_to_rounding_only():
+    shipped = load_lane_change_tables()
+    ev = shipped.events
+    speed = ev["peak_lateral_speed"].to_numpy()
+
+    def with_speed(values):
+        column = ev.schema.get_field_index("peak_lateral_speed")
+        events = ev.set_column(column, "peak_lateral_speed", pa.array(values))
+        return dataclasses.replace(shipped, events=events)
+
+    assert shipped.equals(with_speed(speed * (1 + 1e-14)))  # rounding
+    assert not shipped.equals(with_speed(speed * (1 + 1e-9)))
+    noisier = dataclasses.replace(shipped, noise_speed=shipped.noise_speed * 1.001)
+    assert not shipped.equals(noisier)
+    fewer = dataclasses.replace(shipped, events=ev.slice(1))
+    assert not shipped.equals(fewer)
