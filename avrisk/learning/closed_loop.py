@@ -271,6 +271,18 @@ def stressed(windows: CarFollowingWindows, factor: float) -> CarFollowingWindows
     its first speed: a leader that brakes brakes ``factor`` times as hard
     and stops sooner. The follower's record no longer belongs to that
     leader, so such windows are for the barriers only.
+
+    Parameters
+    ----------
+    windows : CarFollowingWindows
+        ``W`` windows of ``T`` steps.
+    factor : float
+        At least 1 (:class:`ClosedLoopConfig` checks it).
+
+    Returns
+    -------
+    CarFollowingWindows
+        The same windows with ``v_l`` of shape (W, T+1) [m/s] replaced.
     """
     v0 = windows.v_l[:, :1]
     v_l = np.maximum(v0 + factor * (windows.v_l - v0), 0.0)
