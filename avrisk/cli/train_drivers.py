@@ -178,7 +178,7 @@ def _warn_other_kernels() -> None:
         f"{', '.join(here['blas'])}) differ from those that trained the shipped "
         f"files (torch {theirs['torch']}, BLAS {', '.join(theirs['blas'])}): "
         "this run is a training like theirs, not a byte-for-byte copy. To "
-        f"reproduce them, run with {pins} set.",
+        f"reproduce them on an x86-64 CPU with AVX2, run with {pins} set.",
         highlight=False,
     )
 

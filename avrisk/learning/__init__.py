@@ -40,7 +40,8 @@ order, with the settings of :mod:`~avrisk.learning.train_config`)
   drivers visit, and the DAgger rounds;
 * :mod:`~avrisk.learning.closed_loop` -- back-propagation through replays of
   training windows in the simulator's own step: trajectory imitation, gap and
-  TTC barriers, and (optional) MGAIL's discriminator reward;
+  TTC barriers, (optional) MGAIL's discriminator reward, and replays of
+  hard-braking windows made harder (``stressed``) under the barriers;
 * :mod:`~avrisk.learning.mgail` -- the discriminator of that reward;
 * :mod:`~avrisk.learning.bootstrap_heads` -- the bootstrap ensemble of heads;
 * :mod:`~avrisk.learning.xi_prior_fit` -- ``P0(xi)`` fitted to the heads, and
@@ -85,7 +86,8 @@ discriminator's reward (:mod:`~avrisk.learning.mgail`) through replays of
 human car following into every weight of the network, with a gap and a TTC
 barrier as RAIL's collision penalty. The shipped files add it to trajectory
 imitation (the default ``ClosedLoopConfig``): on held-out windows that had
-fewer rear-end collisions than imitation or MGAIL with the same barriers
+fewer rear-end collisions than imitation or MGAIL with the same barriers, and
+with the stressed replays none at all, at the cost of longer gaps
 (BENCHMARKS.md, "Learned drivers"). Model-free GAIL with PPO
 (:func:`~avrisk.learning.gail.gail_finetune`, the acceleration rows of the
 shared head only) is not run by ``train_drivers``; it did not reduce the
