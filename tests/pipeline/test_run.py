@@ -183,7 +183,9 @@ def test_a_run_killed_with_sigkill_resumes_to_the_uninterrupted_result(tmp_path)
     assert not (tmp_path / "run" / "summary.json").exists()
     resumed = run(tmp_path / "run")
     assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
-    assert resumed["timing"]["rollouts_replayed"] >= 2 * 2000
+    # The kill can fall between the second chunk's file and its record, so
+    # only the first chunk is sure to be recorded (and replayed, not rerun).
+    assert resumed["timing"]["rollouts_replayed"] >= 2000
 
 
 def test_float32_exact_parameters_are_stored_as_float32_and_resume_exactly(tmp_path):
