@@ -344,14 +344,13 @@ def closed_loop_finetune(
         return []
     road = Road()
     train_idx, val_idx = _split(len(windows), config.validation_fraction, seed)
-    val = windows.take(val_idx)
+    train_windows, val = windows.take(train_idx), windows.take(val_idx)
     val_seeds = torch.arange(len(val), dtype=torch.int64) + 1_000_003 * (seed + 1)
     rng = np.random.default_rng(seed)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     disc = None
     if config.adversarial_weight > 0:
-        human = windows.take(train_idx)
-        disc = Discriminator(human, config.disc_hidden, config.disc_lr, seed)
+        disc = Discriminator(train_windows, config.disc_hidden, config.disc_lr, seed)
 
     def validate() -> dict[str, float]:
         with torch.no_grad():
@@ -364,8 +363,8 @@ def closed_loop_finetune(
     best = copy.deepcopy(net.state_dict())
     history: list[dict[str, float]] = [{"iteration": 0.0, **first}]
     net.train()
-    draw = _minibatch_weights(windows.take(train_idx), config)
-    hard_idx = train_idx[_hard_braking(windows.take(train_idx), config)]
+    draw = _minibatch_weights(train_windows, config)
+    hard_idx = train_idx[_hard_braking(train_windows, config)]
     barriers_only = dataclasses.replace(config, imitation_weight=0.0, offset_weight=0.0)
     for it in range(config.iterations):
         size = min(config.batch_windows, len(train_idx))
