@@ -23,10 +23,15 @@ for dir in $("$venv/bin/python" -m pip config list 2>/dev/null \
     [ -d "$dir" ] && find_links+=(--find-links "$dir")
 done
 
+# Bytecode is compiled at install (pip does so by default, uv when asked): where
+# PYTHONDONTWRITEBYTECODE is set, a process would otherwise compile the ~3,500
+# modules it imports (torch's among them) from source every time it starts,
+# seconds per command (BENCHMARKS.md, "Start-up").
 if "$venv/bin/python" -m pip install -q uv >/dev/null 2>&1; then
-    "$venv/bin/python" -m uv pip install -q --python "$venv/bin/python" \
-        "${find_links[@]}" -c constraints.txt -e "$spec"
+    "$venv/bin/python" -m uv pip install -q --compile-bytecode \
+        --python "$venv/bin/python" "${find_links[@]}" -c constraints.txt -e "$spec"
 else
     "$venv/bin/python" -m pip install -q "${find_links[@]}" -c constraints.txt -e "$spec"
 fi
+"$venv/bin/python" -m compileall -q avrisk >/dev/null
 echo "avrisk installed in $venv ($("$venv/bin/python" -c 'import avrisk; print(avrisk.__version__)'))"
