@@ -384,6 +384,9 @@ def closed_loop_finetune(
         if config.stress_windows > 0 and len(hard_idx) > 0:
             pick = rng.choice(hard_idx, size=config.stress_windows)
             harder = stressed(windows.take(pick), config.stress_factor)
+            # These noise seeds are those of minibatch windows 7, 8, ...: the
+            # stress replays share their noise streams. Kept as is, since the
+            # shipped drivers were trained with them (byte-for-byte rebuild).
             stress_seeds = seeds[0] + 7 + torch.arange(len(pick))
             trace = differentiable_replay(harder, net, road, stress_seeds)
             stress, stress_parts = closed_loop_loss(trace, harder, barriers_only)
