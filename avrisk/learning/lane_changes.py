@@ -294,14 +294,16 @@ def exposure_seconds(
 
 
 def poisson_rate_interval(
-    k: int, exposure: float, level: float = 0.95
+    k: float, exposure: float, level: float = 0.95
 ) -> tuple[float, float]:
     """Exact (Garwood) interval of a Poisson rate: ``k`` events in ``exposure``.
 
     Parameters
     ----------
-    k : int
-        Events, ``>= 0``.
+    k : float
+        Events, ``>= 0``: a count, or an effective count (not necessarily an
+        integer) where events are overdispersed
+        (:func:`avrisk.realism.metrics.clustered_event_rate`).
     exposure : float
         ``> 0`` (e.g. vehicle-hours: the rate is then per vehicle-hour).
     level : float, default=0.95

@@ -15,7 +15,9 @@ humans drove it once.
 (speed, acceleration, jerk, gap, TTC, lateral offset) and event counts
 (:class:`Followers`); :func:`summarise_part_a` turns them into the report's
 figures (percentiles, KS and W1 to the humans, rates per vehicle-hour with
-exact Poisson intervals, where the collisions happened).
+exact Poisson intervals -- for collisions also with the windows as clusters,
+since a window's replays share its leader -- and where the collisions
+happened).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from avrisk.agents.idm import IDMDriver, IDMParams
 from avrisk.learning.replay import CarFollowingWindows, ReplayResult, replay
 from avrisk.realism.metrics import (
     DT,
+    clustered_event_rate,
     event_rate,
     hard_brake_events,
     kinematics,
@@ -150,6 +153,9 @@ class Followers:
     gap_rmse : float
         Root mean square of the gap's difference to the record after ``T``
         steps [m].
+    collisions_by_window : ndarray of int64, shape (W,)
+        Collisions per window, summed over its replays (windows in the order
+        of their first replay).
     impacts : ndarray of shape (K, 7)
         One row per collision, columns :data:`IMPACT_COLUMNS`: held-out window,
         impact step, follower and leader speed then [m/s], the hardest
@@ -164,6 +170,7 @@ class Followers:
     collisions: int
     road_departures: int
     gap_rmse: float
+    collisions_by_window: NDArray[np.int64]
     impacts: NDArray[np.float64]
 
 
@@ -223,8 +230,16 @@ def followers(
         collisions=int(r.crash.sum()),
         road_departures=road_departures(y, 0.5 * windows.width_f, road.width, r.alive),
         gap_rmse=float(np.sqrt(np.mean((r.gap[:, -1] - windows.gap[:, -1]) ** 2))),
+        collisions_by_window=_by_window(r.crash, labels),
         impacts=_impacts(windows, r, labels),
     )
+
+
+def _by_window(events: NDArray[Any], labels: NDArray[np.int64]) -> NDArray[np.int64]:
+    """Per-replay event counts summed per window (``labels``: window of each)."""
+    _, first, which = np.unique(labels, return_index=True, return_inverse=True)
+    counts = np.bincount(which, weights=events, minlength=len(first))
+    return counts[np.argsort(first)].astype(np.int64)
 
 
 def _impacts(
@@ -340,7 +355,7 @@ def _figures(f: Followers) -> dict[str, Any]:
         "vehicle_hours": f.hours,
         "hard_brakes": event_rate(f.hard_brakes, f.hours),
         "lane_changes": event_rate(f.lane_changes, f.hours),
-        "collisions": event_rate(f.collisions, f.hours),
+        "collisions": clustered_event_rate(f.collisions_by_window, f.hours),
         "road_departures": event_rate(f.road_departures, f.hours),
         "time_stopped": stopped_fraction(f.samples["speed"]),
     }
@@ -359,7 +374,11 @@ def summarise_part_a(part: PartA) -> dict[str, Any]:
         ``ks`` and ``w1`` to the humans (``w1`` in the quantity's unit; None
         without samples); ``vehicle_hours``; ``hard_brakes``,
         ``lane_changes``, ``collisions`` and ``road_departures`` as ``count``,
-        ``per_hour`` [1/veh-h] and exact Poisson ``ci95``; ``time_stopped``
+        ``per_hour`` [1/veh-h] and exact Poisson ``ci95``, and for
+        ``collisions`` also the interval with windows as clusters
+        (:func:`~avrisk.realism.metrics.clustered_event_rate`:
+        ``ci95_windows``, ``dispersion``, ``windows``,
+        ``windows_with_events``); ``time_stopped``
         (share of speeds < 0.1 m/s); for models ``gap_rmse_m`` and
         ``impacts`` (``columns``: :data:`IMPACT_COLUMNS`, ``rows``).
     """

@@ -34,6 +34,7 @@ __all__ = [
     "STOPPED_SPEED",
     "TTC_CAP",
     "Kinematics",
+    "clustered_event_rate",
     "event_rate",
     "hard_brake_events",
     "kinematics",
@@ -248,6 +249,75 @@ def event_rate(count: int, hours: float) -> dict[str, Any]:
     """
     low, high = poisson_rate_interval(count, hours)
     return {"count": count, "per_hour": count / hours, "ci95": [low, high]}
+
+
+def clustered_event_rate(counts: NDArray[Any], hours: float) -> dict[str, Any]:
+    """Events counted per window, over its replays: the rate, with windows as clusters.
+
+    The replays of one held-out window share its leader's record and its
+    start, so their events are not independent draws of the traffic: a model
+    that cannot stop behind one leader crashes in most of that window's
+    replays. The exact Poisson interval of :func:`event_rate` treats every
+    replay as independent and is then too narrow. This adds the quasi-Poisson
+    interval over windows: with the per-window counts' dispersion ``phi =
+    max(1, s^2 / mean)`` (``s^2`` their sample variance), ``C`` events in
+    ``H`` hours weigh as ``C / phi`` independent events in ``H / phi`` hours
+    (the design effect), whose Garwood interval is taken (an effective count
+    need not be an integer). Without events there is no dispersion to
+    measure and both intervals are the Poisson one; ``windows_with_events``
+    of ``windows`` then says how few kinds of traffic were seen.
+
+    Coverage of the true rate in simulated reports of 202 windows x 24
+    replays, some windows crash-prone (2,000 reports per regime;
+    ``benchmarks/collision_interval_coverage.py``, BENCHMARKS.md "Collision
+    intervals when collisions cluster"): 0.97 for both intervals with
+    independent replays; with 1-5% of windows crash-prone 0.85-0.96 against
+    0.38-0.85 for the Poisson interval. When crash-prone windows are so rare
+    that a third of reports see none (0.5%), no interval from such a report
+    covers them (0.62 for both).
+
+    Parameters
+    ----------
+    counts : ndarray of int, shape (W,)
+        Events per window, summed over its replays (every window driven as
+        often).
+    hours : float
+        Vehicle-hours of all ``W`` windows' replays together, ``> 0``.
+
+    Returns
+    -------
+    dict
+        :func:`event_rate`'s ``count``, ``per_hour`` [1/h] and ``ci95``
+        (replays independent), and ``ci95_windows`` (windows as clusters)
+        [1/h], ``dispersion`` (``phi``), ``windows`` (``W``) and
+        ``windows_with_events``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> one_window = clustered_event_rate(np.array([12] + [0] * 99), 10.0)
+    >>> [round(x, 2) for x in one_window["ci95"]]          # as if independent
+    [0.62, 2.1]
+    >>> [round(x, 2) for x in one_window["ci95_windows"]]  # about one event
+    [0.03, 6.69]
+    """
+    counts = np.asarray(counts)
+    if counts.ndim != 1 or counts.size == 0 or np.any(counts < 0):
+        raise ValueError(
+            f"counts must be a non-empty 1-d array of counts >= 0; got {counts!r}"
+        )
+    total = int(counts.sum())
+    out = event_rate(total, hours)
+    phi = 1.0
+    if total > 0 and counts.size > 1:
+        phi = max(1.0, float(counts.var(ddof=1) / counts.mean()))
+    low, high = poisson_rate_interval(total / phi, hours / phi)
+    return out | {
+        "ci95_windows": [low, high],
+        "dispersion": phi,
+        "windows": int(counts.size),
+        "windows_with_events": int(np.count_nonzero(counts)),
+    }
 
 
 def relative_gap(x: float, reference: float) -> float:

@@ -95,11 +95,20 @@ def part_a_table(summary: dict[str, Any]) -> str:
             rate("lane_changes"),
         ),
         _row(
-            "collisions with the leader [1/veh-h] [95% CI] (windows)",
+            "collisions with the leader [1/veh-h] [95% CI] (count)",
             "0",
             [
                 f"{c['per_hour']:.2f} [{c['ci95'][0]:.2f}, {c['ci95'][1]:.2f}] "
                 f"({c['count']})"
+                for c in (m["collisions"] for m in models.values())
+            ],
+        ),
+        _row(
+            "the same, windows as clusters [95% CI] (windows with collisions)",
+            "0",
+            [
+                f"[{c['ci95_windows'][0]:.2f}, {c['ci95_windows'][1]:.2f}] "
+                f"({c['windows_with_events']} of {c['windows']})"
                 for c in (m["collisions"] for m in models.values())
             ],
         ),

@@ -91,6 +91,7 @@ def test_a_collision_is_counted_once_with_its_window_speed_and_braking():
     assert leader == pytest.approx(windows.v_l[1, 6])
     assert decel == pytest.approx(-2.0) and human_decel == pytest.approx(0.0)
     assert near_stop == 1.0  # the leader comes to 0 m/s in the window
+    np.testing.assert_array_equal(sim.collisions_by_window, [0, 1])
     assert sim.samples["speed"].size == 2 * (T + 1) - 4  # frames 7-10 are dead
     assert sim.gap_rmse == pytest.approx(np.sqrt(3.5**2 / 2))
 
@@ -139,8 +140,27 @@ def test_the_tables_show_every_model_and_the_collisions_window():
     assert "| metric | human (held out) | learned | IDM |" in table
     assert "| lateral offset (lateral-file windows): KS / W1 | - | n/a | n/a |" in table
     assert "(1) |" in table  # one collision of the learned model
+    assert "(1 of 2) |" in table  # in one of the two windows
     assert "| learned | 1 | 1 (1: 1) | 4.4 |" in collision_table(summary)
     assert "| IDM | 0 | - |" in collision_table(summary)
     targets = targets_table(part_a_targets(summary))
     assert targets.count("\n") == 3 + 7  # title, blank, header, rule; 7 targets
     assert "| collisions <= 0.5 /veh-h | 1800.00 FAIL |" in targets
+
+
+def test_collisions_are_summed_per_window_over_its_replays():
+    windows = two_windows()
+    crashing = crash_in_second_window(windows)
+    # Three replays of window 40 (two crash) and one of window 7, interleaved
+    # as run_part_a tiles them.
+    take = np.array([1, 0, 1, 1])
+    replays = dataclasses.replace(
+        crashing,
+        **{
+            k: getattr(crashing, k)[take]
+            for k in ("v", "v_l", "gap", "offset", "alive", "crash", "offroad")
+        },
+    )
+    replays.crash[2] = False
+    sim = followers(windows.take(take), replays, Road(), np.array([40, 7, 40, 40]))
+    np.testing.assert_array_equal(sim.collisions_by_window, [2, 0])

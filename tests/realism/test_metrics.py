@@ -6,6 +6,7 @@ from scipy import stats
 
 from avrisk.realism.metrics import (
     TTC_CAP,
+    clustered_event_rate,
     event_rate,
     hard_brake_events,
     kinematics,
@@ -112,3 +113,40 @@ def test_a_road_departure_is_an_onset_over_either_edge_while_alive():
     alive = np.ones_like(y, bool)
     alive[3, 2:] = False
     assert road_departures(y, hw, 10.0, alive) == 2
+
+
+def test_without_clustering_the_window_interval_is_the_poisson_one():
+    spread = clustered_event_rate(np.array([1] * 12 + [0] * 88), 10.0)
+    assert spread["dispersion"] == 1.0 and spread["windows_with_events"] == 12
+    assert spread["ci95_windows"] == spread["ci95"] == event_rate(12, 10.0)["ci95"]
+    none = clustered_event_rate(np.zeros(5, int), 1.0)
+    assert none["ci95_windows"] == none["ci95"] and none["count"] == 0
+    with pytest.raises(ValueError, match="counts"):
+        clustered_event_rate(np.array([-1, 2]), 1.0)
+
+
+@pytest.mark.parametrize(
+    ("share", "p_prone", "p_base", "least_windows", "most_poisson"),
+    [
+        (0.0, 0.0, 0.002, 0.92, 1.0),  # independent replays: both cover
+        (0.02, 0.3, 0.0005, 0.90, 0.75),  # a few crash-prone windows
+    ],
+)
+def test_coverage_of_the_window_interval_when_collisions_cluster(
+    share, p_prone, p_base, least_windows, most_poisson
+):
+    """300 simulated reports of 202 windows x 24 replays (the full sweep:
+    benchmarks/collision_interval_coverage.py). A coverage of 0.95 over 300
+    reports has a standard error of 0.013."""
+    rng = np.random.default_rng(3)
+    windows, replicates, hours = 202, 24, 202 * 24 * 15 / 3600
+    truth = (share * p_prone + (1 - share) * p_base) * replicates * windows / hours
+    covered = {"ci95": 0, "ci95_windows": 0}
+    for _ in range(300):
+        prone = rng.random(windows) < share
+        counts = rng.binomial(replicates, np.where(prone, p_prone, p_base))
+        rate = clustered_event_rate(counts, hours)
+        for key in covered:
+            covered[key] += rate[key][0] <= truth <= rate[key][1]
+    assert covered["ci95_windows"] / 300 >= least_windows
+    assert covered["ci95"] / 300 <= most_poisson
