@@ -33,6 +33,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress, TaskID
+from rich.table import Table
 
 from avrisk.agents.drivers.store import (
     DRIVER_NET_FILE,
@@ -61,6 +62,7 @@ STAGE_LABELS = {
     "closed_loop": "closed-loop training",
     "heads": "bootstrap heads",
     "prior": "xi prior",
+    "candidates": "candidates scored",
     "fit": "PilotNet, BC + DAgger",
 }
 
@@ -79,6 +81,7 @@ SHOWN_METRICS = (
     "c_steer",
     "sparsity",
     "alpha",
+    "stressed_crashes",
 )
 
 
@@ -183,6 +186,24 @@ def _warn_other_kernels() -> None:
     )
 
 
+def _print_selection(selection: dict) -> None:
+    """Each candidate's validation crashes, and the one kept."""
+    table = Table(title="Candidates: crashes on their validation windows")
+    for name in ("seed", "replays", "leaders x1.5", "windows", "as recorded", ""):
+        table.add_column(name, justify="right")
+    for c in selection["candidates"]:
+        kept = "kept" if c["seed"] == selection["chosen_seed"] else ""
+        table.add_row(
+            str(c["seed"]),
+            str(c["replays"]),
+            str(c["stressed_crashes"]),
+            str(c["stressed_windows"]),
+            str(c["crashes"]),
+            kept,
+        )
+    out_console.print(table)
+
+
 def _number(value: float) -> str:
     """Counts with thousands separators, other values to 4 significant digits."""
     return f"{value:,.0f}" if float(value).is_integer() else f"{value:.4g}"
@@ -210,11 +231,22 @@ def train_drivers_command(
             "$AVRISK_NGSIM_DIR, else the data shipped with avrisk.",
         ),
     ] = None,
+    candidates: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Trainings with seeds SEED, SEED+1, ...: each is written to "
+            "OUT/candidates/seed-S and the one whose drivers crash least on their "
+            "own validation windows (training data only) is copied to OUT. Each "
+            "takes as long as one training.",
+        ),
+    ] = 1,
 ) -> None:
     """Retrain the learned drivers and their xi prior from NGSIM data.
 
     The bundled scenarios keep using the shipped model in avrisk/data/drivers
-    unless --out names that folder.
+    unless --out names that folder. Trainings that differ only in their seed
+    crash very differently; --candidates N trains N and keeps the safest.
     """
     with user_errors(OSError):
         folder = _data_folder(data_dir)
@@ -231,7 +263,11 @@ def train_drivers_command(
 
         _warn_other_kernels()
         with training_progress(err_console) as progress:
-            train.train_drivers(seed, out, data_dir=folder, progress=progress)
+            report = train.train_drivers(
+                seed, out, data_dir=folder, progress=progress, candidates=candidates
+            )
+        if report.selection is not None:
+            _print_selection(report.selection)
         written = ", ".join(
             f"{name} ({_size((out / name).stat().st_size)})" for name in OUTPUT_FILES
         )

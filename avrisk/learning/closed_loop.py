@@ -71,6 +71,7 @@ __all__ = [
     "closed_loop_loss",
     "differentiable_replay",
     "simulated_transitions",
+    "split_windows",
     "stressed",
 ]
 
@@ -258,7 +259,16 @@ def closed_loop_loss(
     return loss, parts
 
 
-def _split(n: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def split_windows(n: int, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Training and validation indices of ``n`` windows, sorted.
+
+    :func:`closed_loop_finetune` keeps ``round(fraction n)`` (at least one)
+    windows, drawn with ``seed``, for early stopping.
+
+    Returns
+    -------
+    train, val : ndarray of int64
+    """
     order = np.random.default_rng(seed).permutation(n)
     n_val = max(1, int(round(fraction * n)))
     return np.sort(order[n_val:]), np.sort(order[:n_val])
@@ -343,7 +353,7 @@ def closed_loop_finetune(
     if config.iterations == 0 or len(windows) < 2:
         return []
     road = Road()
-    train_idx, val_idx = _split(len(windows), config.validation_fraction, seed)
+    train_idx, val_idx = split_windows(len(windows), config.validation_fraction, seed)
     train_windows, val = windows.take(train_idx), windows.take(val_idx)
     val_seeds = torch.arange(len(val), dtype=torch.int64) + 1_000_003 * (seed + 1)
     rng = np.random.default_rng(seed)

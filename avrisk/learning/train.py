@@ -29,6 +29,10 @@ Pipeline of :func:`train_drivers` (DESIGN.md §4), one module a stage::
                                                         (training_report.py)
 
 The settings of every stage are one :class:`~avrisk.learning.train_config.TrainConfig`.
+With ``candidates > 1`` the recipe is trained with as many seeds and the
+training whose drivers crash least on their own closed-loop validation windows
+is kept (:mod:`avrisk.learning.selection`; training data only): trainings of
+one recipe differ widely in how often their drivers crash.
 The shipped files are ``driver_net.npz`` (trunk + shared head) and
 ``xi_prior.npz`` (``mu0``, sparse precision, members); see
 :mod:`avrisk.agents.drivers.store`. The run is seeded: the same seed, data
@@ -44,27 +48,41 @@ it with each part alone and with GAIL).
 
 from __future__ import annotations
 
+import json
+import shutil
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import torch
 
+from avrisk.agents.drivers.store import (
+    DRIVER_NET_FILE,
+    XI_PRIOR_FILE,
+    load_driver_net,
+    load_xi_prior,
+)
 from avrisk.learning.behaviour_cloning import fit_driver_net
 from avrisk.learning.bootstrap_heads import bootstrap_heads, centre_heads
 from avrisk.learning.closed_loop import closed_loop_finetune
 from avrisk.learning.dagger import dagger_rounds
 from avrisk.learning.sampling_noise import fit_sampling_noise
+from avrisk.learning.selection import REPLICATES, STRESS, choose, validation_crashes
 from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
 from avrisk.learning.training_data import load_demonstrations, training_windows
 from avrisk.learning.training_report import (
+    TRAINING_REPORT_FILE,
     TrainingReport,
     training_environment,
     write_training_outputs,
 )
 from avrisk.learning.xi_prior_fit import fit_xi_prior, validation_nll
 
-__all__ = ["train_drivers"]
+__all__ = ["CANDIDATES_DIR", "train_drivers"]
+
+#: Sub-folder of ``out_dir`` for the trainings among which ``candidates``
+#: chooses, one ``seed-S`` folder each.
+CANDIDATES_DIR = "candidates"
 
 
 def train_drivers(
@@ -75,6 +93,7 @@ def train_drivers(
     config: TrainConfig | None = None,
     progress: Progress | None = None,
     threads: int | None = 1,
+    candidates: int = 1,
 ) -> TrainingReport:
     """Reproduce the shipped driver network and ``xi`` distribution from data.
 
@@ -98,19 +117,79 @@ def train_drivers(
         thread the run is bit-reproducible on a machine; a multi-threaded BLAS
         may split reductions differently from run to run. None keeps the
         current setting.
+    candidates : int, default=1
+        Trainings of the recipe, with seeds ``seed, seed + 1, ...``. With
+        more than one, each is written to ``out_dir/candidates/seed-S/`` and
+        scored by its drivers' crashes on its own closed-loop validation
+        windows (:func:`~avrisk.learning.selection.validation_crashes`), and
+        the one with the fewest is copied to ``out_dir``; its report's
+        ``selection`` lists every candidate's score. A candidate's files are
+        those of ``train_drivers(seed + k)``.
 
     Returns
     -------
     TrainingReport
+        Of the training written to ``out_dir`` (the chosen one).
+
+    Raises
+    ------
+    ValueError
+        For ``candidates < 1``.
     """
+    if candidates < 1:
+        raise ValueError(f"candidates must be >= 1; got {candidates}")
     config = TrainConfig() if config is None else config
     previous = torch.get_num_threads()
     if threads is not None:
         torch.set_num_threads(threads)
     try:
-        return _train_drivers(seed, Path(out_dir), data_dir, config, progress)
+        if candidates == 1:
+            return _train_drivers(seed, Path(out_dir), data_dir, config, progress)
+        return _train_candidates(
+            seed, candidates, Path(out_dir), data_dir, config, progress
+        )
     finally:
         torch.set_num_threads(previous)
+
+
+def _train_candidates(
+    seed: int,
+    candidates: int,
+    out: Path,
+    data_dir: str | Path | None,
+    config: TrainConfig,
+    progress: Progress | None,
+) -> TrainingReport:
+    """Train seeds ``seed .. seed + candidates - 1``; keep the fewest crashes."""
+    windows = training_windows(data_dir, config.closed_loop.window_steps)
+    reports, scores = {}, []
+    for k in range(candidates):
+        folder = out / CANDIDATES_DIR / f"seed-{seed + k}"
+        reports[seed + k] = _train_drivers(seed + k, folder, data_dir, config, progress)
+        net = load_driver_net(folder / DRIVER_NET_FILE)
+        prior = load_xi_prior(folder / XI_PRIOR_FILE)
+        scores.append(
+            validation_crashes(net, prior, windows, config.closed_loop, seed + k)
+        )
+        if progress is not None:
+            metrics = {"stressed_crashes": float(scores[-1].stressed_crashes)}
+            progress(TrainEvent("candidates", k + 1, candidates, metrics))
+    best = choose(scores)
+    chosen = out / CANDIDATES_DIR / f"seed-{best.seed}"
+    for name in (DRIVER_NET_FILE, XI_PRIOR_FILE):
+        shutil.copyfile(chosen / name, out / name)
+    selection = {
+        "criterion": (
+            f"fewest crashes in {REPLICATES} replays of every closed-loop "
+            f"validation window, xi ~ P0, leaders' speed changes x{STRESS}; "
+            "then crashes with the recorded leaders; then the lowest seed"
+        ),
+        "chosen_seed": best.seed,
+        "candidates": [asdict(score) for score in scores],
+    }
+    report = replace(reports[best.seed], out_dir=str(out), selection=selection)
+    (out / TRAINING_REPORT_FILE).write_text(json.dumps(report.to_dict(), indent=2))
+    return report
 
 
 class _Stopwatch:

@@ -68,6 +68,10 @@ class TrainingReport:
         Versions and thread count.
     seconds : dict of str to float
         Wall time per stage.
+    selection : dict or None
+        With ``candidates > 1``: the criterion, every candidate's score
+        (:class:`~avrisk.learning.selection.CandidateScore`) and the seed
+        kept; None for a single training.
     """
 
     seed: int
@@ -84,6 +88,7 @@ class TrainingReport:
     config: dict[str, Any]
     environment: dict[str, Any]
     seconds: dict[str, float] = field(default_factory=dict)
+    selection: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict."""

@@ -86,3 +86,27 @@ def test_training_on_other_cpu_kernels_than_the_shipped_files_says_how_to_match(
     assert "torch AVX512, BLAS SkylakeX" in said
     assert f"torch {theirs['torch']}, BLAS {', '.join(theirs['blas'])}" in said
     assert "ATEN_CPU_CAPABILITY=avx2 OPENBLAS_CORETYPE=Haswell" in said
+
+
+@pytest.mark.slow
+def test_candidates_print_their_validation_crashes_and_the_one_kept(
+    tmp_path, fake_ngsim, tiny_train_config, monkeypatch
+):
+    monkeypatch.setattr(
+        training,
+        "train_drivers",
+        functools.partial(training.train_drivers, config=tiny_train_config),
+    )
+    out = tmp_path / "drivers"
+    args = ("--seed", "5", "--out", str(out), "--data-dir", str(fake_ngsim))
+    result = _train(*args, "--candidates", "2")
+    assert result.exit_code == 0, result.output
+    assert "Candidates: crashes on their validation windows" in result.output
+    assert result.output.count("kept") == 1
+    kept = json.loads((out / "training_report.json").read_text())["seed"]
+    assert kept in (5, 6) and (out / "candidates" / f"seed-{kept}").is_dir()
+
+
+def test_fewer_than_one_candidate_is_refused(tmp_path):
+    result = _train("--candidates", "0", "--out", str(tmp_path))
+    assert result.exit_code == 2 and "--candidates" in result.output

@@ -5,7 +5,9 @@ import torch
 
 from avrisk.agents.drivers.store import XiPrior, load_driver_net
 from avrisk.agents.drivers.xi import XI_DIM
-from avrisk.learning.train import train_drivers
+from avrisk.learning.selection import CandidateScore, choose
+from avrisk.learning.train import CANDIDATES_DIR, train_drivers
+from avrisk.learning.training_data import training_windows
 
 
 @pytest.mark.slow
@@ -29,3 +31,33 @@ def test_train_drivers_writes_loadable_weights_a_prior_and_a_report(
     kernels = saved["environment"]["cpu_kernels"]
     assert kernels["torch"] == torch.backends.cpu.get_cpu_capability()
     assert kernels["blas"]  # numpy's OpenBLAS at least
+
+
+@pytest.mark.slow
+def test_candidates_keep_the_training_with_the_fewest_validation_crashes(
+    tmp_path, fake_ngsim, tiny_train_config
+):
+    out = tmp_path / "out"
+    report = train_drivers(
+        3, out, data_dir=fake_ngsim, config=tiny_train_config, candidates=2
+    )
+    scores = [CandidateScore(**row) for row in report.selection["candidates"]]
+    assert [s.seed for s in scores] == [3, 4]
+    assert report.selection["chosen_seed"] == choose(scores).seed == report.seed
+    n_windows = len(training_windows(fake_ngsim, 20))
+    assert all(s.replays == 8 * max(1, round(0.2 * n_windows)) for s in scores)
+    chosen = out / CANDIDATES_DIR / f"seed-{report.seed}"
+    for name in ("driver_net.npz", "xi_prior.npz"):
+        assert (out / name).read_bytes() == (chosen / name).read_bytes()
+    saved = json.loads((out / "training_report.json").read_text())
+    assert saved["selection"] == report.selection
+    # A candidate is the single training of its seed.
+    alone = train_drivers(
+        4, tmp_path / "alone", data_dir=fake_ngsim, config=tiny_train_config
+    )
+    assert alone.selection is None
+    assert (tmp_path / "alone" / "driver_net.npz").read_bytes() == (
+        out / CANDIDATES_DIR / "seed-4" / "driver_net.npz"
+    ).read_bytes()
+    with pytest.raises(ValueError, match="candidates"):
+        train_drivers(3, tmp_path / "x", data_dir=fake_ngsim, candidates=0)
