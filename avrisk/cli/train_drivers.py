@@ -12,9 +12,12 @@ command warns when the kernels here differ), and writes into ``--out``::
     xi_prior.npz            xi ~ N(mu0, Sigma0): mean, sparse precision, heads
     training_report.json    what the run did and measured
 
-Files of those names already in ``--out`` are replaced. The shipped driver
-model (``avrisk/data/drivers/``, which the bundled scenarios use) is replaced
-only when ``--out`` names that folder.
+With ``--candidates N`` it trains seeds ``SEED .. SEED+N-1`` into
+``--out/candidates/seed-S/``, prints each one's crashes on its own closed-loop
+validation windows (:mod:`avrisk.learning.selection`) and copies the safest
+into ``--out``. Files of those names already in ``--out`` are replaced. The
+shipped driver model (``avrisk/data/drivers/``, which the bundled scenarios
+use) is replaced only when ``--out`` names that folder.
 """
 
 from __future__ import annotations
