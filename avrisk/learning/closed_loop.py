@@ -299,6 +299,24 @@ def stressed(windows: CarFollowingWindows, factor: float) -> CarFollowingWindows
     return dataclasses.replace(windows, v_l=v_l)
 
 
+def _stress_seeds(
+    minibatch_seeds: Tensor, seed: int, it: int, n: int, config: ClosedLoopConfig
+) -> Tensor:
+    """Noise seeds of step ``it``'s ``n`` stress replays, int64 of shape (n,).
+
+    With ``stress_own_noise`` they follow every minibatch seed of the run;
+    without it they are those of minibatch windows 7, 8, ... (the stress
+    replays then share those windows' noise streams), as when the shipped
+    files were trained.
+    """
+    if not config.stress_own_noise:
+        return minibatch_seeds[0] + 7 + torch.arange(n)
+    first = seed * 1_000_003 + config.iterations * config.batch_windows
+    return torch.as_tensor(
+        first + it * config.stress_windows + np.arange(n), dtype=torch.int64
+    )
+
+
 def _hard_braking(windows: CarFollowingWindows, config: ClosedLoopConfig) -> np.ndarray:
     """Whether each window's leader brakes harder than ``hard_brake_decel``."""
     leader_decel = np.diff(windows.v_l, axis=1).min(axis=1) / DT
@@ -394,10 +412,7 @@ def closed_loop_finetune(
         if config.stress_windows > 0 and len(hard_idx) > 0:
             pick = rng.choice(hard_idx, size=config.stress_windows)
             harder = stressed(windows.take(pick), config.stress_factor)
-            # These noise seeds are those of minibatch windows 7, 8, ...: the
-            # stress replays share their noise streams. Kept as is, since the
-            # shipped drivers were trained with them (byte-for-byte rebuild).
-            stress_seeds = seeds[0] + 7 + torch.arange(len(pick))
+            stress_seeds = _stress_seeds(seeds, seed, it, len(pick), config)
             trace = differentiable_replay(harder, net, road, stress_seeds)
             stress, stress_parts = closed_loop_loss(trace, harder, barriers_only)
             loss = loss + stress

@@ -82,6 +82,12 @@ class ClosedLoopConfig:
         harder than the data hold, in which to learn to stop (0: none).
     stress_factor : float, default=1.5
         How much harder their leaders brake.
+    stress_own_noise : bool, default=False
+        Give the stress replays action noise of their own. False, as when
+        the shipped files were trained, reuses the noise seeds of minibatch
+        windows 7, 8, ..., so that the stress replays share those windows'
+        noise streams; True is meant for the next retraining (BENCHMARKS.md,
+        "Keeping the safest of several trainings").
     """
 
     iterations: int = 120
@@ -106,6 +112,7 @@ class ClosedLoopConfig:
     grad_clip: float = 1.0
     stress_windows: int = 16
     stress_factor: float = 1.5
+    stress_own_noise: bool = False
 
     def __post_init__(self) -> None:
         if (

@@ -9,6 +9,7 @@ from avrisk.agents.drivers.store import load_driver_net
 from avrisk.learning.bootstrap_heads import centre_heads
 from avrisk.learning.closed_loop import (
     _minibatch_weights,
+    _stress_seeds,
     closed_loop_finetune,
     closed_loop_loss,
     differentiable_replay,
@@ -275,3 +276,19 @@ def test_hard_braking_windows_are_drawn_as_often_as_asked():
     np.testing.assert_allclose(p, np.array([1, 1, 1, 1, 5, 5]) / 14)
     gentle = ClosedLoopConfig(hard_brake_oversample=5.0, hard_brake_decel=-5.0)
     np.testing.assert_allclose(_minibatch_weights(win, gentle), np.full(6, 1 / 6))
+
+
+def test_stress_replays_get_noise_of_their_own_only_when_asked():
+    config = ClosedLoopConfig(iterations=5, batch_windows=8, stress_windows=4)
+    minibatch = {
+        it: torch.as_tensor(3 * 1_000_003 + it * 8 + np.arange(8)) for it in range(5)
+    }
+    shared = _stress_seeds(minibatch[2], 3, 2, 4, config)
+    assert shared.tolist() == minibatch[2][7:8].tolist() + [
+        int(minibatch[3][k]) for k in range(3)
+    ]  # as the shipped files were trained: minibatch windows 7, 8, ...
+    own = dataclasses.replace(config, stress_own_noise=True)
+    seen = set(torch.cat(list(minibatch.values())).tolist())
+    drawn = [_stress_seeds(minibatch[it], 3, it, 4, own).tolist() for it in range(5)]
+    flat = [s for row in drawn for s in row]
+    assert len(set(flat)) == 20 and not seen & set(flat)
