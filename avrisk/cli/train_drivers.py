@@ -36,7 +36,6 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import Progress, TaskID
-from rich.table import Table
 
 from avrisk.agents.drivers.store import (
     DRIVER_NET_FILE,
@@ -45,6 +44,7 @@ from avrisk.agents.drivers.store import (
 )
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
 from avrisk.cli.progress import stage_columns
+from avrisk.cli.tables import add_columns, compact_table
 from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
 
 if TYPE_CHECKING:
@@ -191,18 +191,28 @@ def _warn_other_kernels() -> None:
 
 def _print_selection(selection: dict) -> None:
     """Each candidate's validation crashes, and the one kept."""
-    table = Table(title="Candidates: crashes on their validation windows")
-    for name in ("seed", "replays", "leaders x1.5", "windows", "as recorded", ""):
-        table.add_column(name, justify="right")
+    table = compact_table(
+        "Candidates: crashes on their own validation windows",
+        caption="Replays of the closed-loop stage's validation windows, xi ~ P0; "
+        "kept: the fewest crashes with the leaders braking 1.5x as hard.",
+    )
+    names = (
+        "seed",
+        "replays",
+        "crashes,\nleaders x1.5",
+        "windows\nwith one",
+        "crashes,\nas recorded",
+        "",
+    )
+    add_columns(table, names, text=("",))
     for c in selection["candidates"]:
-        kept = "kept" if c["seed"] == selection["chosen_seed"] else ""
         table.add_row(
             str(c["seed"]),
-            str(c["replays"]),
+            f"{c['replays']:,}",
             str(c["stressed_crashes"]),
             str(c["stressed_windows"]),
             str(c["crashes"]),
-            kept,
+            "kept" if c["seed"] == selection["chosen_seed"] else "",
         )
     out_console.print(table)
 
