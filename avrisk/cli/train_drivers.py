@@ -15,9 +15,10 @@ command warns when the kernels here differ), and writes into ``--out``::
 With ``--candidates N`` it trains seeds ``SEED .. SEED+N-1`` into
 ``--out/candidates/seed-S/``, prints each one's crashes on its own closed-loop
 validation windows (:mod:`avrisk.learning.selection`) and copies the safest
-into ``--out``. Files of those names already in ``--out`` are replaced. The
-shipped driver model (``avrisk/data/drivers/``, which the bundled scenarios
-use) is replaced only when ``--out`` names that folder.
+into ``--out`` (``--workers K``: K at a time, one process each). Files of
+those names already in ``--out`` are replaced. The shipped driver model
+(``avrisk/data/drivers/``, which the bundled scenarios use) is replaced only
+when ``--out`` names that folder.
 """
 
 from __future__ import annotations
@@ -254,6 +255,14 @@ def train_drivers_command(
             "takes as long as one training.",
         ),
     ] = 1,
+    workers: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="With --candidates: train this many at once, in worker "
+            "processes of one CPU each (the same files as one after the other).",
+        ),
+    ] = 1,
 ) -> None:
     """Retrain the learned drivers and their xi prior from NGSIM data.
 
@@ -277,7 +286,12 @@ def train_drivers_command(
         _warn_other_kernels()
         with training_progress(err_console) as progress:
             report = train.train_drivers(
-                seed, out, data_dir=folder, progress=progress, candidates=candidates
+                seed,
+                out,
+                data_dir=folder,
+                progress=progress,
+                candidates=candidates,
+                workers=workers,
             )
         if report.selection is not None:
             _print_selection(report.selection)

@@ -49,8 +49,10 @@ it with each part alone and with GAIL).
 from __future__ import annotations
 
 import json
+import multiprocessing
 import shutil
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -67,7 +69,13 @@ from avrisk.learning.bootstrap_heads import bootstrap_heads, centre_heads
 from avrisk.learning.closed_loop import closed_loop_finetune
 from avrisk.learning.dagger import dagger_rounds
 from avrisk.learning.sampling_noise import fit_sampling_noise
-from avrisk.learning.selection import REPLICATES, STRESS, choose, validation_crashes
+from avrisk.learning.selection import (
+    REPLICATES,
+    STRESS,
+    CandidateScore,
+    choose,
+    validation_crashes,
+)
 from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
 from avrisk.learning.training_data import load_demonstrations, training_windows
 from avrisk.learning.training_report import (
@@ -94,6 +102,7 @@ def train_drivers(
     progress: Progress | None = None,
     threads: int | None = 1,
     candidates: int = 1,
+    workers: int = 1,
 ) -> TrainingReport:
     """Reproduce the shipped driver network and ``xi`` distribution from data.
 
@@ -125,6 +134,9 @@ def train_drivers(
         the one with the fewest is copied to ``out_dir``; its report's
         ``selection`` lists every candidate's score. A candidate's files are
         those of ``train_drivers(seed + k)``.
+    workers : int, default=1
+        With several candidates, train them in this many processes at once
+        (one thread each; the same files as one after the other).
 
     Returns
     -------
@@ -134,10 +146,12 @@ def train_drivers(
     Raises
     ------
     ValueError
-        For ``candidates < 1``.
+        For ``candidates < 1`` or ``workers < 1``.
     """
-    if candidates < 1:
-        raise ValueError(f"candidates must be >= 1; got {candidates}")
+    if candidates < 1 or workers < 1:
+        raise ValueError(
+            f"candidates and workers must be >= 1; got {candidates} and {workers}"
+        )
     config = TrainConfig() if config is None else config
     previous = torch.get_num_threads()
     if threads is not None:
@@ -146,7 +160,7 @@ def train_drivers(
         if candidates == 1:
             return _train_drivers(seed, Path(out_dir), data_dir, config, progress)
         return _train_candidates(
-            seed, candidates, Path(out_dir), data_dir, config, progress
+            seed, candidates, Path(out_dir), data_dir, config, progress, workers
         )
     finally:
         torch.set_num_threads(previous)
@@ -159,21 +173,34 @@ def _train_candidates(
     data_dir: str | Path | None,
     config: TrainConfig,
     progress: Progress | None,
+    workers: int,
 ) -> TrainingReport:
     """Train seeds ``seed .. seed + candidates - 1``; keep the fewest crashes."""
-    windows = training_windows(data_dir, config.closed_loop.window_steps)
-    reports, scores = {}, []
-    for k in range(candidates):
-        folder = out / CANDIDATES_DIR / f"seed-{seed + k}"
-        reports[seed + k] = _train_drivers(seed + k, folder, data_dir, config, progress)
-        net = load_driver_net(folder / DRIVER_NET_FILE)
-        prior = load_xi_prior(folder / XI_PRIOR_FILE)
-        scores.append(
-            validation_crashes(net, prior, windows, config.closed_loop, seed + k)
-        )
+    seeds = [seed + k for k in range(candidates)]
+    folders = [out / CANDIDATES_DIR / f"seed-{s}" for s in seeds]
+    results: dict[int, tuple[TrainingReport, CandidateScore]] = {}
+
+    def done(s: int, result: tuple[TrainingReport, CandidateScore]) -> None:
+        results[s] = result
         if progress is not None:
-            metrics = {"stressed_crashes": float(scores[-1].stressed_crashes)}
-            progress(TrainEvent("candidates", k + 1, candidates, metrics))
+            metrics = {"stressed_crashes": float(result[1].stressed_crashes)}
+            progress(TrainEvent("candidates", len(results), candidates, metrics))
+
+    if workers == 1:
+        for s, folder in zip(seeds, folders, strict=True):
+            done(s, _train_and_score(s, folder, data_dir, config, progress, None))
+    else:
+        # One single-threaded process per candidate: the same files as in
+        # this process (spawned, so that no torch state is inherited).
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(min(workers, candidates), mp_context=context) as pool:
+            futures = {
+                pool.submit(_train_and_score, s, f, data_dir, config, None, 1): s
+                for s, f in zip(seeds, folders, strict=True)
+            }
+            for future in as_completed(futures):
+                done(futures[future], future.result())
+    scores = [results[s][1] for s in seeds]
     best = choose(scores)
     chosen = out / CANDIDATES_DIR / f"seed-{best.seed}"
     for name in (DRIVER_NET_FILE, XI_PRIOR_FILE):
@@ -187,9 +214,28 @@ def _train_candidates(
         "chosen_seed": best.seed,
         "candidates": [asdict(score) for score in scores],
     }
-    report = replace(reports[best.seed], out_dir=str(out), selection=selection)
+    report = replace(results[best.seed][0], out_dir=str(out), selection=selection)
     (out / TRAINING_REPORT_FILE).write_text(json.dumps(report.to_dict(), indent=2))
     return report
+
+
+def _train_and_score(
+    seed: int,
+    folder: Path,
+    data_dir: str | Path | None,
+    config: TrainConfig,
+    progress: Progress | None,
+    threads: int | None,
+) -> tuple[TrainingReport, CandidateScore]:
+    """One candidate: its training in ``folder``, then its validation crashes."""
+    if threads is not None:
+        torch.set_num_threads(threads)
+    report = _train_drivers(seed, folder, data_dir, config, progress)
+    windows = training_windows(data_dir, config.closed_loop.window_steps)
+    net = load_driver_net(folder / DRIVER_NET_FILE)
+    prior = load_xi_prior(folder / XI_PRIOR_FILE)
+    score = validation_crashes(net, prior, windows, config.closed_loop, seed)
+    return report, score
 
 
 class _Stopwatch:

@@ -99,7 +99,7 @@ def test_candidates_print_their_validation_crashes_and_the_one_kept(
     )
     out = tmp_path / "drivers"
     args = ("--seed", "5", "--out", str(out), "--data-dir", str(fake_ngsim))
-    result = _train(*args, "--candidates", "2")
+    result = _train(*args, "--candidates", "2", "--workers", "2")
     assert result.exit_code == 0, result.output
     assert "Candidates: crashes on their own validation windows" in result.output
     rows = [line.split() for line in result.output.splitlines()]

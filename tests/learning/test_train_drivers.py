@@ -61,3 +61,18 @@ def test_candidates_keep_the_training_with_the_fewest_validation_crashes(
     ).read_bytes()
     with pytest.raises(ValueError, match="candidates"):
         train_drivers(3, tmp_path / "x", data_dir=fake_ngsim, candidates=0)
+    # In two worker processes: the same candidates, scores and choice.
+    par = train_drivers(
+        3,
+        tmp_path / "par",
+        data_dir=fake_ngsim,
+        config=tiny_train_config,
+        candidates=2,
+        workers=2,
+    )
+    assert par.selection == report.selection
+    for seed in (3, 4):
+        for name in ("driver_net.npz", "xi_prior.npz"):
+            here = out / CANDIDATES_DIR / f"seed-{seed}" / name
+            there = tmp_path / "par" / CANDIDATES_DIR / f"seed-{seed}" / name
+            assert here.read_bytes() == there.read_bytes()
