@@ -125,12 +125,11 @@ def validation_crashes(
     xi = torch.as_tensor(
         fam.sample(len(tiled), np.random.default_rng([seed, 1])), dtype=torch.float32
     )
-    every = torch.ones(2, dtype=torch.bool)
-    road = Road()
-    crashed = {}
-    for kind, win in (("plain", tiled), ("stressed", stressed(tiled, stress))):
-        driver = LearnedDriver(net, xi, controlled=every)
-        crashed[kind] = np.asarray(replay(win, driver, road, seed=seed).crash)
+    driver = LearnedDriver(net, xi, controlled=torch.ones(2, dtype=torch.bool))
+    crashed = {
+        kind: np.asarray(replay(win, driver, Road(), seed=seed).crash)
+        for kind, win in (("plain", tiled), ("stressed", stressed(tiled, stress)))
+    }
     per_window = crashed["stressed"].reshape(replicates, len(val)).sum(axis=0)
     return CandidateScore(
         seed=seed,

@@ -146,16 +146,16 @@ class Followers:
         TTC closing only; lateral offset of the lateral-file windows only).
     hours : float
         Vehicle-hours driven, ``W T DT / 3600`` [h].
-    hard_brakes, lane_changes, collisions, road_departures : int
-        Event counts (collisions with the leader; windows in which the
-        follower crosses a road edge,
+    hard_brakes, lane_changes, road_departures : int
+        Event counts (windows in which the follower crosses a road edge,
         :func:`~avrisk.realism.metrics.road_departures`).
     gap_rmse : float
         Root mean square of the gap's difference to the record after ``T``
         steps [m].
     collisions_by_window : ndarray of int64, shape (W,)
-        Collisions per window, summed over its replays (windows in the order
-        of their first replay).
+        Collisions with the leader per window, summed over its replays
+        (windows in the order of their first replay); :attr:`collisions` is
+        their total.
     impacts : ndarray of shape (K, 7)
         One row per collision, columns :data:`IMPACT_COLUMNS`: held-out window,
         impact step, follower and leader speed then [m/s], the hardest
@@ -167,11 +167,15 @@ class Followers:
     hours: float
     hard_brakes: int
     lane_changes: int
-    collisions: int
     road_departures: int
     gap_rmse: float
     collisions_by_window: NDArray[np.int64]
     impacts: NDArray[np.float64]
+
+    @property
+    def collisions(self) -> int:
+        """Collisions with the leader, all windows together."""
+        return int(self.collisions_by_window.sum())
 
 
 def recorded(windows: CarFollowingWindows) -> ReplayResult:
@@ -227,7 +231,6 @@ def followers(
         hours=len(windows) * windows.n_steps * DT / 3600,
         hard_brakes=hard_brake_events(kin.accel_all, kin.accel_ok),
         lane_changes=lane_index_changes(y / road.lane_width, r.alive),
-        collisions=int(r.crash.sum()),
         road_departures=road_departures(y, 0.5 * windows.width_f, road.width, r.alive),
         gap_rmse=float(np.sqrt(np.mean((r.gap[:, -1] - windows.gap[:, -1]) ** 2))),
         collisions_by_window=_by_window(r.crash, labels),
