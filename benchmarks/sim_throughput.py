@@ -113,6 +113,9 @@ def worker_avrisk(
 
     _set_threads(threads)
     from avrisk.sim.simulator import compile_requested
+    from avrisk.tensors.allocator import keep_freed_memory
+
+    keep_freed_memory()  # as avrisk's commands and workers do
 
     sim = _scenario_simulator(scenario, measure, device)
     x, seeds = _batch(sim, batch_size)

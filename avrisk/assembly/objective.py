@@ -26,6 +26,7 @@ from avrisk.fingerprint import sha256_file, sha256_json
 from avrisk.scenario import ParamLayout, ScenarioSpec, spec_from_dict
 from avrisk.sim.collision import Contact
 from avrisk.sim.interfaces import weights_files
+from avrisk.tensors.allocator import keep_freed_memory
 
 __all__ = [
     "EVENT_COLUMNS",
@@ -226,8 +227,9 @@ class ObjectiveFactory:
         )
 
     def __call__(self) -> SimulationObjective:
-        """A new objective (sets this process's torch threads to one)."""
+        """A new objective (one torch thread, freed memory kept for reuse)."""
         torch.set_num_threads(1)
+        keep_freed_memory()
         return SimulationObjective(
             spec_from_dict(self.spec, source="the run's resolved scenario"),
             device=self.device,

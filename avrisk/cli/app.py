@@ -13,6 +13,7 @@ from avrisk.cli.serve_ego import serve_ego
 from avrisk.cli.simulate import replay, simulate
 from avrisk.cli.train_drivers import train_drivers_command
 from avrisk.cli.train_vision import train_vision_command
+from avrisk.tensors.allocator import keep_freed_memory
 
 app = typer.Typer(
     name="avrisk",
@@ -44,6 +45,7 @@ def _root(
     ),
 ) -> None:
     """Rare-event risk estimation for autonomous-vehicle policies."""
+    keep_freed_memory()
 
 
 for command in (run, compare, report, simulate, replay, demo):

@@ -30,8 +30,7 @@ import torch
 from torch import Tensor
 
 from avrisk.safety.running_min import RunningMin
-from avrisk.sim.geometry import min_argmin
-from avrisk.sim.lidar import beam_directions, relative_velocity, scan_boxes
+from avrisk.sim.lidar import beam_directions, nearest_box, relative_velocity
 from avrisk.sim.state import VehicleState
 
 __all__ = ["MinTTC", "ray_ttc"]
@@ -74,7 +73,7 @@ def ray_ttc(
     def rest(t: Tensor) -> Tensor:
         return t[..., 1:]
 
-    dist = scan_boxes(
+    s, j = nearest_box(
         ego(state.x),
         ego(state.y),
         ego(cos),
@@ -88,8 +87,7 @@ def ray_ttc(
         ray_cos,
         ray_sin,
         max_range,
-    )  # (..., A-1, N)
-    s, j = min_argmin(dist, dim=-2)  # first vehicle on each ray, (..., N); inf: none
+    )  # first vehicle on each ray, (..., N); inf: none
     wx, wy = relative_velocity(
         ego(cos), ego(sin), ego(state.speed), rest(cos), rest(sin), rest(state.speed)
     )

@@ -3,7 +3,7 @@ import math
 import pytest
 import torch
 
-from avrisk.sim.lidar import beam_directions, lidar_scan, others_index
+from avrisk.sim.lidar import beam_directions, lidar_scan, nearest_box, others_index
 from avrisk.sim.road import Road
 from avrisk.sim.state import VehicleState
 
@@ -100,3 +100,44 @@ def test_the_nearer_of_two_vehicles_on_a_beam_is_the_one_hit():
 
 def test_others_index_lists_everyone_but_oneself():
     assert others_index(3).tolist() == [[1, 2], [0, 2], [0, 1]]
+
+
+@pytest.mark.parametrize("n_boxes", [1, 2, 5, 7])
+def test_boxes_one_at_a_time_give_the_nearest_box_of_all_at_once_bit_for_bit(n_boxes):
+    # Compiled code scans one box at a time, eager code all at once: both must
+    # give the same distances and the same (lowest) index, on exact ties
+    # (boxes in the same place, rays along box edges), misses and hits.
+    g = torch.Generator().manual_seed(n_boxes)
+    batch, n_rays = 400, 36
+
+    def draw(*shape, scale=1.0):
+        return torch.rand(*shape, generator=g) * scale
+
+    sensor = [draw(batch, 1, scale=40.0), torch.round(draw(batch, 1, scale=3.0)) * 4]
+    heading = (draw(batch, 1) - 0.5) * 0.4
+    heading[::3] = 0.0
+    targets = [
+        draw(batch, n_boxes, scale=40.0),
+        torch.round(draw(batch, n_boxes, scale=3.0)) * 4,
+    ]
+    targets[0][::5, -1] = targets[0][::5, 0]  # a box behind another, exactly
+    target_heading = (draw(batch, n_boxes) - 0.5) * 0.4
+    target_heading[::2] = 0.0
+    args = (
+        *sensor,
+        torch.cos(heading),
+        torch.sin(heading),
+        *targets,
+        torch.cos(target_heading),
+        torch.sin(target_heading),
+        torch.full((batch, n_boxes), 2.4),
+        torch.full((batch, n_boxes), 1.0),
+        *beam_directions(n_rays),
+        30.0,
+    )
+    d_all, i_all = nearest_box(*args, one_at_a_time=False)
+    d_one, i_one = nearest_box(*args, one_at_a_time=True)
+    assert d_all.shape == i_all.shape == (batch, n_rays)
+    assert torch.isinf(d_all).any() and torch.isfinite(d_all).any()
+    assert torch.equal(d_one, d_all)
+    assert torch.equal(i_one, i_all)
