@@ -205,9 +205,10 @@ def nearest_box(
     Compiled, one box at a time makes no ``(..., J, R)`` temporary, and the
     scan and the reduction fuse into one loop over ``(..., R)``: the lidar of
     ``highway_default`` takes 1.8 ms instead of 2.5 ms per step at batch
-    1,024 on one CPU thread (BENCHMARKS.md "Simulator throughput"). Eager, it
-    would dispatch ``J`` times as many operations, which costs more than the
-    temporaries (taken in cache-sized slices, :mod:`avrisk.tensors.slices`).
+    1,024 on one CPU thread (BENCHMARKS.md "Simulator throughput"). Eager,
+    it dispatches ``J`` times as many operations, which pays only where the
+    ``(..., J, R)`` temporaries would leave the cache: the simulator's lidar
+    chooses by batch size (:class:`avrisk.sim.Simulator`).
     The running index is float arithmetic, ``i + [d_k < d] (k - i)``, exact
     for ``J < 2**24``; distances are capped at the largest finite float for
     the comparison, so that two misses (``inf - inf``) are no improvement.
@@ -267,6 +268,7 @@ def lidar_scan(
     beam_cos: Tensor,
     beam_sin: Tensor,
     max_range: float,
+    one_at_a_time: bool | None = None,
 ) -> LidarScan:
     """Lidar sweep of every vehicle against the others and the road edges.
 
@@ -282,6 +284,9 @@ def lidar_scan(
         Beam directions in the vehicle frame (:func:`beam_directions`).
     max_range : float
         Sensor range [m].
+    one_at_a_time : bool, optional
+        How the other vehicles are scanned (:func:`nearest_box`): the same
+        values either way.
 
     Returns
     -------
@@ -323,6 +328,7 @@ def lidar_scan(
         beam_cos,
         beam_sin,
         max_range,
+        one_at_a_time,
     )  # (..., A, R)
     seen = step(wall - nearest)  # 1.0 for a vehicle; a tie goes to the wall
     wx, wy = relative_velocity(

@@ -141,3 +141,47 @@ def test_boxes_one_at_a_time_give_the_nearest_box_of_all_at_once_bit_for_bit(n_b
     assert torch.isinf(d_all).any() and torch.isfinite(d_all).any()
     assert torch.equal(d_one, d_all)
     assert torch.equal(i_one, i_all)
+
+
+def test_the_simulators_eager_lidar_gives_the_same_scan_however_the_batch_is_cut(
+    monkeypatch,
+):
+    # Eager, the simulator scans all other vehicles at once while a batch's
+    # temporaries fit one slice, and one vehicle at a time in slices beyond.
+    from avrisk.safety import MinBoxTTC
+    from avrisk.sim import SimConfig, Simulator
+    from avrisk.sim import simulator as simulator_module
+
+    g = torch.Generator().manual_seed(3)
+    batch, n = 9, 5
+    rows = torch.rand(batch, n, 6, generator=g)
+    state = VehicleState(
+        x=rows[..., 0] * 60.0,
+        y=rows[..., 1] * ROAD.width,
+        heading=(rows[..., 2] - 0.5) * 0.2,
+        speed=rows[..., 3] * 30.0,
+        length=torch.full((batch, n), 4.8),
+        width=torch.full((batch, n), 2.0),
+    )
+    cos, sin = state.cos_sin
+    sim = Simulator(ROAD, SimConfig(n_lidar_beams=N_BEAMS), measure=MinBoxTTC())
+    whole = sim._scan(state, cos, sin)
+    all_at_once = n * (n - 1) * N_BEAMS
+    calls = []
+    real = simulator_module.lidar_scan
+
+    def spy(state, *args):
+        calls.append((state.n_vehicles, len(state.x), args[-1]))
+        return real(state, *args)
+
+    monkeypatch.setattr(simulator_module, "lidar_scan", spy)
+    # a budget of 4 rollouts one vehicle at a time: slices of 4, 4 and 1
+    monkeypatch.setattr(simulator_module, "_EAGER_CHUNK_TESTS", 4 * n * N_BEAMS)
+    cut = sim._scan(state, cos, sin)
+    # room for the whole batch all at once: one call, all at once (eager)
+    monkeypatch.setattr(simulator_module, "_EAGER_CHUNK_TESTS", batch * all_at_once)
+    at_once = sim._scan(state, cos, sin)
+    assert calls == [(n, 4, True), (n, 4, True), (n, 1, True), (n, batch, None)]
+    for field in ("range", "range_rate", "hit"):
+        assert torch.equal(getattr(cut, field), getattr(whole, field))
+        assert torch.equal(getattr(at_once, field), getattr(whole, field))
