@@ -199,6 +199,17 @@ def realism_command(
             "same figures on a machine.",
         ),
     ] = 1,
+    brake_guard: Annotated[
+        str | None,
+        typer.Option(
+            "--brake-guard",
+            metavar="GAP,DECEL",
+            help="Drive the learned drivers with an emergency brake: where the "
+            "vehicle ahead on the front beam needs more than DECEL [m/s^2] of "
+            "braking to stop the closing GAP [m] short of it, brake that hard "
+            "(e.g. 2,1). Default: the network alone.",
+        ),
+    ] = None,
 ) -> None:
     """Compare the learned drivers with held-out human driving (issue 21).
 
@@ -207,6 +218,10 @@ def realism_command(
     traffic against held-out US-101 vehicles. Both use only data shipped with
     avrisk. Takes one to two minutes at the defaults on one thread.
     """
+    from avrisk.agents.drivers.guard import BrakeGuard
+
+    with user_errors(ValueError):
+        guard = None if brake_guard is None else BrakeGuard.parse(brake_guard)
     with user_errors(OSError):
         files = driver_files(drivers)
         check_output_folder(out)
@@ -216,7 +231,11 @@ def realism_command(
 
         torch.set_num_threads(threads)
         settings = RealismSettings(
-            seed=seed, replicates=replicates, windows=windows, scenes=scenes
+            seed=seed,
+            replicates=replicates,
+            windows=windows,
+            scenes=scenes,
+            guard=guard,
         )
         t0 = time.perf_counter()
         with part_progress() as (progress_a, progress_b):

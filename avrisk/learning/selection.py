@@ -35,6 +35,7 @@ import numpy as np
 import torch
 
 from avrisk.agents.drivers.driver import LearnedDriver
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import XiPrior
 from avrisk.learning.closed_loop import split_windows, stressed
@@ -92,6 +93,7 @@ def validation_crashes(
     *,
     replicates: int = REPLICATES,
     stress: float = STRESS,
+    guard: BrakeGuard | None = None,
 ) -> CandidateScore:
     """Score a training by its crashes on the closed-loop stage's validation windows.
 
@@ -110,6 +112,8 @@ def validation_crashes(
     replicates : int, default=REPLICATES
     stress : float, default=STRESS
         At least 1.
+    guard : BrakeGuard, optional
+        The drivers' emergency brake (None: the network alone).
 
     Returns
     -------
@@ -125,7 +129,8 @@ def validation_crashes(
     xi = torch.as_tensor(
         fam.sample(len(tiled), np.random.default_rng([seed, 1])), dtype=torch.float32
     )
-    driver = LearnedDriver(net, xi, controlled=torch.ones(2, dtype=torch.bool))
+    every = torch.ones(2, dtype=torch.bool)
+    driver = LearnedDriver(net, xi, controlled=every, guard=guard)
     crashed = {
         kind: np.asarray(replay(win, driver, Road(), seed=seed).crash)
         for kind, win in (("plain", tiled), ("stressed", stressed(tiled, stress)))

@@ -31,6 +31,7 @@ import torch
 from numpy.typing import NDArray
 
 from avrisk.agents.drivers.driver import LearnedDriver
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.idm import IDMDriver, IDMParams
 from avrisk.learning.replay import CarFollowingWindows, ReplayResult, replay
@@ -100,7 +101,12 @@ Progress = Callable[[str, int, int], None]
 
 
 def learned_drivers(
-    net: DriverNet, fam: Any, n: int, rng: np.random.Generator, n_vehicles: int
+    net: DriverNet,
+    fam: Any,
+    n: int,
+    rng: np.random.Generator,
+    n_vehicles: int,
+    guard: BrakeGuard | None = None,
 ) -> dict[str, LearnedDriver]:
     """The learned drivers compared: at ``mu0``, and with ``xi ~ P0`` per rollout.
 
@@ -118,6 +124,8 @@ def learned_drivers(
     rng : numpy.random.Generator
     n_vehicles : int
         ``A``.
+    guard : BrakeGuard, optional
+        Their emergency brake (None: none).
 
     Returns
     -------
@@ -127,10 +135,10 @@ def learned_drivers(
     xi_draw = torch.as_tensor(fam.sample(n, rng), dtype=torch.float32)
     mu0 = torch.as_tensor(fam.mean, dtype=torch.float32)
     return {
-        "learned mu0": LearnedDriver(net, mu0, controlled=every),
-        "learned xi~P0": LearnedDriver(net, xi_draw, controlled=every),
+        "learned mu0": LearnedDriver(net, mu0, controlled=every, guard=guard),
+        "learned xi~P0": LearnedDriver(net, xi_draw, controlled=every, guard=guard),
         "learned xi~P0, mean actions": LearnedDriver(
-            net, xi_draw, controlled=every, stochastic=False
+            net, xi_draw, controlled=every, stochastic=False, guard=guard
         ),
     }
 
@@ -301,6 +309,7 @@ def run_part_a(
     replicates: int,
     road: Road,
     progress: Progress | None = None,
+    guard: BrakeGuard | None = None,
 ) -> PartA:
     """Replay ``windows`` ``replicates`` times with every model of part A.
 
@@ -320,6 +329,8 @@ def run_part_a(
     road : Road
     progress : callable, optional
         ``progress(model, done, total)``.
+    guard : BrakeGuard, optional
+        The learned drivers' emergency brake (None: none).
 
     Returns
     -------
@@ -329,7 +340,7 @@ def run_part_a(
     win, win_labels = windows.take(tile), labels[tile]
     n = len(win)
     drivers: dict[str, Any] = dict(
-        learned_drivers(net, fam, n, np.random.default_rng(seed), 2)
+        learned_drivers(net, fam, n, np.random.default_rng(seed), 2, guard)
     )
     # Car following only: MOBIL would overtake the replayed leader.
     drivers["IDM"] = IDMDriver(

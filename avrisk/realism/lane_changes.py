@@ -25,6 +25,7 @@ import torch
 from numpy.typing import NDArray
 
 from avrisk.agents.drivers.driver import LearnedDriver
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.lane_change import LaneChangeParams, LaneChangingDriver
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.idm import IDMDriver
@@ -239,11 +240,15 @@ def measure(
 
 
 def lane_changing_drivers(
-    net: DriverNet, road: Road, params: LaneChangeParams, stochastic: bool = True
+    net: DriverNet,
+    road: Road,
+    params: LaneChangeParams,
+    stochastic: bool = True,
+    guard: BrakeGuard | None = None,
 ) -> LaneChangingDriver:
     """The learned network with its lane-change layer, driving every vehicle."""
     every = torch.ones(N_VEHICLES, dtype=torch.bool)
-    inner = LearnedDriver(net, controlled=every, stochastic=stochastic)
+    inner = LearnedDriver(net, controlled=every, stochastic=stochastic, guard=guard)
     return LaneChangingDriver(inner, road, params)
 
 
@@ -253,6 +258,7 @@ def evaluate(
     params: LaneChangeParams,
     noise: float,
     progress: Progress | None = None,
+    guard: BrakeGuard | None = None,
 ) -> dict[str, TrafficLaneChanges]:
     """Every compared model on ``scenes`` (see the module docstring).
 
@@ -266,6 +272,8 @@ def evaluate(
         The detector's lane-keeping speed [m/s] (the US-101 tables').
     progress : callable, optional
         ``progress(model, done, total)``.
+    guard : BrakeGuard, optional
+        The learned drivers' emergency brake (None: none).
 
     Returns
     -------
@@ -274,15 +282,17 @@ def evaluate(
     every = torch.ones(N_VEHICLES, dtype=torch.bool)
     drivers = {
         "learned + lane changes (sampled actions)": (
-            lane_changing_drivers(net, scenes.road, params),
+            lane_changing_drivers(net, scenes.road, params, guard=guard),
             [scenes.xi],
         ),
         "learned + lane changes (mean actions)": (
-            lane_changing_drivers(net, scenes.road, params, stochastic=False),
+            lane_changing_drivers(
+                net, scenes.road, params, stochastic=False, guard=guard
+            ),
             [scenes.xi],
         ),
         "learned, no lane changes (sampled actions)": (
-            LearnedDriver(net, controlled=every),
+            LearnedDriver(net, controlled=every, guard=guard),
             [scenes.xi],
         ),
         "IDM+MOBIL": (IDMDriver(scenes.idm, scenes.road), [None]),

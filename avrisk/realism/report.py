@@ -23,6 +23,7 @@ import numpy as np
 import pyarrow.compute as pc
 import torch
 
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.lane_change import LaneChangeParams
 from avrisk.agents.drivers.store import (
     DRIVER_NET_FILE,
@@ -104,6 +105,9 @@ class RealismSettings:
         Length of a window [s].
     horizon : float, default=HORIZON
         Length of a part-B scene [s].
+    guard : BrakeGuard or None, default=None
+        An emergency brake on the learned drivers, in both parts
+        (:mod:`avrisk.agents.drivers.guard`); None: the network alone.
     """
 
     seed: int = 2024
@@ -112,6 +116,7 @@ class RealismSettings:
     scenes: int = 256
     window_s: float = 15.0
     horizon: float = HORIZON
+    guard: BrakeGuard | None = None
 
 
 @dataclass(frozen=True)
@@ -215,13 +220,19 @@ def run_realism(
         replicates=s.replicates,
         road=road,
         progress=progress_a,
+        guard=s.guard,
     )
     summary_a = summarise_part_a(part_a)
     t1 = time.perf_counter()
     tables = load_lane_change_tables()
     scenes = Scenes(s.scenes, s.seed + 1, s.horizon, fam)
     part_b = evaluate(
-        net, scenes, LaneChangeParams(), tables.noise_speed, progress=progress_b
+        net,
+        scenes,
+        LaneChangeParams(),
+        tables.noise_speed,
+        progress=progress_b,
+        guard=s.guard,
     )
     summary_b = summarise_lane_changes(
         part_b, split_statistics(tables, "test"), split_statistics(tables, "train")
@@ -301,7 +312,7 @@ def markdown(result: RealismResult, command: str) -> str:
     return "\n\n".join(
         [
             f"# Realism of the learned drivers against held-out human data\n\n"
-            f"Drivers: {drivers} ({hashes}).",
+            f"Drivers: {drivers} ({hashes}){_guard_words(s.guard)}.",
             part_a_table(result.summary_a),
             targets_table(result.targets),
             collision_table(result.summary_a),
@@ -311,6 +322,15 @@ def markdown(result: RealismResult, command: str) -> str:
             f"_Command: `{command}`; {seconds:.0f} s, torch {torch.__version__}, "
             f"{torch.get_num_threads()} thread(s)._",
         ]
+    )
+
+
+def _guard_words(guard: BrakeGuard | None) -> str:
+    if guard is None:
+        return ""
+    return (
+        f", with an emergency brake (gap floor {guard.gap_floor:g} m, engaged "
+        f"above {guard.engage_decel:g} m/s^2 of needed deceleration)"
     )
 
 

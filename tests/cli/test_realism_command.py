@@ -67,6 +67,7 @@ def test_the_report_is_written_whole_with_its_provenance(
         "scenes": 1,
         "window_s": 3.0,
         "horizon": 6.0,
+        "guard": None,
     }
     held_out = prov["held_out"]["part_a"]
     assert held_out["windows"] == 3 and len(held_out["indices"]) == 3
@@ -159,3 +160,20 @@ def test_an_out_path_that_is_a_file_is_refused_before_any_work(tmp_path):
     blocker.write_text("not a folder")
     out = one_line_error(realism("--out", blocker))
     assert "is a file" in out
+
+
+def test_the_brake_guard_is_used_and_recorded(tmp_path, short_parts):
+    out = tmp_path / "report"
+    result = realism(*TINY, "--brake-guard", "2,1", "--out", out)
+    assert result.exit_code == 0, result.output
+    figures = json.loads((out / "realism.json").read_text())
+    guard = figures["provenance"]["settings"]["guard"]
+    assert guard == {"gap_floor": 2.0, "engage_decel": 1.0}
+    assert "with an emergency brake (gap floor 2 m" in (out / "realism.md").read_text()
+
+
+@pytest.mark.parametrize("text", ["2", "a,b", "2,1,3", "-1,1", "2,0"])
+def test_a_bad_brake_guard_is_a_one_line_error_before_any_work(tmp_path, text):
+    out = one_line_error(realism("--brake-guard", text, "--out", tmp_path / "r"))
+    assert "gap" in out.lower() or "decel" in out.lower()
+    assert not (tmp_path / "r").exists()

@@ -47,6 +47,7 @@ import torch
 from torch import Tensor
 
 from avrisk.agents.drivers.features import features_from_observation
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import ActionDistribution, DriverNet
 from avrisk.agents.drivers.xi import XI_DIM
 from avrisk.agents.policy import ego_only, register_policy
@@ -300,6 +301,10 @@ class LearnedDriver:
         False clips braking so that a vehicle stops rather than reverses
         within a step (speed noise around 0 in congested traffic would
         otherwise back cars up).
+    guard : BrakeGuard, optional
+        An emergency brake on the network's acceleration
+        (:mod:`avrisk.agents.drivers.guard`); None (the default) drives on the
+        network alone.
     """
 
     #: The features include every vehicle's lidar.
@@ -314,6 +319,7 @@ class LearnedDriver:
         stochastic: bool = True,
         noise_steps: int | None = None,
         allow_reverse: bool = False,
+        guard: BrakeGuard | None = None,
     ) -> None:
         if noise_steps is not None and (not stochastic or noise_steps < 1):
             raise ValueError(
@@ -330,6 +336,7 @@ class LearnedDriver:
         self.stochastic = stochastic
         self.noise_steps = noise_steps
         self.allow_reverse = allow_reverse
+        self.guard = guard
         self.noise = (
             NoiseRequest(
                 DRIVER_NOISE_STREAM,
@@ -390,6 +397,18 @@ class LearnedDriver:
         """
         return self.net(self._mine(features_from_observation(obs)), xi)
 
+    def _guarded(self, accel: Tensor, obs: Observation) -> Tensor:
+        """``accel`` (B, C) through the emergency brake, from the front beams."""
+        assert self.guard is not None and obs.lidar is not None
+        lidar = obs.lidar
+        return self.guard.limit(
+            accel,
+            self._mine(lidar.range[..., 0]),
+            self._mine(lidar.range_rate[..., 0]),
+            self._mine(lidar.hit[..., 0]),
+            self._mine(obs.state.length),
+        )
+
     def _mine(self, t: Tensor) -> Tensor:
         """The controlled vehicles' columns of ``t``, shape (B, C, ...)."""
         return t if self.columns is None else t.index_select(1, self.columns)
@@ -418,6 +437,8 @@ class LearnedDriver:
         accel, steer = sample_actions(dist, eps, self.net.noise_scale)
         dtype = obs.state.x.dtype
         accel, steer = accel.to(dtype), steer.to(dtype)
+        if self.guard is not None:
+            accel = self._guarded(accel, obs)
         if not self.allow_reverse:
             accel = _no_reverse(accel, self._mine(obs.state.speed), obs.dt)
         action = Action(accel=self._spread(accel), steer=self._spread(steer))

@@ -9,6 +9,7 @@ from avrisk.agents.drivers.driver import (
     ar1_noise,
     sample_actions,
 )
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import XI_DIM
 from avrisk.agents.policy import get_policy
@@ -143,3 +144,29 @@ def test_per_rollout_xi_must_match_the_batch(net):
         LearnedDriver(net, torch.zeros(2, XI_DIM), controlled=ALL3).init(obs, None)
     with pytest.raises(ValueError, match="404"):
         LearnedDriver(net, torch.zeros(3, 10), controlled=ALL3)
+
+
+def test_a_guarded_driver_brakes_for_a_stopped_vehicle_ahead_and_is_unchanged_elsewhere(
+    net,
+):
+    # Vehicle 0 closes at 15 m/s on vehicle 1, stopped 30 m ahead in its lane;
+    # vehicle 2 drives alone in the next lane.
+    rows = [
+        [0.0, 5.55, 0.0, 15.0, 4.8, 1.9],
+        [30.0, 5.55, 0.0, 0.0, 4.8, 1.9],
+        [-40.0, 1.85, 0.0, 15.0, 4.8, 1.9],
+    ]
+    state = VehicleState.from_rows([rows])
+    seeds = torch.tensor([3])
+    plain = LearnedDriver(net, controlled=ALL3, stochastic=False)
+    guarded = LearnedDriver(
+        net, controlled=ALL3, stochastic=False, guard=BrakeGuard(2.0, 1.0)
+    )
+    a = sim(horizon=0.1).run(state, [plain], seeds, record_trace=True).trace
+    b = sim(horizon=0.1).run(state, [guarded], seeds, record_trace=True).trace
+    # 25.2 m of bumper gap, 23.2 m of room: 15^2 / 46.4 = 4.85 m/s^2 needed
+    braked = (b.speed[0, 1, 0] - b.speed[0, 0, 0]) / 0.1
+    assert braked.item() == pytest.approx(-225.0 / 46.4, rel=1e-4)
+    assert (a.speed[0, 1, 0] - a.speed[0, 0, 0]).item() / 0.1 > -1.0
+    assert torch.equal(a.x[0, :, 2], b.x[0, :, 2])  # nothing ahead: no change
+    assert torch.equal(a.speed[0, :, 1], b.speed[0, :, 1])

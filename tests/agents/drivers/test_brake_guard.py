@@ -1,0 +1,57 @@
+import pytest
+import torch
+
+from avrisk.agents.drivers.guard import BrakeGuard
+
+GUARD = BrakeGuard(gap_floor=2.0, engage_decel=1.0)
+LENGTH = 4.8
+
+
+def limit(accel, rng, rate, hit=0):
+    t = torch.tensor
+    return GUARD.limit(
+        t([[accel]]), t([[rng]]), t([[rate]]), t([[hit]]), t([[LENGTH]])
+    ).item()
+
+
+def test_closing_fast_on_a_vehicle_ahead_brakes_to_stop_the_closing_at_the_floor():
+    # bumper gap 12.4 - 2.4 = 10 m, 8 m left above the floor, closing at 8 m/s:
+    # 64 / (2 * 8) = 4 m/s^2 needed
+    assert limit(0.5, 12.4, -8.0) == pytest.approx(-4.0)
+
+
+def test_the_networks_harder_braking_is_kept():
+    assert limit(-5.0, 12.4, -8.0) == -5.0
+
+
+def test_below_the_engaging_deceleration_the_network_drives_unchanged():
+    # closing at 3 m/s with 8 m of room needs 0.5625 m/s^2 < 1
+    assert limit(0.3, 12.4, -3.0) == pytest.approx(0.3)
+    assert limit(0.3, 12.4, +3.0) == pytest.approx(0.3)  # opening
+
+
+def test_a_beam_that_hits_no_vehicle_never_brakes():
+    assert limit(0.3, 3.0, -20.0, hit=-1) == pytest.approx(0.3)
+
+
+def test_inside_the_floor_the_room_is_floored_not_negative():
+    # gap 1 m < floor: room 0.1 m, closing 1 m/s: 5 m/s^2
+    assert limit(0.0, 1.0 + LENGTH / 2, -1.0) == pytest.approx(-5.0)
+
+
+@pytest.mark.parametrize(
+    ("text", "guard"), [("2,1", BrakeGuard(2.0, 1.0)), ("0,0.5", BrakeGuard(0, 0.5))]
+)
+def test_a_guard_parses_from_gap_and_deceleration(text, guard):
+    assert BrakeGuard.parse(text) == guard
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [("2", "GAP_FLOOR,ENGAGE_DECEL"), ("x,1", "GAP_FLOOR"), ("-1,1", "gap_floor")],
+)
+def test_bad_guards_are_refused(text, match):
+    with pytest.raises(ValueError, match=match):
+        BrakeGuard.parse(text)
+    with pytest.raises(ValueError, match="engage_decel"):
+        BrakeGuard(1.0, 0.0)
