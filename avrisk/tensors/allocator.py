@@ -26,7 +26,6 @@ itself may call it too.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import os
 import sys
 
@@ -76,13 +75,14 @@ def _user_configured(environ: dict[str, str] | os._Environ[str]) -> bool:
 
 
 def _glibc() -> ctypes.CDLL | None:
-    """The C library of this process if it is glibc, else None."""
-    name = ctypes.util.find_library("c")
-    if name is None:
-        return None
+    """The C library of this process if it is glibc, else None.
+
+    ``CDLL(None)`` looks symbols up in the process itself (no library search,
+    which would run ``ldconfig`` at every command's start).
+    """
+    libc = ctypes.CDLL(None)
     try:
-        libc = ctypes.CDLL(name)
         libc.gnu_get_libc_version  # noqa: B018 -- only glibc has it
-    except (OSError, AttributeError):
+    except AttributeError:
         return None
     return libc
