@@ -279,6 +279,10 @@ def learned_drivers(
 ) -> LearnedDriver | LaneChangingDriver:
     """The actor of a scenario's learned drivers, changing lanes if the spec says so.
 
+    They drive with the emergency brake their weights carry (``net.guard``,
+    :mod:`avrisk.agents.drivers.guard`); the ``lidar_imitation`` ego, the same
+    network, drives without it.
+
     Parameters
     ----------
     net : DriverNet
@@ -298,6 +302,7 @@ def learned_drivers(
         controlled=controlled,
         stochastic=settings.stochastic,
         noise_steps=spec.simulation.n_steps if settings.noise_in_x else None,
+        guard=net.guard,
     )
     if settings.lane_changes is None:
         return driver

@@ -23,7 +23,7 @@ import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 from rich.markup import escape
@@ -43,6 +43,7 @@ from avrisk.cli.tables import add_columns, compact_table
 if TYPE_CHECKING:
     from rich.table import Table
 
+    from avrisk.agents.drivers.guard import BrakeGuard
     from avrisk.realism import DriverFiles, RealismResult
     from avrisk.realism.car_following import Progress as PartProgress
 
@@ -203,11 +204,12 @@ def realism_command(
         str | None,
         typer.Option(
             "--brake-guard",
-            metavar="GAP,DECEL",
-            help="Drive the learned drivers with an emergency brake: where the "
-            "vehicle ahead on the front beam needs more than DECEL [m/s^2] of "
-            "braking to stop the closing GAP [m] short of it, brake that hard "
-            "(e.g. 2,1). Default: the network alone.",
+            metavar="GAP,DECEL|none",
+            help="The learned drivers' emergency brake: where the vehicle ahead "
+            "on the front beam needs more than DECEL [m/s^2] of braking to stop "
+            "the closing GAP [m] short of it, brake that hard (e.g. 3,0.5); "
+            "'none' drives the network alone. Default: the brake the driver "
+            "weights carry (the shipped drivers': 3,0.5).",
         ),
     ] = None,
 ) -> None:
@@ -218,10 +220,8 @@ def realism_command(
     traffic against held-out US-101 vehicles. Both use only data shipped with
     avrisk. Takes one to two minutes at the defaults on one thread.
     """
-    from avrisk.agents.drivers.guard import BrakeGuard
-
     with user_errors(ValueError):
-        guard = None if brake_guard is None else BrakeGuard.parse(brake_guard)
+        guard = _brake_guard(brake_guard)
     with user_errors(OSError):
         files = driver_files(drivers)
         check_output_folder(out)
@@ -249,3 +249,14 @@ def realism_command(
             f"({duration(time.perf_counter() - t0)})",
             highlight=False,
         )
+
+
+def _brake_guard(text: str | None) -> BrakeGuard | Literal["drivers"] | None:
+    """``--brake-guard``: the drivers' own brake (absent), none, or GAP,DECEL."""
+    from avrisk.agents.drivers.guard import BrakeGuard
+
+    if text is None:
+        return "drivers"
+    if text.strip().lower() == "none":
+        return None
+    return BrakeGuard.parse(text)

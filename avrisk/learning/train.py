@@ -25,14 +25,17 @@ Pipeline of :func:`train_drivers` (DESIGN.md §4), one module a stage::
                       closed-loop head                 (bootstrap_heads.py)
     mu0, Sigma0^-1  = ensemble mean, Ledoit-Wolf + graphical lasso
                                                         (xi_prior_fit.py)
-    files, report   = driver_net.npz, xi_prior.npz, training_report.json
+    files, report   = driver_net.npz (with the emergency brake
+                      TrainConfig.guard, which training itself never
+                      drives with), xi_prior.npz, training_report.json
                                                         (training_report.py)
 
 The settings of every stage are one :class:`~avrisk.learning.train_config.TrainConfig`.
 With ``candidates > 1`` the recipe is trained with as many seeds and the
-training whose drivers crash least on their own closed-loop validation windows
-is kept (:mod:`avrisk.learning.selection`; training data only): trainings of
-one recipe differ widely in how often their drivers crash.
+training whose drivers (with their emergency brake) crash least on their own
+closed-loop validation windows is kept (:mod:`avrisk.learning.selection`;
+training data only): trainings of one recipe differ widely in how often their
+drivers crash.
 The shipped files are ``driver_net.npz`` (trunk + shared head) and
 ``xi_prior.npz`` (``mu0``, sparse precision, members); see
 :mod:`avrisk.agents.drivers.store`. The run is seeded: the same seed, data
@@ -234,7 +237,9 @@ def _train_and_score(
     windows = training_windows(data_dir, config.closed_loop.window_steps)
     net = load_driver_net(folder / DRIVER_NET_FILE)
     prior = load_xi_prior(folder / XI_PRIOR_FILE)
-    score = validation_crashes(net, prior, windows, config.closed_loop, seed)
+    score = validation_crashes(
+        net, prior, windows, config.closed_loop, seed, guard=net.guard
+    )
     return report, score
 
 
@@ -335,4 +340,5 @@ def _train_drivers(
         environment=training_environment(),
         seconds=stopwatch.seconds,
     )
+    net.guard = config.guard
     return write_training_outputs(out, net, prior, report)

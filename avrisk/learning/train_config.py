@@ -12,6 +12,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from avrisk.agents.drivers.guard import BrakeGuard
+
 __all__ = ["ClosedLoopConfig", "Progress", "TrainConfig", "TrainEvent"]
 
 
@@ -55,7 +57,7 @@ class ClosedLoopConfig:
         ``adversarial_weight``).
     offset_weight : float, default=1.0
         Weight of the lane-offset imitation term (lateral windows).
-    adversarial_weight : float, default=1.0
+    adversarial_weight : float, default=10.0
         Weight of MGAIL's reward (:mod:`avrisk.learning.mgail`): the loss
         gets ``-adversarial_weight`` times the mean discriminator reward of the
         simulated transitions (0: no discriminator).
@@ -103,7 +105,7 @@ class ClosedLoopConfig:
     ttc_weight: float = 10.0
     imitation_weight: float = 1.0
     offset_weight: float = 1.0
-    adversarial_weight: float = 1.0
+    adversarial_weight: float = 10.0
     disc_hidden: int = 64
     disc_lr: float = 1e-3
     disc_epochs: int = 2
@@ -211,6 +213,13 @@ class TrainConfig:
     closed_loop : ClosedLoopConfig
         Closed-loop training after DAgger and the noise calibration
         (:mod:`avrisk.learning.closed_loop`; ``iterations=0`` skips it).
+    guard : BrakeGuard or None, default=BrakeGuard(3.0, 0.5)
+        The emergency brake written with the weights
+        (:mod:`avrisk.agents.drivers.guard`): the scenarios' environment
+        drivers and ``avrisk realism`` drive with it, and ``--candidates``
+        scores with it. Training itself drives the network alone. The default
+        was chosen on the closed-loop validation windows of three trainings
+        (``benchmarks/brake_guard.py``); None writes drivers without one.
     """
 
     n_members: int = 20
@@ -235,6 +244,7 @@ class TrainConfig:
     target_density: float = 0.01
     max_shift: float = 0.01
     closed_loop: ClosedLoopConfig = field(default_factory=ClosedLoopConfig)
+    guard: BrakeGuard | None = BrakeGuard(3.0, 0.5)
 
     def __post_init__(self) -> None:
         if self.n_members < 2:

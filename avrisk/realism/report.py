@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pyarrow.compute as pc
@@ -68,6 +68,7 @@ from avrisk.scenario import xi_base_family
 from avrisk.sim import Road
 
 __all__ = [
+    "DRIVERS_GUARD",
     "FILES",
     "DriverFiles",
     "RealismResult",
@@ -83,6 +84,9 @@ FILES = {
     "part_a_figure": "part_a_cdfs.png",
     "part_b_figure": "lane_changes.png",
 }
+
+#: ``RealismSettings.guard``: the emergency brake the driver weights carry.
+DRIVERS_GUARD = "drivers"
 
 
 @dataclass(frozen=True)
@@ -105,9 +109,11 @@ class RealismSettings:
         Length of a window [s].
     horizon : float, default=HORIZON
         Length of a part-B scene [s].
-    guard : BrakeGuard or None, default=None
-        An emergency brake on the learned drivers, in both parts
-        (:mod:`avrisk.agents.drivers.guard`); None: the network alone.
+    guard : BrakeGuard, None or "drivers", default="drivers"
+        The emergency brake of the learned drivers, in both parts
+        (:mod:`avrisk.agents.drivers.guard`): ``"drivers"`` the one their
+        weights carry (:data:`DRIVERS_GUARD`), None the network alone.
+        :func:`run_realism` records the one it drove with.
     """
 
     seed: int = 2024
@@ -116,7 +122,7 @@ class RealismSettings:
     scenes: int = 256
     window_s: float = 15.0
     horizon: float = HORIZON
-    guard: BrakeGuard | None = None
+    guard: BrakeGuard | Literal["drivers"] | None = "drivers"
 
 
 @dataclass(frozen=True)
@@ -207,6 +213,8 @@ def run_realism(
     net = load_driver_net(drivers.net)
     fam = xi_base_family(load_xi_prior(drivers.prior))
     s = settings
+    if s.guard == DRIVERS_GUARD:
+        s = replace(s, guard=net.guard)
     road = Road()
     t0 = time.perf_counter()
     everything = held_out_windows(round(s.window_s / DT), road)

@@ -200,6 +200,15 @@ def test_the_lidar_ego_drives_on_its_mean_action_whatever_the_seed(models):
     assert isinstance(sim.ego_policy, LearnedEgoPolicy)
 
 
+def test_the_traffic_drives_with_the_weights_brake_and_the_lidar_ego_without():
+    sim = ScenarioSimulator(load_spec("highway_default"))
+    assert sim.net.guard is not None  # the shipped drivers carry one
+    assert sim._learned_driver.guard == sim.net.guard
+    assert not hasattr(sim.ego_policy, "guard")
+    lanes = with_lane_changes(load_spec("highway_default"))
+    assert ScenarioSimulator(lanes)._learned_driver.inner.guard == sim.net.guard
+
+
 def with_lane_changes(spec, **settings):
     """``spec`` with its learned drivers changing lanes (``settings`` as in YAML)."""
     drivers = spec.learned_drivers.model_copy(

@@ -10,7 +10,9 @@ from typer.testing import CliRunner
 
 import avrisk
 import avrisk.realism
-from avrisk.agents.drivers.store import default_drivers_dir
+from avrisk.agents.drivers.guard import BrakeGuard
+from avrisk.agents.drivers.network import DriverNet
+from avrisk.agents.drivers.store import default_drivers_dir, load_driver_net
 from avrisk.cli.app import app
 from avrisk.fingerprint import sha256_file
 from avrisk.realism import FILES, RealismSettings
@@ -67,7 +69,7 @@ def test_the_report_is_written_whole_with_its_provenance(
         "scenes": 1,
         "window_s": 3.0,
         "horizon": 6.0,
-        "guard": None,
+        "guard": load_driver_net(drivers_copy / "driver_net.npz").guard.to_dict(),
     }
     held_out = prov["held_out"]["part_a"]
     assert held_out["windows"] == 3 and len(held_out["indices"]) == 3
@@ -172,7 +174,27 @@ def test_the_brake_guard_is_used_and_recorded(tmp_path, short_parts):
     assert "with an emergency brake (gap floor 2 m" in (out / "realism.md").read_text()
 
 
-@pytest.mark.parametrize("text", ["2", "a,b", "2,1,3", "-1,1", "2,0"])
+def test_by_default_the_drivers_own_brake_is_used_and_none_turns_it_off(
+    tmp_path, short_parts, drivers_copy
+):
+    net = DriverNet.load(drivers_copy / "driver_net.npz")
+    net.guard = BrakeGuard(4.0, 0.25)
+    net.save(drivers_copy / "driver_net.npz")
+    runs = {"own": (), "off": ("--brake-guard", "none")}
+    for name, option in runs.items():
+        out = tmp_path / name
+        result = realism(*TINY, "--drivers", drivers_copy, *option, "--out", out)
+        assert result.exit_code == 0, result.output
+        runs[name] = json.loads((out / "realism.json").read_text())
+        runs[name]["md"] = (out / "realism.md").read_text()
+    own = runs["own"]["provenance"]["settings"]["guard"]
+    assert own == {"gap_floor": 4.0, "engage_decel": 0.25}
+    assert "gap floor 4 m" in runs["own"]["md"]
+    assert runs["off"]["provenance"]["settings"]["guard"] is None
+    assert "emergency brake" not in runs["off"]["md"]
+
+
+@pytest.mark.parametrize("text", ["2", "a,b", "2,1,3", "-1,1", "2,0", "inf,1"])
 def test_a_bad_brake_guard_is_a_one_line_error_before_any_work(tmp_path, text):
     out = one_line_error(realism("--brake-guard", text, "--out", tmp_path / "r"))
     assert "gap" in out.lower() or "decel" in out.lower()

@@ -3,6 +3,7 @@ import json
 import pytest
 import torch
 
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.store import XiPrior, load_driver_net
 from avrisk.agents.drivers.xi import XI_DIM
 from avrisk.learning.selection import CandidateScore, choose
@@ -18,6 +19,7 @@ def test_train_drivers_writes_loadable_weights_a_prior_and_a_report(
         3, tmp_path / "out", data_dir=fake_ngsim, config=tiny_train_config
     )
     net = load_driver_net(tmp_path / "out" / "driver_net.npz")
+    assert net.guard == tiny_train_config.guard == BrakeGuard(3.0, 0.5)
     prior = XiPrior.load(tmp_path / "out" / "xi_prior.npz")
     assert prior.members.shape == (3, XI_DIM) and 0 < prior.sparsity <= 1
     assert net.default_xi.shape == (XI_DIM,)

@@ -19,6 +19,7 @@ emergency brake on the learned drivers", floors of 1-2 m) it engaged in
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -46,11 +47,13 @@ class BrakeGuard:
     engage_decel: float
 
     def __post_init__(self) -> None:
-        if not self.gap_floor >= 0.0:
-            raise ValueError(f"gap_floor must be >= 0 [m]; got {self.gap_floor}")
-        if not self.engage_decel > 0.0:
+        if not 0.0 <= self.gap_floor < math.inf:
             raise ValueError(
-                f"engage_decel must be > 0 [m/s^2]; got {self.engage_decel}"
+                f"gap_floor must be finite and >= 0 [m]; got {self.gap_floor}"
+            )
+        if not 0.0 < self.engage_decel < math.inf:
+            raise ValueError(
+                f"engage_decel must be finite and > 0 [m/s^2]; got {self.engage_decel}"
             )
 
     def limit(
@@ -87,6 +90,32 @@ class BrakeGuard:
         needed = closing * closing / (2.0 * room)
         engaged = (hit_ahead >= 0) & (needed > self.engage_decel)
         return torch.where(engaged, torch.minimum(accel, -needed), accel)
+
+    def to_dict(self) -> dict[str, float]:
+        """The settings as JSON numbers (see :meth:`from_dict`)."""
+        return {"gap_floor": self.gap_floor, "engage_decel": self.engage_decel}
+
+    @classmethod
+    def from_dict(cls, data: object) -> BrakeGuard:
+        """A guard from :meth:`to_dict`'s mapping, checked (untrusted input).
+
+        Raises
+        ------
+        ValueError
+            If ``data`` is not a mapping of exactly the two settings to finite
+            numbers in range.
+        """
+        keys = {"gap_floor", "engage_decel"}
+        if not isinstance(data, dict) or set(data) != keys:
+            raise ValueError(
+                f"a brake guard is a mapping of {sorted(keys)}; got {data!r}"
+            )
+        values = [data["gap_floor"], data["engage_decel"]]
+        if not all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in values
+        ):
+            raise ValueError(f"a brake guard's settings are numbers; got {data!r}")
+        return cls(float(values[0]), float(values[1]))
 
     @classmethod
     def parse(cls, text: str) -> BrakeGuard:

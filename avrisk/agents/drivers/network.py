@@ -46,6 +46,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from avrisk.agents.drivers.features import FEATURE_NAMES, N_FEATURES
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.xi import (
     N_HIDDEN_LAST,
     N_OUTPUTS,
@@ -176,6 +177,12 @@ class DriverNet(nn.Module):
         loop, per action, ``>= 0`` (1: the network's own Gaussian; 0: its mean).
         Calibrated on closed-loop replays of human training episodes by
         :func:`avrisk.learning.train.train_drivers`.
+    guard : BrakeGuard, optional
+        The emergency brake these drivers are meant to drive with
+        (:mod:`avrisk.agents.drivers.guard`); saved with the weights. The
+        network does not apply it: a
+        :class:`~avrisk.agents.drivers.driver.LearnedDriver` does, when given
+        it (the scenarios' environment drivers and ``avrisk realism`` are).
 
     Attributes
     ----------
@@ -203,8 +210,10 @@ class DriverNet(nn.Module):
         action_scale: tuple[float, float] = (1.0, 0.02),
         noise_correlation: tuple[float, float] = (0.0, 0.0),
         noise_scale: tuple[float, float] = (1.0, 1.0),
+        guard: BrakeGuard | None = None,
     ) -> None:
         super().__init__()
+        self.guard = guard
         mean = torch.zeros(N_FEATURES) if input_mean is None else _vec(input_mean)
         scale = torch.ones(N_FEATURES) if input_scale is None else _vec(input_scale)
         if mean.shape != (N_FEATURES,) or scale.shape != (N_FEATURES,):
@@ -359,6 +368,8 @@ class DriverNet(nn.Module):
             "hidden_sizes": list(HIDDEN_SIZES),
             "xi_dim": XI_DIM,
         }
+        if self.guard is not None:
+            meta["guard"] = self.guard.to_dict()
         arrays["meta"] = np.array(json.dumps(meta))
         return arrays
 
@@ -369,7 +380,8 @@ class DriverNet(nn.Module):
         Raises
         ------
         ValueError
-            If the format version or the feature layout differs from this code's.
+            If the format version or the feature layout differs from this
+            code's, or the saved guard is malformed.
         """
         meta = json.loads(str(arrays["meta"]))
         if meta.get("format_version") != FORMAT_VERSION:
@@ -385,6 +397,7 @@ class DriverNet(nn.Module):
             tuple(arrays["action_scale"]),
             tuple(arrays["noise_correlation"]),
             tuple(arrays["noise_scale"]),
+            guard=None if "guard" not in meta else BrakeGuard.from_dict(meta["guard"]),
         )
         state = {k: torch.from_numpy(np.asarray(arrays[k])) for k in net.state_dict()}
         net.load_state_dict(state)

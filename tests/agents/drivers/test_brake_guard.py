@@ -55,3 +55,28 @@ def test_bad_guards_are_refused(text, match):
         BrakeGuard.parse(text)
     with pytest.raises(ValueError, match="engage_decel"):
         BrakeGuard(1.0, 0.0)
+
+
+def test_a_guard_round_trips_through_its_json_mapping():
+    assert BrakeGuard.from_dict(GUARD.to_dict()) == GUARD
+    assert BrakeGuard.from_dict({"gap_floor": 3, "engage_decel": 1}) == BrakeGuard(3, 1)
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        None,
+        {},
+        {"gap_floor": 1.0, "engage_decel": 1.0, "x": 0},
+        {"gap_floor": True, "engage_decel": 1.0},
+    ],
+)
+def test_a_malformed_mapping_is_refused(data):
+    with pytest.raises(ValueError, match="brake guard"):
+        BrakeGuard.from_dict(data)
+
+
+@pytest.mark.parametrize("text", ["inf,1", "1,inf", "nan,1"])
+def test_settings_must_be_finite(text):
+    with pytest.raises(ValueError, match="finite"):
+        BrakeGuard.parse(text)

@@ -1,3 +1,4 @@
+import json
 import math
 
 import numpy as np
@@ -6,6 +7,7 @@ import torch
 
 from avrisk.agents.drivers.driver import reproducible_exp
 from avrisk.agents.drivers.features import N_FEATURES
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import (
     LOG_VAR_MAX,
     DriverNet,
@@ -136,6 +138,31 @@ def test_weights_round_trip_through_npz_without_pickle(net, tmp_path):
             100,
             200,
         )
+
+
+def test_the_brake_guard_travels_with_the_weights(net, tmp_path):
+    assert DriverNet.from_arrays(net.to_arrays()).guard is None
+    net.guard = BrakeGuard(3.0, 0.5)
+    net.save(tmp_path / "w.npz")
+    assert DriverNet.load(tmp_path / "w.npz").guard == BrakeGuard(3.0, 0.5)
+
+
+@pytest.mark.parametrize(
+    "guard",
+    [
+        {"gap_floor": 3.0},
+        {"gap_floor": "3", "engage_decel": 0.5},
+        {"gap_floor": -1.0, "engage_decel": 0.5},
+        {"gap_floor": 3.0, "engage_decel": 1e999},
+        [3.0, 0.5],
+    ],
+)
+def test_a_malformed_saved_guard_is_refused(net, guard):
+    arrays = net.to_arrays()
+    meta = json.loads(str(arrays["meta"]))
+    arrays["meta"] = np.array(json.dumps({**meta, "guard": guard}))
+    with pytest.raises(ValueError, match="brake guard|gap_floor|engage_decel"):
+        DriverNet.from_arrays(arrays)
 
 
 def test_weights_of_another_format_version_are_refused(net):
