@@ -4,7 +4,8 @@ Part A of the realism check (car following on held-out NGSIM I-80 windows,
 with issue 21's targets) and the lane changes against held-out US-101 vehicles
 are ``avrisk realism`` (:mod:`avrisk.realism`). This script keeps the two
 checks that need more than the package ships, with the same learned drivers
-(``mu0``, ``xi ~ P0`` per rollout, mean actions) next to IDM+MOBIL:
+(``mu0``, ``xi ~ P0`` per rollout, mean actions; with the emergency brake their
+weights carry) next to IDM+MOBIL:
 
 B. Multi-lane traffic (6 lanes, 6 vehicles, random scenes unseen in
    training, 20 s): learned drivers for every vehicle vs IDM+MOBIL, with the
@@ -96,7 +97,7 @@ def part_b(net, fam, n_scenes: int, seed: int, horizon: float) -> str:
     rng = np.random.default_rng(seed)
     a_veh = 6
     init, params = random_highway_scenes(n_scenes, a_veh, road, rng)
-    drivers = learned_drivers(net, fam, n_scenes, rng, a_veh)
+    drivers = learned_drivers(net, fam, n_scenes, rng, a_veh, net.guard)
     drivers["IDM+MOBIL"] = IDMDriver(params, road)
     human = us101_reference()
     sim = Simulator(road, SimConfig(horizon=horizon), measure=MinTTC(n_rays=1))
@@ -199,7 +200,7 @@ def part_c(net, fam, n: int, seed: int) -> str:
     idm = driver_params(spec, n)
     seeds = torch.arange(n, dtype=torch.int64)
     ego = IDMPolicy(idm, ss.road)
-    drivers = learned_drivers(net, fam, n, rng, spec.n_vehicles)
+    drivers = learned_drivers(net, fam, n, rng, spec.n_vehicles, net.guard)
     rows = {}
     for name, drv in drivers.items():
         rows[name] = ss.simulator.run(state, [drv, ego], seeds)
