@@ -253,10 +253,6 @@ def realism_command(
 
 def _brake_guard(text: str | None) -> BrakeGuard | Literal["drivers"] | None:
     """``--brake-guard``: the drivers' own brake (absent), none, or GAP,DECEL."""
-    from avrisk.agents.drivers.guard import BrakeGuard
+    from avrisk.agents.drivers.guard import parse_guard
 
-    if text is None:
-        return "drivers"
-    if text.strip().lower() == "none":
-        return None
-    return BrakeGuard.parse(text)
+    return "drivers" if text is None else parse_guard(text)

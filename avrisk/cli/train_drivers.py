@@ -49,7 +49,7 @@ from avrisk.cli.tables import add_columns, compact_table
 from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
 
 if TYPE_CHECKING:
-    from avrisk.learning.train_config import TrainEvent
+    from avrisk.learning.train_config import TrainConfig, TrainEvent
 
 #: Where ``train-drivers`` writes by default (not the shipped model).
 DEFAULT_OUT = Path("runs") / "drivers"
@@ -218,6 +218,16 @@ def _print_selection(selection: dict) -> None:
     out_console.print(table)
 
 
+def _config(brake_guard: str | None) -> TrainConfig:
+    """The default recipe, with ``--brake-guard``'s brake if given."""
+    from avrisk.agents.drivers.guard import parse_guard
+    from avrisk.learning.train_config import TrainConfig
+
+    if brake_guard is None:
+        return TrainConfig()
+    return TrainConfig(guard=parse_guard(brake_guard))
+
+
 def _number(value: float) -> str:
     """Counts with thousands separators, other values to 4 significant digits."""
     return f"{value:,.0f}" if float(value).is_integer() else f"{value:.4g}"
@@ -263,6 +273,18 @@ def train_drivers_command(
             "processes of one CPU each (the same files as one after the other).",
         ),
     ] = 1,
+    brake_guard: Annotated[
+        str | None,
+        typer.Option(
+            "--brake-guard",
+            metavar="GAP,DECEL|none",
+            help="The emergency brake written with the weights, which the "
+            "scenarios' traffic and avrisk realism drive with (training does "
+            "not): brake where the vehicle ahead needs more than DECEL [m/s^2] "
+            "to stop the closing GAP [m] short of it; 'none' for no brake. "
+            "Default: 3,0.5.",
+        ),
+    ] = None,
 ) -> None:
     """Retrain the learned drivers and their xi prior from NGSIM data.
 
@@ -270,6 +292,8 @@ def train_drivers_command(
     unless --out names that folder. Trainings that differ only in their seed
     crash very differently; --candidates N trains N and keeps the safest.
     """
+    with user_errors(ValueError):
+        config = _config(brake_guard)
     with user_errors(OSError):
         folder = _data_folder(data_dir)
         _check_writable(out)
@@ -289,6 +313,7 @@ def train_drivers_command(
                 seed,
                 out,
                 data_dir=folder,
+                config=config,
                 progress=progress,
                 candidates=candidates,
                 workers=workers,

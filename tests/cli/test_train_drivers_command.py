@@ -1,7 +1,7 @@
 """``avrisk train-drivers`` through the Typer app."""
 
-import functools
 import json
+from dataclasses import replace
 
 import pytest
 from typer.testing import CliRunner
@@ -9,6 +9,7 @@ from typer.testing import CliRunner
 import avrisk.learning.train as training
 import avrisk.learning.training_report as training_report
 from avrisk.agents.drivers import XiPrior, load_driver_net
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.store import default_drivers_dir
 from avrisk.cli.app import app
 from avrisk.cli.train_drivers import _warn_other_kernels
@@ -20,16 +21,22 @@ def _train(*args):
     return runner.invoke(app, ["train-drivers", *args])
 
 
+def tiny_training(monkeypatch, tiny):
+    """Train the tiny recipe, with the brake the command line asks for."""
+    real = training.train_drivers
+
+    def train(*args, config, **kwargs):
+        return real(*args, config=replace(tiny, guard=config.guard), **kwargs)
+
+    monkeypatch.setattr(training, "train_drivers", train)
+
+
 @pytest.mark.slow
 def test_train_drivers_writes_the_model_files_and_names_them(
     tmp_path, fake_ngsim, tiny_train_config, monkeypatch
 ):
     shipped = {p.name: p.stat().st_mtime_ns for p in default_drivers_dir().iterdir()}
-    monkeypatch.setattr(
-        training,
-        "train_drivers",
-        functools.partial(training.train_drivers, config=tiny_train_config),
-    )
+    tiny_training(monkeypatch, tiny_train_config)
     out = tmp_path / "new" / "drivers"
     result = _train("--seed", "2", "--out", str(out), "--data-dir", str(fake_ngsim))
     assert result.exit_code == 0, result.output
@@ -46,6 +53,29 @@ def test_train_drivers_writes_the_model_files_and_names_them(
     assert "val/loss=" in result.output
     after = {p.name: p.stat().st_mtime_ns for p in default_drivers_dir().iterdir()}
     assert after == shipped
+    assert net.guard == BrakeGuard(3.0, 0.5)  # the default brake is written
+
+
+@pytest.mark.slow
+def test_the_brake_written_with_the_weights_is_chosen_on_the_command_line(
+    tmp_path, fake_ngsim, tiny_train_config, monkeypatch
+):
+    tiny_training(monkeypatch, tiny_train_config)
+    data = ("--data-dir", str(fake_ngsim))
+    for text, guard in (("none", None), ("2,1", BrakeGuard(2.0, 1.0))):
+        out = tmp_path / text
+        result = _train("--out", str(out), *data, "--brake-guard", text)
+        assert result.exit_code == 0, result.output
+        assert load_driver_net(out / "driver_net.npz").guard == guard
+
+
+@pytest.mark.parametrize("text", ["3", "x,1", "-1,0.5"])
+def test_a_bad_brake_is_a_one_line_error_before_training(tmp_path, text):
+    result = _train("--brake-guard", text, "--out", str(tmp_path / "d"))
+    assert result.exit_code == 2, result.output  # a usage error
+    assert result.output.startswith("error: ") and "gap" in result.output.lower()
+    assert len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "d").exists()
 
 
 def test_a_missing_data_folder_is_a_one_line_error(tmp_path):
@@ -92,11 +122,7 @@ def test_training_on_other_cpu_kernels_than_the_shipped_files_says_how_to_match(
 def test_candidates_print_their_validation_crashes_and_the_one_kept(
     tmp_path, fake_ngsim, tiny_train_config, monkeypatch
 ):
-    monkeypatch.setattr(
-        training,
-        "train_drivers",
-        functools.partial(training.train_drivers, config=tiny_train_config),
-    )
+    tiny_training(monkeypatch, tiny_train_config)
     out = tmp_path / "drivers"
     args = ("--seed", "5", "--out", str(out), "--data-dir", str(fake_ngsim))
     result = _train(*args, "--candidates", "2", "--workers", "2")

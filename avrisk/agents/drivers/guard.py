@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-__all__ = ["BrakeGuard"]
+__all__ = ["BrakeGuard", "parse_guard"]
 
 #: Smallest distance [m] left before the floor in the deceleration's divisor.
 _MIN_ROOM = 0.1
@@ -136,3 +136,16 @@ class BrakeGuard:
                 f"e.g. 2,1; got {text!r}"
             ) from None
         return cls(floor, decel)
+
+
+def parse_guard(text: str) -> BrakeGuard | None:
+    """A command line's brake: ``"none"`` (no brake) or ``"GAP_FLOOR,ENGAGE_DECEL"``.
+
+    Raises
+    ------
+    ValueError
+        As :meth:`BrakeGuard.parse`.
+    """
+    if text.strip().lower() == "none":
+        return None
+    return BrakeGuard.parse(text)
