@@ -124,6 +124,14 @@ class RealismSettings:
     horizon: float = HORIZON
     guard: BrakeGuard | Literal["drivers"] | None = "drivers"
 
+    def __post_init__(self) -> None:
+        known = self.guard is None or isinstance(self.guard, BrakeGuard)
+        if not known and self.guard != DRIVERS_GUARD:
+            raise ValueError(
+                f"guard must be a BrakeGuard, None or {DRIVERS_GUARD!r}; "
+                f"got {self.guard!r}"
+            )
+
 
 @dataclass(frozen=True)
 class DriverFiles:

@@ -199,3 +199,8 @@ def test_a_bad_brake_guard_is_a_one_line_error_before_any_work(tmp_path, text):
     out = one_line_error(realism("--brake-guard", text, "--out", tmp_path / "r"))
     assert "gap" in out.lower() or "decel" in out.lower()
     assert not (tmp_path / "r").exists()
+
+
+def test_settings_refuse_a_guard_they_cannot_drive_with():
+    with pytest.raises(ValueError, match="guard must be"):
+        RealismSettings(guard="3,0.5")
