@@ -618,9 +618,10 @@ class Simulator:
         Eager, every other vehicle is scanned at once (temporaries of
         ``A (A - 1) R`` elements per rollout) while the whole batch's fit in
         one slice, and beyond that one vehicle at a time (``A R`` per rollout,
-        ``A - 1`` times as many operations): on one CPU thread 15-17% faster
-        per step of ``highway_default`` at batches of 1,024 and 8,192, 11%
-        slower at 64 (BENCHMARKS.md "Simulator throughput"). Compiled, always
+        ``A - 1`` times as many operations): on one CPU thread 18% and 9%
+        faster per step of ``highway_default`` at batches of 1,024 and 8,192,
+        and unchanged at 64, which scans all at once either way (BENCHMARKS.md
+        "Simulator throughput"). Compiled, always
         one at a time (:func:`avrisk.sim.lidar.nearest_box`). The same values
         every way.
         """
