@@ -254,5 +254,6 @@ def realism_command(
 def _brake_guard(text: str | None) -> BrakeGuard | Literal["drivers"] | None:
     """``--brake-guard``: the drivers' own brake (absent), none, or GAP,DECEL."""
     from avrisk.agents.drivers.guard import parse_guard
+    from avrisk.realism.report import DRIVERS_GUARD
 
-    return "drivers" if text is None else parse_guard(text)
+    return DRIVERS_GUARD if text is None else parse_guard(text)
