@@ -204,10 +204,11 @@ def realism_command(
         str | None,
         typer.Option(
             "--brake-guard",
-            metavar="GAP,DECEL|none",
+            metavar="GAP,DECEL[,hold]|none",
             help="The learned drivers' emergency brake: where the vehicle ahead "
             "on the front beam needs more than DECEL [m/s^2] of braking to stop "
-            "the closing GAP [m] short of it, brake that hard (e.g. 3,0.5); "
+            "the closing GAP [m] short of it, brake that hard (e.g. 3,0.5; "
+            "',hold' also brakes whenever closing inside GAP); "
             "'none' drives the network alone. Default: the brake the driver "
             "weights carry (the shipped drivers': 3,0.5).",
         ),

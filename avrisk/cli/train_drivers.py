@@ -277,11 +277,12 @@ def train_drivers_command(
         str | None,
         typer.Option(
             "--brake-guard",
-            metavar="GAP,DECEL|none",
+            metavar="GAP,DECEL[,hold]|none",
             help="The emergency brake written with the weights, which the "
             "scenarios' traffic and avrisk realism drive with (training does "
             "not): brake where the vehicle ahead needs more than DECEL [m/s^2] "
-            "to stop the closing GAP [m] short of it; 'none' for no brake. "
+            "to stop the closing GAP [m] short of it (',hold': also whenever "
+            "closing inside GAP); 'none' for no brake. "
             "Default: 3,0.5.",
         ),
     ] = None,

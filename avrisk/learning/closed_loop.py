@@ -57,6 +57,7 @@ import torch
 from torch import Tensor
 
 from avrisk.agents.drivers.driver import LearnedDriver
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import pack_xi
 from avrisk.learning.gail import transition_features
@@ -109,7 +110,11 @@ class ClosedLoopTrace:
 
 
 def differentiable_replay(
-    windows: CarFollowingWindows, net: DriverNet, road: Road, seeds: Tensor
+    windows: CarFollowingWindows,
+    net: DriverNet,
+    road: Road,
+    seeds: Tensor,
+    guard: BrakeGuard | None = None,
 ) -> ClosedLoopTrace:
     """Replay ``windows`` with the network driving, keeping the graph.
 
@@ -122,6 +127,8 @@ def differentiable_replay(
     road : Road
     seeds : Tensor of int64, shape (W,)
         Per-window noise seeds.
+    guard : BrakeGuard, optional
+        The follower's emergency brake (None: the network alone).
 
     Returns
     -------
@@ -129,7 +136,8 @@ def differentiable_replay(
     """
     sim, state, replay_leader = replay_setup(windows, road)
     both = torch.ones(2, dtype=torch.bool)
-    actor = replay_leader(LearnedDriver(net, controlled=both, stochastic=True))
+    driver = LearnedDriver(net, controlled=both, stochastic=True, guard=guard)
+    actor = replay_leader(driver)
     actors = [actor]
     masks = sim.controlled(actors, state.n_vehicles)
     xi = pack_xi(net.last.weight, net.last.bias).expand(len(windows), -1)
@@ -344,6 +352,8 @@ def closed_loop_finetune(
     config: ClosedLoopConfig,
     seed: int,
     progress: Progress | None = None,
+    *,
+    guard: BrakeGuard | None = None,
 ) -> list[dict[str, float]]:
     """Train ``net`` in place on closed-loop replays of training windows.
 
@@ -359,6 +369,9 @@ def closed_loop_finetune(
         Minibatches and the actions' noise.
     progress : callable, optional
         Receives ``TrainEvent("closed_loop", ...)`` after every step.
+    guard : BrakeGuard, optional
+        Every replay drives with this emergency brake on top of the network
+        (``ClosedLoopConfig.drive_with_guard``; None: the network alone).
 
     Returns
     -------
@@ -382,7 +395,7 @@ def closed_loop_finetune(
 
     def validate() -> dict[str, float]:
         with torch.no_grad():
-            trace = differentiable_replay(val, net, road, val_seeds)
+            trace = differentiable_replay(val, net, road, val_seeds, guard)
             loss, parts = closed_loop_loss(trace, val, config)
         return {"val_loss": float(loss)} | {f"val_{k}": v for k, v in parts.items()}
 
@@ -402,7 +415,7 @@ def closed_loop_finetune(
             dtype=torch.int64,
         )
         part = windows.take(batch)
-        trace = differentiable_replay(part, net, road, seeds)
+        trace = differentiable_replay(part, net, road, seeds, guard)
         disc_row = {}
         if disc is not None:
             x, valid = simulated_transitions(trace, part)
@@ -413,7 +426,7 @@ def closed_loop_finetune(
             pick = rng.choice(hard_idx, size=config.stress_windows)
             harder = stressed(windows.take(pick), config.stress_factor)
             stress_seeds = _stress_seeds(seeds, seed, it, len(pick), config)
-            trace = differentiable_replay(harder, net, road, stress_seeds)
+            trace = differentiable_replay(harder, net, road, stress_seeds, guard)
             stress, stress_parts = closed_loop_loss(trace, harder, barriers_only)
             loss = loss + stress
             parts["stress_crash_rate"] = stress_parts["crash_rate"]

@@ -304,6 +304,7 @@ def _train_drivers(
             config.closed_loop,
             seed,
             progress,
+            guard=config.guard if config.closed_loop.drive_with_guard else None,
         )
     stopwatch.lap("closed_loop")
 

@@ -91,6 +91,11 @@ class ClosedLoopConfig:
         noise streams. True gave four trainings with stress_factor 2.0 no
         fewer held-out collisions than the shared noise (BENCHMARKS.md,
         "Keeping the safest of several trainings", recipe (q)).
+    drive_with_guard : bool, default=False
+        Every replay of the stage (minibatch, stress and validation) drives
+        with the emergency brake the weights will carry
+        (:attr:`TrainConfig.guard`), so that the network learns on top of
+        it. False trains the network alone.
     """
 
     iterations: int = 120
@@ -116,6 +121,7 @@ class ClosedLoopConfig:
     stress_windows: int = 16
     stress_factor: float = 1.5
     stress_own_noise: bool = False
+    drive_with_guard: bool = False
 
     def __post_init__(self) -> None:
         if (
@@ -217,7 +223,8 @@ class TrainConfig:
         The emergency brake written with the weights
         (:mod:`avrisk.agents.drivers.guard`): the scenarios' environment
         drivers and ``avrisk realism`` drive with it, and ``--candidates``
-        scores with it. Training itself drives the network alone. The default
+        scores with it. Training drives the network alone unless
+        ``closed_loop.drive_with_guard``. The default
         was chosen on the closed-loop validation windows of three trainings
         (``benchmarks/brake_guard.py``); None writes drivers without one.
     """
@@ -252,6 +259,8 @@ class TrainConfig:
         for name in ("trunk_epochs", "head_epochs", "batch_size", "head_batch_size"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
+        if self.closed_loop.drive_with_guard and self.guard is None:
+            raise ValueError("closed_loop.drive_with_guard needs a guard to drive with")
 
 
 class TrainEvent(NamedTuple):

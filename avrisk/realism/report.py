@@ -278,7 +278,8 @@ def _provenance(result: RealismResult, command: str) -> dict[str, Any]:
         "torch": torch.__version__,
         "numpy": np.__version__,
         "torch_threads": torch.get_num_threads(),
-        "settings": asdict(s),
+        # the guard as the driver files write it (BrakeGuard.to_dict)
+        "settings": asdict(s) | {"guard": s.guard and s.guard.to_dict()},
         "lane_change_layer": asdict(LaneChangeParams()),
         "drivers": {
             "shipped": result.drivers.shipped,
@@ -346,7 +347,8 @@ def _guard_words(guard: BrakeGuard | None) -> str:
         return ""
     return (
         f", with an emergency brake (gap floor {guard.gap_floor:g} m, engaged "
-        f"above {guard.engage_decel:g} m/s^2 of needed deceleration)"
+        f"above {guard.engage_decel:g} m/s^2 of needed deceleration"
+        + (", and whenever closing inside the floor)" if guard.hold_floor else ")")
     )
 
 

@@ -19,16 +19,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
-
-from avrisk.rare.estimator import DiagnosticTable  # noqa: E402
-from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable  # noqa: E402
-from avrisk.rare.weights import MAX_RELIABLE_PARETO_K  # noqa: E402
+from avrisk.rare.estimator import DiagnosticTable
+from avrisk.rare.final_stage import MIN_RELIABLE_ESS, is_reliable
+from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 
 #: Marks a figure computed from an unreliable importance-sampling standard error.
 UNRELIABLE_MARK = "*"
@@ -95,6 +90,20 @@ def comparison_rows(
     return sorted(rows, key=lambda row: row["gamma"])
 
 
+def _pyplot() -> Any:
+    """``matplotlib.pyplot`` on the Agg backend, imported on first use.
+
+    Matplotlib takes about half a second to import; the commands that print
+    tables without drawing (``run``, ``compare``, ``simulate``) do not pay it.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def plot_comparison(
     tested: dict[str, Any],
     label: str,
@@ -105,6 +114,7 @@ def plot_comparison(
 
     ``label`` names the method (``"cross-entropy"``, ``"splitting + IS"``).
     """
+    plt = _pyplot()
     rows = comparison_rows(tested, reference)
     gammas = [r["gamma"] for r in rows]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
@@ -179,6 +189,9 @@ def plot_diagnostic(
     unit : str, default="s"
         Unit of ``f``.
     """
+    from matplotlib.ticker import MaxNLocator
+
+    plt = _pyplot()
     steps = table.column(table.columns[0])
     panels = 2 if table.bars else 1
     fig, axes = plt.subplots(

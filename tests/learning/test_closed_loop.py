@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from avrisk.agents.drivers.driver import LearnedDriver
+from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.store import load_driver_net
 from avrisk.learning.bootstrap_heads import centre_heads
 from avrisk.learning.closed_loop import (
@@ -19,7 +20,7 @@ from avrisk.learning.closed_loop import (
 from avrisk.learning.gail import human_transitions
 from avrisk.learning.mgail import Discriminator
 from avrisk.learning.replay import replay
-from avrisk.learning.train_config import ClosedLoopConfig
+from avrisk.learning.train_config import ClosedLoopConfig, TrainConfig
 from avrisk.sim import Road
 from tests.learning.recorded_windows import recorded_windows
 
@@ -57,6 +58,36 @@ def test_the_differentiable_replay_is_the_replay_of_the_simulator_with_gradient(
     loss.backward()
     for name, p in net.named_parameters():
         assert p.grad is not None and p.grad.abs().sum() > 0, name
+
+
+def test_replays_and_training_drive_with_the_guard_when_given_one():
+    win = queue_windows(n=6, steps=40, gap0=4.0)
+    net = load_driver_net()
+    road, seeds = Road(), torch.arange(6, dtype=torch.int64)
+    guard = BrakeGuard(2.0, 0.5, hold_floor=True)
+    with torch.no_grad():
+        alone = differentiable_replay(win, net, road, seeds)
+        braked = differentiable_replay(win, net, road, seeds, guard)
+    both = torch.ones(2, dtype=torch.bool)
+    driver = LearnedDriver(
+        net, net.default_xi.expand(6, -1), controlled=both, guard=guard
+    )
+    plain = replay(win, driver, road, seed=0)
+    alive = braked.alive.numpy()
+    np.testing.assert_allclose(
+        braked.v.numpy()[alive], plain.v[:, 1:][alive], atol=1e-5
+    )
+    assert int(alone.crash.sum()) > int(braked.crash.sum())
+    config = ClosedLoopConfig(iterations=2, batch_windows=4, validate_every=1)
+    hist = closed_loop_finetune(load_driver_net(), win, config, seed=1)
+    held = closed_loop_finetune(load_driver_net(), win, config, seed=1, guard=guard)
+    assert hist[0]["val_crash_rate"] >= held[0]["val_crash_rate"]
+    assert hist[0]["val_loss"] != held[0]["val_loss"]
+
+
+def test_training_with_the_guard_needs_one():
+    with pytest.raises(ValueError, match="drive_with_guard"):
+        TrainConfig(closed_loop=ClosedLoopConfig(drive_with_guard=True), guard=None)
 
 
 def test_the_barrier_acts_only_below_the_margin_and_in_line():
