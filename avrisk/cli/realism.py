@@ -210,7 +210,7 @@ def realism_command(
             "the closing GAP [m] short of it, brake that hard (e.g. 3,0.5; "
             "',hold' also brakes whenever closing inside GAP); "
             "'none' drives the network alone. Default: the brake the driver "
-            "weights carry (the shipped drivers': 3,0.5).",
+            "weights carry (the shipped drivers': 2,2,hold).",
         ),
     ] = None,
 ) -> None:

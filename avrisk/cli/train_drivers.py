@@ -219,13 +219,21 @@ def _print_selection(selection: dict) -> None:
 
 
 def _config(brake_guard: str | None) -> TrainConfig:
-    """The default recipe, with ``--brake-guard``'s brake if given."""
+    """The default recipe, with ``--brake-guard``'s brake if given.
+
+    Without a brake the closed loop trains the network alone.
+    """
+    from dataclasses import replace
+
     from avrisk.agents.drivers.guard import parse_guard
     from avrisk.learning.train_config import TrainConfig
 
+    default = TrainConfig()
     if brake_guard is None:
-        return TrainConfig()
-    return TrainConfig(guard=parse_guard(brake_guard))
+        return default
+    guard = parse_guard(brake_guard)
+    closed_loop = replace(default.closed_loop, drive_with_guard=guard is not None)
+    return replace(default, guard=guard, closed_loop=closed_loop)
 
 
 def _number(value: float) -> str:
@@ -279,11 +287,11 @@ def train_drivers_command(
             "--brake-guard",
             metavar="GAP,DECEL[,hold]|none",
             help="The emergency brake written with the weights, which the "
-            "scenarios' traffic and avrisk realism drive with (training does "
-            "not): brake where the vehicle ahead needs more than DECEL [m/s^2] "
-            "to stop the closing GAP [m] short of it (',hold': also whenever "
-            "closing inside GAP); 'none' for no brake. "
-            "Default: 3,0.5.",
+            "scenarios' traffic, avrisk realism and the closed loop's "
+            "minibatches drive with: brake where the vehicle ahead needs more "
+            "than DECEL [m/s^2] to stop the closing GAP [m] short of it "
+            "(',hold': also whenever closing inside GAP); 'none' for no brake "
+            "(the closed loop then trains the network alone). Default: 2,2,hold.",
         ),
     ] = None,
 ) -> None:

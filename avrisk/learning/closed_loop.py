@@ -39,6 +39,12 @@ and as differentiable-simulation imitation does (e.g. Scheel et al. 2021,
         a standing queue) are harder than nearly all training windows
     one Adam step on every weight of the network (trunk and shared head)
 
+With ``drive_with_guard`` the minibatch and validation replays drive with the
+emergency brake the weights will carry (:mod:`avrisk.agents.drivers.guard`),
+so that the network learns the braked driver's following; the stress replays
+drive the network alone, so that it learns to stop in their emergencies by
+itself rather than leave them to the brake.
+
 Early stopping on validation windows (a fixed part of the training windows,
 chosen by seed): the weights of the iteration with the lowest validation
 loss are kept; the adversarial term is left out of it, as its discriminator
@@ -370,8 +376,10 @@ def closed_loop_finetune(
     progress : callable, optional
         Receives ``TrainEvent("closed_loop", ...)`` after every step.
     guard : BrakeGuard, optional
-        Every replay drives with this emergency brake on top of the network
-        (``ClosedLoopConfig.drive_with_guard``; None: the network alone).
+        The minibatch and validation replays drive with this emergency brake
+        on top of the network (``ClosedLoopConfig.drive_with_guard``); the
+        stress replays never do, so that the network itself learns to stop in
+        their emergencies. None: the network alone everywhere.
 
     Returns
     -------
@@ -426,7 +434,7 @@ def closed_loop_finetune(
             pick = rng.choice(hard_idx, size=config.stress_windows)
             harder = stressed(windows.take(pick), config.stress_factor)
             stress_seeds = _stress_seeds(seeds, seed, it, len(pick), config)
-            trace = differentiable_replay(harder, net, road, stress_seeds, guard)
+            trace = differentiable_replay(harder, net, road, stress_seeds)
             stress, stress_parts = closed_loop_loss(trace, harder, barriers_only)
             loss = loss + stress
             parts["stress_crash_rate"] = stress_parts["crash_rate"]

@@ -26,7 +26,11 @@ def tiny_training(monkeypatch, tiny):
     real = training.train_drivers
 
     def train(*args, config, **kwargs):
-        return real(*args, config=replace(tiny, guard=config.guard), **kwargs)
+        closed_loop = replace(
+            tiny.closed_loop, drive_with_guard=config.closed_loop.drive_with_guard
+        )
+        asked = replace(tiny, guard=config.guard, closed_loop=closed_loop)
+        return real(*args, config=asked, **kwargs)
 
     monkeypatch.setattr(training, "train_drivers", train)
 
@@ -53,7 +57,8 @@ def test_train_drivers_writes_the_model_files_and_names_them(
     assert "val/loss=" in result.output
     after = {p.name: p.stat().st_mtime_ns for p in default_drivers_dir().iterdir()}
     assert after == shipped
-    assert net.guard == BrakeGuard(3.0, 0.5)  # the default brake is written
+    # the default brake is written
+    assert net.guard == BrakeGuard(2.0, 2.0, hold_floor=True)
 
 
 @pytest.mark.slow
@@ -67,6 +72,18 @@ def test_the_brake_written_with_the_weights_is_chosen_on_the_command_line(
         result = _train("--out", str(out), *data, "--brake-guard", text)
         assert result.exit_code == 0, result.output
         assert load_driver_net(out / "driver_net.npz").guard == guard
+
+
+def test_without_a_brake_the_closed_loop_trains_the_network_alone():
+    from avrisk.cli.train_drivers import _config
+    from avrisk.learning.train_config import TrainConfig
+
+    assert _config(None) == TrainConfig()
+    assert TrainConfig().closed_loop.drive_with_guard
+    assert not _config("none").closed_loop.drive_with_guard
+    held = _config("1,3,hold")
+    assert held.guard == BrakeGuard(1.0, 3.0, hold_floor=True)
+    assert held.closed_loop.drive_with_guard
 
 
 @pytest.mark.parametrize("text", ["3", "x,1", "-1,0.5"])

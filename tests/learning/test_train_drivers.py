@@ -19,7 +19,7 @@ def test_train_drivers_writes_loadable_weights_a_prior_and_a_report(
         3, tmp_path / "out", data_dir=fake_ngsim, config=tiny_train_config
     )
     net = load_driver_net(tmp_path / "out" / "driver_net.npz")
-    assert net.guard == tiny_train_config.guard == BrakeGuard(3.0, 0.5)
+    assert net.guard == tiny_train_config.guard == BrakeGuard(2.0, 2.0, hold_floor=True)
     prior = XiPrior.load(tmp_path / "out" / "xi_prior.npz")
     assert prior.members.shape == (3, XI_DIM) and 0 < prior.sparsity <= 1
     assert net.default_xi.shape == (XI_DIM,)
