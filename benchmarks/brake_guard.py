@@ -1,7 +1,7 @@
 """Choose the learned drivers' emergency brake on training windows only.
 
-Scores each ``--guards`` setting (``GAP,DECEL``; ``none`` for the network
-alone) by the crashes of each trained drivers' folder on its closed-loop
+Scores each ``--guards`` setting (``GAP,DECEL`` or ``GAP,DECEL,hold``;
+``none`` for the network alone) by the crashes of each trained drivers' folder on its closed-loop
 validation windows (training data: :func:`avrisk.learning.selection.validation_crashes`,
 8 replays per window, leaders as recorded and with their speed changes made
 1.5 times as large), and prints one row per setting with the totals. The
@@ -9,7 +9,7 @@ held-out windows are not used: measure the chosen setting on them afterwards
 with ``avrisk realism --drivers DIR --brake-guard GAP,DECEL``.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/brake_guard.py \\
-        --drivers DIR:SEED [DIR:SEED ...] --guards none,1,2,2,1,1,1
+        --drivers DIR:SEED [DIR:SEED ...] --guards none,1,2,2,1,2,2,hold
 
 ``SEED`` is the training's seed (``train-drivers --seed``): it fixes the
 validation split. About 3 s per folder and setting on one thread.
@@ -31,7 +31,7 @@ from avrisk.learning.training_data import training_windows
 
 
 def _guards(text: str) -> list[BrakeGuard | None]:
-    """``none,2,1,1,1`` -> [None, BrakeGuard(2, 1), BrakeGuard(1, 1)]."""
+    """``none,2,1,2,2,hold`` -> [None, BrakeGuard(2, 1), BrakeGuard(2, 2, True)]."""
     items = text.split(",")
     out: list[BrakeGuard | None] = []
     while items:
@@ -39,8 +39,9 @@ def _guards(text: str) -> list[BrakeGuard | None]:
             out.append(None)
             items = items[1:]
         else:
-            out.append(BrakeGuard.parse(",".join(items[:2])))
-            items = items[2:]
+            n = 3 if len(items) > 2 and items[2] == "hold" else 2
+            out.append(BrakeGuard.parse(",".join(items[:n])))
+            items = items[n:]
     return out
 
 
@@ -67,9 +68,7 @@ def main() -> None:
             validation_crashes(net, prior, windows, config, seed, guard=guard)
             for _, seed, net, prior in trainings
         ]
-        name = "none"
-        if guard is not None:
-            name = f"{guard.gap_floor:g},{guard.engage_decel:g}"
+        name = "none" if guard is None else guard.text()
         cells = [f"{s.stressed_crashes} / {s.crashes}" for s in scores]
         total = (
             sum(s.stressed_crashes for s in scores),
