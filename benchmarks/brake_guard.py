@@ -1,10 +1,11 @@
 """Choose the learned drivers' emergency brake on training windows only.
 
 Scores each ``--guards`` setting (``GAP,DECEL`` or ``GAP,DECEL,hold``;
-``none`` for the network alone) by the crashes of each trained drivers' folder on its closed-loop
-validation windows (training data: :func:`avrisk.learning.selection.validation_crashes`,
-8 replays per window, leaders as recorded and with their speed changes made
-1.5 times as large), and prints one row per setting with the totals. The
+``none`` for the network alone) by the crashes of each trained drivers'
+folder on its closed-loop validation windows (training data:
+:func:`avrisk.learning.selection.validation_crashes`, 8 replays per window,
+leaders as recorded and with their speed changes made 1.5 times as large),
+and prints one row per setting with the totals. The
 held-out windows are not used: measure the chosen setting on them afterwards
 with ``avrisk realism --drivers DIR --brake-guard GAP,DECEL``.
 
