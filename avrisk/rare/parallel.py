@@ -162,6 +162,10 @@ def _exit_with(parent: int) -> None:
     os._exit(1)
 
 
+#: Seconds a terminated worker is given to exit before it is killed.
+_DEATH_WAIT_S = 5.0
+
+
 class ProcessPoolEvaluator:
     """Evaluate chunks in ``workers`` local processes, each with its own ``f``.
 
@@ -230,8 +234,23 @@ class ProcessPoolEvaluator:
             return
         # Python 3.14 has ProcessPoolExecutor.terminate_workers; before, its
         # processes are only reachable through this attribute.
-        for process in list((getattr(self._pool, "_processes", None) or {}).values()):
+        processes = list((getattr(self._pool, "_processes", None) or {}).values())
+        for process in processes:
             process.terminate()
+        for process in processes:
+            process.join(_DEATH_WAIT_S)
+            if process.is_alive():
+                process.kill()
+                process.join()
+        # A worker killed while it wrote a result leaves half a message in the
+        # results pipe, and the pool's manager thread then waits in recv()
+        # for the rest, forever (and shutdown with it). With every worker
+        # dead, the parent's end is the pipe's last writer: closing it ends
+        # that read with EOFError, which the manager thread takes for a broken
+        # pool and exits.
+        result_queue = getattr(self._pool, "_result_queue", None)
+        if result_queue is not None:
+            result_queue._writer.close()
         self.close()
 
     def __enter__(self) -> ProcessPoolEvaluator:

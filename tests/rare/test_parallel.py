@@ -191,3 +191,21 @@ def test_a_run_stopped_by_an_exception_stops_its_workers_at_once(tmp_path):
                 start = time.monotonic()
     assert time.monotonic() - start < 20  # not the 60 s of the chunks under way
     assert processes and not any(p.is_alive() for p in processes)
+
+
+def test_stopping_does_not_hang_on_a_result_half_written_by_a_killed_worker():
+    """A worker killed while writing its result leaves part of a message in the
+    results pipe: the pool's manager thread must not wait for the rest."""
+    import struct
+    import threading
+
+    pool = ProcessPoolEvaluator(LinearFactory(), workers=2)
+    naive_mc(PROBLEM.f, PROBLEM.base, PROBLEM.gamma, 2_000, evaluator=pool)
+    # a message header announcing 1,000 bytes, then 10 of them: as a killed writer
+    writer = pool._pool._result_queue._writer
+    os.write(writer.fileno(), struct.pack("!i", 1000) + b"x" * 10)
+    time.sleep(0.5)  # the manager thread now waits for the other 990
+    stopper = threading.Thread(target=pool.terminate, daemon=True)
+    stopper.start()
+    stopper.join(60)
+    assert not stopper.is_alive()
