@@ -10,7 +10,7 @@ held-out windows are not used: measure the chosen setting on them afterwards
 with ``avrisk realism --drivers DIR --brake-guard GAP,DECEL``.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/brake_guard.py \\
-        --drivers DIR:SEED [DIR:SEED ...] --guards none,1,2,2,1,2,2,hold
+        --drivers DIR:SEED [DIR:SEED ...] --guards none 1,2 2,1 2,2,hold
 
 ``SEED`` is the training's seed (``train-drivers --seed``): it fixes the
 validation split. About 3 s per folder and setting on one thread.
@@ -24,32 +24,26 @@ from pathlib import Path
 
 import torch
 
-from avrisk.agents.drivers.guard import BrakeGuard
+from avrisk.agents.drivers.guard import parse_guard
 from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
 from avrisk.learning.selection import validation_crashes
 from avrisk.learning.train_config import ClosedLoopConfig
 from avrisk.learning.training_data import training_windows
 
-
-def _guards(text: str) -> list[BrakeGuard | None]:
-    """``none,2,1,2,2,hold`` -> [None, BrakeGuard(2, 1), BrakeGuard(2, 2, True)]."""
-    items = text.split(",")
-    out: list[BrakeGuard | None] = []
-    while items:
-        if items[0] == "none":
-            out.append(None)
-            items = items[1:]
-        else:
-            n = 3 if len(items) > 2 and items[2] == "hold" else 2
-            out.append(BrakeGuard.parse(",".join(items[:n])))
-            items = items[n:]
-    return out
+#: The settings scored when ``--guards`` is not given.
+DEFAULT_GUARDS = ("none", "1,2", "1,1", "2,1", "2,0.5")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--drivers", nargs="+", required=True, help="DIR:SEED")
-    parser.add_argument("--guards", default="none,1,2,1,1,2,1,2,0.5")
+    parser.add_argument(
+        "--guards",
+        nargs="+",
+        type=parse_guard,
+        default=[parse_guard(text) for text in DEFAULT_GUARDS],
+        help="settings: none, GAP,DECEL or GAP,DECEL,hold (space-separated)",
+    )
     parser.add_argument("--json", type=Path)
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -64,7 +58,7 @@ def main() -> None:
     rows = []
     print("| guard | " + " | ".join(f for f, *_ in trainings) + " | total |")
     print("|---|" + "---:|" * (len(trainings) + 1))
-    for guard in _guards(args.guards):
+    for guard in args.guards:
         scores = [
             validation_crashes(net, prior, windows, config, seed, guard=guard)
             for _, seed, net, prior in trainings

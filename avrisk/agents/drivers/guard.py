@@ -161,8 +161,9 @@ class BrakeGuard:
         """
         parts = [p.strip() for p in text.split(",")]
         hold = len(parts) == 3 and parts[2].lower() == "hold"
+        numbers = parts[:2] if hold else parts
         try:
-            floor, decel = (float(p) for p in parts[: 2 if hold else len(parts)])
+            floor, decel = (float(p) for p in numbers)
         except ValueError:
             raise ValueError(
                 f"a brake guard is GAP_FLOOR,ENGAGE_DECEL in m and m/s^2, "
