@@ -7,12 +7,17 @@ configuration, each in a fresh process (and, for Ray, a fresh local cluster on
 * rollouts/s: the run's own figure (``summary.json``: rollouts over the time the
   run waited for results; workers' start-up, simulator build included);
 * command [s]: wall time of the whole command (imports, Ray start, report);
-* ratio: rollouts/s against the in-process run of the same table.
+* ratio: rollouts/s against the first configuration of the table.
 
-All configurations give the same estimate (checked: ``p`` must agree). Usage::
+With ``--rounds R`` every configuration runs ``R`` times, the configurations in
+turn (round 1: all of them, round 2: all again...), so that a drift of the
+machine's load touches them alike; the table gives each one's median and range.
+All runs give the same estimate (checked: ``p`` must agree). Usage::
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/backend_throughput.py
     .venv/bin/python benchmarks/backend_throughput.py --n 8192 --configs in-process,ray2
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/backend_throughput.py \
+        --scenario highway_default --rounds 3
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import argparse
 import json
 import os
 import platform
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -62,33 +68,54 @@ def main() -> None:
         default=",".join(CONFIGS),
         help=f"comma-separated, of: {', '.join(CONFIGS)}",
     )
+    parser.add_argument(
+        "--rounds", type=int, default=1, help="runs of every configuration, in turn"
+    )
     args = parser.parse_args()
     names = [c.strip() for c in args.configs.split(",")]
     unknown = sorted(set(names) - set(CONFIGS))
     if unknown:
         parser.error(f"unknown configurations {unknown}; known: {list(CONFIGS)}")
+    if args.rounds < 1:
+        parser.error(f"--rounds must be >= 1; got {args.rounds}")
     print(
-        f"# {args.scenario}, naive, {args.n} rollouts; {platform.processor()} "
-        f"{os.cpu_count()} CPUs; OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}"
+        f"# {args.scenario}, naive, {args.n} rollouts, {args.rounds} round(s); "
+        f"{platform.processor()} {os.cpu_count()} CPUs; "
+        f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}"
     )
-    rows = []
+    runs: dict[str, list[dict]] = {name: [] for name in names}
     with tempfile.TemporaryDirectory() as tmp:
-        for i, name in enumerate(names):
-            rows.append(
-                (name, measure(args.scenario, args.n, CONFIGS[name], Path(tmp, str(i))))
-            )
-    if len({row["p"] for _, row in rows}) != 1:
-        sys.exit(f"the backends disagree on p: {[(n, r['p']) for n, r in rows]}")
-    base = rows[0][1]["rollouts_per_second"]
-    header = f"| configuration | options | rollouts/s | ratio to {rows[0][0]} |"
-    print(header + " command [s] |")
+        for r in range(args.rounds):
+            for name in names:
+                out = Path(tmp, f"{name}-{r}")
+                row = measure(args.scenario, args.n, CONFIGS[name], out)
+                runs[name].append(row)
+                print(
+                    f"# round {r + 1} {name}: {row['rollouts_per_second']:.0f} "
+                    f"rollouts/s, command {row['command_s']:.1f} s",
+                    flush=True,
+                )
+    estimates = {row["p"] for rows in runs.values() for row in rows}
+    if len(estimates) != 1:
+        sys.exit(f"the runs disagree on p: {sorted(estimates)}")
+
+    def spread(name: str, key: str, fmt: str) -> str:
+        values = [row[key] for row in runs[name]]
+        text = format(statistics.median(values), fmt)
+        if len(values) > 1:
+            text += f" ({min(values):{fmt}}-{max(values):{fmt}})"
+        return text
+
+    base = statistics.median(row["rollouts_per_second"] for row in runs[names[0]])
+    print(f"| configuration | options | rollouts/s | ratio to {names[0]} ", end="")
+    print("| command [s] |")
     print("|---|---|---:|---:|---:|")
-    for name, row in rows:
-        rate = row["rollouts_per_second"]
+    for name in names:
+        rate = statistics.median(row["rollouts_per_second"] for row in runs[name])
         options = " ".join(CONFIGS[name]) or "(none)"
         print(
-            f"| {name} | `{options}` | {rate:.0f} | {rate / base:.2f} "
-            f"| {row['command_s']:.1f} |"
+            f"| {name} | `{options}` | {spread(name, 'rollouts_per_second', '.0f')} "
+            f"| {rate / base:.2f} | {spread(name, 'command_s', '.1f')} |"
         )
 
 
