@@ -119,6 +119,9 @@ class CostMeter:
     ----------
     measured_bytes : float or None
         Disk a rollout took in the first chunk written [B] (:meth:`disk`).
+    measured_full : bool
+        Whether that chunk stored its rollouts in full (the rate line says so
+        when the plan stores rollouts of both kinds).
     """
 
     console: Console
@@ -127,6 +130,7 @@ class CostMeter:
     full_bytes_per_rollout: float
     done: int = 0
     measured_bytes: float | None = None
+    measured_full: bool = False
     _scale: float = 1.0
     _announced: bool = False
     _measured: bool = False
@@ -167,11 +171,16 @@ class CostMeter:
             highlight=False,
         )
 
+    @property
+    def _two_kinds(self) -> bool:
+        """Whether the plan stores some rollouts in full, at another size."""
+        return self.full_bytes_per_rollout != self.bytes_per_rollout and any(
+            run.stored_in_full for run in self.plan
+        )
+
     def _per_rollout_text(self) -> str:
         full = self.full_bytes_per_rollout
-        if full == self.bytes_per_rollout or not any(
-            run.stored_in_full for run in self.plan
-        ):
+        if not self._two_kinds:
             return f"{self.bytes_per_rollout:,.0f} B a rollout"
         return (
             f"{self.bytes_per_rollout:,.0f} B a rollout, {full:,.0f} B for one "
@@ -186,6 +195,7 @@ class CostMeter:
         """
         if self.measured_bytes is None:
             self.measured_bytes = row_bytes
+            self.measured_full = full
             estimate = self.full_bytes_per_rollout if full else self.bytes_per_rollout
             self._scale = row_bytes / estimate
 
@@ -204,6 +214,7 @@ class CostMeter:
         if not left:
             return
         disk = self.measured_bytes
+        kind = " stored in full" if self.measured_full and self._two_kinds else ""
         bound = self.at_most
         rest = f"at most {left:,} more" if bound else f"the {left:,} left"
         self.console.print(
@@ -212,7 +223,7 @@ class CostMeter:
             + (
                 ""
                 if disk is None
-                else f"; disk: {disk:,.0f} B a rollout, {bound}about "
+                else f"; disk: {disk:,.0f} B a rollout{kind}, {bound}about "
                 f"{megabytes(self.total_bytes)} in all"
             ),
             highlight=False,

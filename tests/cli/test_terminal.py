@@ -181,6 +181,7 @@ def test_the_plan_counts_the_rollouts_splitting_stores_in_full(tmp_path):
     assert float(planned) == pytest.approx((390 * full + 30 * compact) / 1e3, abs=1)
     measured = float(err.split("; disk: ")[1].split(" B a rollout")[0].replace(",", ""))
     assert measured == pytest.approx(full, rel=0.15)  # the first chunk: a level
+    assert " B a rollout stored in full, at most about " in err.split("; disk: ")[1]
 
 
 def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
