@@ -1,0 +1,269 @@
+"""Do two devices give the same answer? The same naive draws, row by row.
+
+Simulates fixed draws of a scenario's P0 in chunks on one device and records,
+per chunk, the hits at several thresholds, the crashes, and every *near* row
+(``f <= --near``, default 1 s) with its ``f``, crash flag and contact. Run it
+once per device (or per torch build) into its own folder, then ``compare``
+the folders chunk by chunk and row by row: a device that rounds differently
+shows up as rows whose ``f`` moved, and an answer that differs as rows that
+hit on one side only. A rate of 2e-4 is a few hundred rows in millions, so an
+agreement check on a thousand rollouts cannot see it; this one can.
+
+The draws are those of issue 42's GPU reference of ``highway_idm``: chunk
+``k`` holds ``--chunk-size`` rows, its X from ``p0.sample(chunk_size,
+chunk_rng(seed, 0, k))`` and its rollout seeds from ``sample_seeds(seed, 0,
+arange(k * chunk_size, (k + 1) * chunk_size))``. Rows are independent of the
+batch they are simulated in (each rollout has its own seed), so
+``--sub-batch`` only sets memory and speed.
+
+Usage (chunks as files under ``OUT``; rerunning skips the chunks done;
+``--shard I/K`` does chunks ``k = I mod K`` for K processes side by side)::
+
+    OMP_NUM_THREADS=1 .venv/bin/python benchmarks/device_agreement.py simulate \\
+        highway_idm --seed 2026 --chunks 0-13 --device cpu --out runs/idm_cpu
+    python3 benchmarks/device_agreement.py simulate highway_idm --seed 2026 \\
+        --chunks 0-13 --device cuda --sub-batch 262144 --out runs/idm_cuda
+    .venv/bin/python benchmarks/device_agreement.py compare runs/idm_cpu runs/idm_cuda
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from avrisk.assembly import ScenarioSimulator, SimulationObjective, base_distribution
+from avrisk.rare.problem import chunk_rng, sample_seeds
+from avrisk.scenario import load_spec
+
+#: Thresholds [s] counted.
+GAMMAS = (0.1, 0.3, 0.5, 1.0)
+SCHEMA = "avrisk.device_agreement/1"
+
+
+def chunk_draws(
+    spec, seed: int, chunk: int, chunk_size: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """X (chunk_size, D) and int64 seeds (chunk_size,) of one chunk."""
+    x = base_distribution(spec).sample(chunk_size, chunk_rng(seed, 0, chunk))
+    ids = np.arange(chunk * chunk_size, (chunk + 1) * chunk_size)
+    return x, sample_seeds(seed, 0, ids)
+
+
+def simulate_rows(
+    sim: ScenarioSimulator, x: np.ndarray, seeds: np.ndarray, sub_batch: int
+) -> dict[str, np.ndarray]:
+    """``f`` (float32 as float64), ``crash``, ``contact`` of every row."""
+    parts: dict[str, list[np.ndarray]] = {"f": [], "crash": [], "contact": []}
+    with torch.no_grad():
+        for start in range(0, len(x), sub_batch):
+            res = sim.rollout(x[start : start + sub_batch], seeds[start : start + sub_batch])
+            parts["f"].append(res.f.cpu().numpy().astype(np.float64))
+            parts["crash"].append(res.crash.cpu().numpy())
+            parts["contact"].append(res.contact.cpu().numpy().astype(np.int64))
+    return {name: np.concatenate(chunks) for name, chunks in parts.items()}
+
+
+def chunk_record(rows: dict[str, np.ndarray], near: float) -> dict:
+    """Counts at every threshold and the near rows of one simulated chunk."""
+    f, crash = rows["f"], rows["crash"]
+    index = np.flatnonzero(f <= near)
+    return {
+        "n": len(f),
+        "failed": int(np.isnan(f).sum()),
+        "crashes": int(crash.sum()),
+        "hits": {f"{g:g}": int((f <= g).sum()) for g in GAMMAS},
+        "near": {
+            "row": index.tolist(),
+            "f": f[index].tolist(),
+            "crash": crash[index].astype(int).tolist(),
+            "contact": rows["contact"][index].tolist(),
+        },
+    }
+
+
+def _chunk_path(out: Path, chunk: int) -> Path:
+    return out / f"chunk_{chunk:04d}.json"
+
+
+def _parse_range(text: str) -> list[int]:
+    lo, _, hi = text.partition("-")
+    return list(range(int(lo), int(hi or lo) + 1))
+
+
+def simulate(args: argparse.Namespace) -> None:
+    spec = load_spec(args.scenario)
+    objective = SimulationObjective(spec, device=args.device)
+    sim = objective.simulator
+    i, _, k = args.shard.partition("/")
+    todo = [c for c in _parse_range(args.chunks) if c % int(k) == int(i)]
+    args.out.mkdir(parents=True, exist_ok=True)
+    for chunk in todo:
+        path = _chunk_path(args.out, chunk)
+        if path.is_file():
+            continue
+        start = time.perf_counter()
+        x, seeds = chunk_draws(spec, args.seed, chunk, args.chunk_size)
+        rows = simulate_rows(sim, x, seeds, args.sub_batch)
+        record = {
+            "schema": SCHEMA,
+            "scenario": spec.name,
+            "seed": args.seed,
+            "chunk": chunk,
+            "chunk_size": args.chunk_size,
+            "sub_batch": args.sub_batch,
+            "near_threshold": args.near,
+            "defines_p": objective.definition(),
+            "computed_with": objective.computed_with(),
+            "seconds": time.perf_counter() - start,
+            **chunk_record(rows, args.near),
+        }
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(record) + "\n")
+        os.replace(tmp, path)
+        print(
+            f"chunk {chunk}: {record['n'] / record['seconds']:.0f} rollouts/s, "
+            f"hits {record['hits']}, crashes {record['crashes']}",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+def read_chunks(folder: Path) -> dict[int, dict]:
+    """Recorded chunks of one folder, by chunk index."""
+    chunks = {}
+    for path in sorted(folder.glob("chunk_*.json")):
+        record = json.loads(path.read_text())
+        if record.get("schema") != SCHEMA:
+            sys.exit(f"{path}: not a {SCHEMA} record")
+        chunks[record["chunk"]] = record
+    if not chunks:
+        sys.exit(f"{folder}: no recorded chunks")
+    return chunks
+
+
+def compare_chunk(a: dict, b: dict) -> dict:
+    """Row-by-row agreement of one chunk simulated twice.
+
+    Only rows near on at least one side are known; a row near on one side
+    only is a disagreement at every threshold it crosses.
+    """
+    near = min(a["near_threshold"], b["near_threshold"])
+    rows_a = {r: (f, c) for r, f, c in zip(a["near"]["row"], a["near"]["f"], a["near"]["crash"])}
+    rows_b = {r: (f, c) for r, f, c in zip(b["near"]["row"], b["near"]["f"], b["near"]["crash"])}
+    both = sorted(set(rows_a) & set(rows_b))
+    diffs = [abs(rows_a[r][0] - rows_b[r][0]) for r in both]
+    differing = [r for r in both if rows_a[r][0] != rows_b[r][0]]
+    one_side = sorted(
+        r
+        for r in set(rows_a) ^ set(rows_b)
+        if min(rows_a.get(r, (math.inf,))[0], rows_b.get(r, (math.inf,))[0]) <= near
+    )
+    crash_diff = [r for r in both if rows_a[r][1] != rows_b[r][1]]
+    hits_only = {
+        f"{g:g}": [
+            sum(1 for r, (f, _) in mine.items() if f <= g and theirs.get(r, (math.inf,))[0] > g)
+            for mine, theirs in ((rows_a, rows_b), (rows_b, rows_a))
+        ]
+        for g in GAMMAS
+        if g <= near
+    }
+    return {
+        "chunk": a["chunk"],
+        "n": a["n"],
+        "hits": {key: [a["hits"][key], b["hits"][key]] for key in a["hits"]},
+        "crashes": [a["crashes"], b["crashes"]],
+        "near_rows_both": len(both),
+        "near_rows_differing_f": len(differing),
+        "near_rows_one_side": len(one_side),
+        "crash_disagreements": len(crash_diff),
+        "max_abs_f_diff_s": max(diffs, default=0.0),
+        "hits_on_one_side_only": hits_only,
+    }
+
+
+def compare(args: argparse.Namespace) -> None:
+    a, b = read_chunks(args.a), read_chunks(args.b)
+    for key in ("scenario", "seed", "chunk_size", "defines_p"):
+        va, vb = next(iter(a.values()))[key], next(iter(b.values()))[key]
+        if va != vb:
+            sys.exit(f"{key} differs: {va} against {vb}: not the same draws")
+    common = sorted(set(a) & set(b))
+    per_chunk = [compare_chunk(a[c], b[c]) for c in common]
+    totals = {
+        "chunks": len(common),
+        "n": sum(c["n"] for c in per_chunk),
+        "hits": {
+            key: [sum(c["hits"][key][s] for c in per_chunk) for s in (0, 1)]
+            for key in per_chunk[0]["hits"]
+        },
+        "crashes": [sum(c["crashes"][s] for c in per_chunk) for s in (0, 1)],
+        "near_rows_differing_f": sum(c["near_rows_differing_f"] for c in per_chunk),
+        "near_rows_one_side": sum(c["near_rows_one_side"] for c in per_chunk),
+        "crash_disagreements": sum(c["crash_disagreements"] for c in per_chunk),
+        "max_abs_f_diff_s": max(c["max_abs_f_diff_s"] for c in per_chunk),
+    }
+    sides = [
+        json.dumps(next(iter(side.values()))["computed_with"], sort_keys=True)
+        for side in (a, b)
+    ]
+    print(f"A = {args.a}: {sides[0]}\nB = {args.b}: {sides[1]}")
+    print(f"{'chunk':>5} {'rows':>8} " + " ".join(f"{'f<=' + k:>13}" for k in totals["hits"]))
+    for c in per_chunk:
+        cells = " ".join(f"{h[0]:>6}/{h[1]:<6}" for h in c["hits"].values())
+        print(f"{c['chunk']:>5} {c['n']:>8} {cells}")
+    cells = " ".join(f"{h[0]:>6}/{h[1]:<6}" for h in totals["hits"].values())
+    print(f"{'all':>5} {totals['n']:>8} {cells}")
+    print(
+        f"crashes {totals['crashes'][0]}/{totals['crashes'][1]}; near rows whose f "
+        f"differs: {totals['near_rows_differing_f']} (largest |df| "
+        f"{totals['max_abs_f_diff_s']:.3g} s); near on one side only: "
+        f"{totals['near_rows_one_side']}; crash disagreements: "
+        f"{totals['crash_disagreements']}"
+    )
+    if args.json:
+        args.json.write_text(
+            json.dumps(
+                {"a": str(args.a), "b": str(args.b), "computed_with": sides,
+                 "totals": totals, "per_chunk": per_chunk},
+                indent=1,
+            )
+            + "\n"
+        )
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    run = sub.add_parser("simulate", help="Simulate chunks of draws on one device.")
+    run.add_argument("scenario")
+    run.add_argument("--seed", type=int, default=2026)
+    run.add_argument("--chunks", default="0-13", help="First-last chunk index.")
+    run.add_argument("--chunk-size", type=int, default=262_144)
+    run.add_argument("--sub-batch", type=int, default=8192)
+    run.add_argument("--device", default="cpu")
+    run.add_argument("--near", type=float, default=1.0, help="Rows kept: f <= NEAR [s].")
+    run.add_argument("--shard", default="0/1", help="I/K: chunks k = I mod K.")
+    run.add_argument("--threads", type=int, default=1)
+    run.add_argument("--out", type=Path, required=True)
+    cmp = sub.add_parser("compare", help="Compare two folders chunk by chunk.")
+    cmp.add_argument("a", type=Path)
+    cmp.add_argument("b", type=Path)
+    cmp.add_argument("--json", type=Path, help="Also write the comparison here.")
+    args = parser.parse_args(argv)
+    if args.command == "simulate":
+        torch.set_num_threads(args.threads)
+        simulate(args)
+    else:
+        compare(args)
+
+
+if __name__ == "__main__":
+    main()
