@@ -64,7 +64,9 @@ def simulate_rows(
     parts: dict[str, list[np.ndarray]] = {"f": [], "crash": [], "contact": []}
     with torch.no_grad():
         for start in range(0, len(x), sub_batch):
-            res = sim.rollout(x[start : start + sub_batch], seeds[start : start + sub_batch])
+            res = sim.rollout(
+                x[start : start + sub_batch], seeds[start : start + sub_batch]
+            )
             parts["f"].append(res.f.cpu().numpy().astype(np.float64))
             parts["crash"].append(res.crash.cpu().numpy())
             parts["contact"].append(res.contact.cpu().numpy().astype(np.int64))
@@ -149,6 +151,14 @@ def read_chunks(folder: Path) -> dict[int, dict]:
     return chunks
 
 
+def _near_rows(record: dict) -> dict[int, tuple[float, int]]:
+    """Row index -> (f, crash) of one chunk's near rows."""
+    near = record["near"]
+    return {
+        r: (f, c) for r, f, c in zip(near["row"], near["f"], near["crash"], strict=True)
+    }
+
+
 def compare_chunk(a: dict, b: dict) -> dict:
     """Row-by-row agreement of one chunk simulated twice.
 
@@ -156,8 +166,7 @@ def compare_chunk(a: dict, b: dict) -> dict:
     only is a disagreement at every threshold it crosses.
     """
     near = min(a["near_threshold"], b["near_threshold"])
-    rows_a = {r: (f, c) for r, f, c in zip(a["near"]["row"], a["near"]["f"], a["near"]["crash"])}
-    rows_b = {r: (f, c) for r, f, c in zip(b["near"]["row"], b["near"]["f"], b["near"]["crash"])}
+    rows_a, rows_b = _near_rows(a), _near_rows(b)
     both = sorted(set(rows_a) & set(rows_b))
     diffs = [abs(rows_a[r][0] - rows_b[r][0]) for r in both]
     differing = [r for r in both if rows_a[r][0] != rows_b[r][0]]
@@ -169,7 +178,11 @@ def compare_chunk(a: dict, b: dict) -> dict:
     crash_diff = [r for r in both if rows_a[r][1] != rows_b[r][1]]
     hits_only = {
         f"{g:g}": [
-            sum(1 for r, (f, _) in mine.items() if f <= g and theirs.get(r, (math.inf,))[0] > g)
+            sum(
+                1
+                for r, (f, _) in mine.items()
+                if f <= g and theirs.get(r, (math.inf,))[0] > g
+            )
             for mine, theirs in ((rows_a, rows_b), (rows_b, rows_a))
         ]
         for g in GAMMAS
@@ -215,7 +228,10 @@ def compare(args: argparse.Namespace) -> None:
         for side in (a, b)
     ]
     print(f"A = {args.a}: {sides[0]}\nB = {args.b}: {sides[1]}")
-    print(f"{'chunk':>5} {'rows':>8} " + " ".join(f"{'f<=' + k:>13}" for k in totals["hits"]))
+    print(
+        f"{'chunk':>5} {'rows':>8} "
+        + " ".join(f"{'f<=' + k:>13}" for k in totals["hits"])
+    )
     for c in per_chunk:
         cells = " ".join(f"{h[0]:>6}/{h[1]:<6}" for h in c["hits"].values())
         print(f"{c['chunk']:>5} {c['n']:>8} {cells}")
@@ -231,12 +247,66 @@ def compare(args: argparse.Namespace) -> None:
     if args.json:
         args.json.write_text(
             json.dumps(
-                {"a": str(args.a), "b": str(args.b), "computed_with": sides,
-                 "totals": totals, "per_chunk": per_chunk},
+                {
+                    "a": str(args.a),
+                    "b": str(args.b),
+                    "computed_with": sides,
+                    "totals": totals,
+                    "per_chunk": per_chunk,
+                },
                 indent=1,
             )
             + "\n"
         )
+
+
+def fixture(args: argparse.Namespace) -> None:
+    """Write the replay test's rows: near rows, simulated again here.
+
+    ``--rows`` rows of ``--source``'s chunks with ``f <= --below``, evenly
+    spread over their sorted ``f`` (crashes and near misses alike), their X
+    and seeds, and ``f``, crash and contact as this device simulates them now.
+    """
+    chunks = read_chunks(args.source)
+    first = next(iter(chunks.values()))
+    spec = load_spec(first["scenario"])
+    objective = SimulationObjective(spec, device=args.device)
+    near = sorted(
+        (f, record["chunk"], row)
+        for record in chunks.values()
+        for row, (f, _) in _near_rows(record).items()
+        if f <= args.below
+    )
+    spread = np.unique(np.linspace(0, len(near) - 1, args.rows).round().astype(int))
+    picked = [near[i] for i in spread]
+    xs, seeds = [], []
+    for _, chunk, row in picked:
+        x, s = chunk_draws(spec, first["seed"], chunk, first["chunk_size"])
+        xs.append(x[row])
+        seeds.append(s[row])
+    x, seeds = np.array(xs), np.array(seeds, dtype=np.int64)
+    rows = simulate_rows(objective.simulator, x, seeds, len(x))
+    args.out.write_text(
+        json.dumps(
+            {
+                "scenario": spec.name,
+                "defines_p": objective.definition(),
+                "computed_with": objective.computed_with(),
+                "drawn_as": {
+                    "seed": first["seed"],
+                    "chunk_size": first["chunk_size"],
+                    "chunk_row": [[c, r] for _, c, r in picked],
+                },
+                "x": x.tolist(),
+                "seeds": seeds.tolist(),
+                "f": rows["f"].tolist(),
+                "crash": rows["crash"].astype(int).tolist(),
+                "contact": rows["contact"].tolist(),
+            }
+        )
+        + "\n"
+    )
+    print(f"wrote {len(x)} rows to {args.out}", file=sys.stderr)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -249,7 +319,9 @@ def main(argv: list[str] | None = None) -> None:
     run.add_argument("--chunk-size", type=int, default=262_144)
     run.add_argument("--sub-batch", type=int, default=8192)
     run.add_argument("--device", default="cpu")
-    run.add_argument("--near", type=float, default=1.0, help="Rows kept: f <= NEAR [s].")
+    run.add_argument(
+        "--near", type=float, default=1.0, help="Rows kept: f <= NEAR [s]."
+    )
     run.add_argument("--shard", default="0/1", help="I/K: chunks k = I mod K.")
     run.add_argument("--threads", type=int, default=1)
     run.add_argument("--out", type=Path, required=True)
@@ -257,12 +329,17 @@ def main(argv: list[str] | None = None) -> None:
     cmp.add_argument("a", type=Path)
     cmp.add_argument("b", type=Path)
     cmp.add_argument("--json", type=Path, help="Also write the comparison here.")
+    fix = sub.add_parser("fixture", help="Write the replay test's rows.")
+    fix.add_argument("source", type=Path, help="A folder of simulated chunks.")
+    fix.add_argument("--out", type=Path, required=True)
+    fix.add_argument(
+        "--below", type=float, default=0.5, help="Rows with f <= this [s]."
+    )
+    fix.add_argument("--rows", type=int, default=64)
+    fix.add_argument("--device", default="cpu")
     args = parser.parse_args(argv)
-    if args.command == "simulate":
-        torch.set_num_threads(args.threads)
-        simulate(args)
-    else:
-        compare(args)
+    torch.set_num_threads(getattr(args, "threads", 1))
+    {"simulate": simulate, "compare": compare, "fixture": fixture}[args.command](args)
 
 
 if __name__ == "__main__":
