@@ -13,7 +13,10 @@ last). Its ``n_l`` particles with ``f <= b_{l+1}`` (the survivors) seed
 ``n_l`` Markov chains, of ``N // n_l`` states or one more, seed included: their
 ``N`` states are set ``l + 1``. With exact counts, not ``p0`` assumed,
 
-    p_hat = prod_{l=0}^{L-2} (n_l / N) * (#{f <= gamma in set L-1} / N).
+    p_hat = prod_{l=0}^{L-2} (n_l / N_l) * (#{f <= gamma in set L-1} / N_{L-1}),
+
+``N_l = N`` but for a first set grown on a plateau (*Plateaus*), whose factor
+counts its further draws only.
 
 A test threshold ``g`` is estimated from the deepest set conditioned on a level
 at or above ``g``; below ``gamma`` it may see no particle (``p = 0``; its
@@ -31,7 +34,11 @@ acceptance does not fall with the dimension. The chains move in lockstep, one
 round of proposals at a time; after each round ``beta`` is multiplied by
 ``exp(ADAPT_GAIN (accepted - TARGET_ACCEPTANCE proposed) / chains)`` (clipped
 to ``[MIN_BETA, 1]``), which drives the acceptance rate towards
-``TARGET_ACCEPTANCE = 0.3``; ``beta`` carries over from level to level. With
+``TARGET_ACCEPTANCE = 0.3``; ``beta`` carries over from level to level. A chain
+that is refused keeps its state (as Metropolis-Hastings does); only when no
+chain accepts in ``MAX_ROUNDS_WITHOUT_MOVE`` rounds in a row with ``beta``
+already at ``MIN_BETA`` (a step that barely moves: the set below the level has
+no volume, or ``f`` jumps) does the run stop with a :class:`SplittingError`. With
 ``n_moves > 1`` a chain keeps every ``n_moves``-th state only (thinning). For a
 seeded (stochastic) ``f`` each proposal has its own seed: the chain moves on
 ``(x, seed)``, and a fresh seed is an independence proposal from its prior, so
@@ -40,15 +47,32 @@ the move stays reversible.
 Ties
 ----
 Many rollouts may share one value of ``f`` (``inf`` for no encounter, ``0`` for
-crashes, a coarse ``f``). The level is still the quantile and the survivors
-are counted exactly (``f <= level``). When ties leave more than ``p0_max`` of
-the particles at or below the quantile, the level moves to the largest value
-below it (fewer survivors than ``p0``, but progress); with no value below it,
-the quantile stays the level. The level must fall at every step: when every
-particle has the same ``f`` (all ``inf``, or all at the current level), when
-the levels do not reach ``gamma`` within ``max_levels`` sets, or when no chain
-accepts a proposal in ``MAX_ROUNDS_WITHOUT_MOVE`` rounds in a row, the run
-stops with a :class:`SplittingError` naming the case, never with a number.
+crashes, a capped or coarse ``f``). The level is still the quantile and the
+survivors are counted exactly (``f <= level``). When ties leave more than
+``p0_max`` of the particles at or below the quantile, the level moves to the
+largest value below the tie: the factor is then the share strictly below it,
+counted exactly as generalized splitting does, and the chains stay in ``f <=
+level``, so the moves keep the conditional law invariant. The level must fall
+at every set: one that cannot (the tie at the current level holds the whole
+set) ends the levels with a bound (*Plateaus*).
+
+Plateaus
+--------
+``f`` may be constant on most of ``P0`` (a TTC capped where nothing closes): a
+first set of ``N`` draws may then hold few or no particles below the tie.
+When it holds fewer than ``min_survivors`` below it (or every draw at it),
+the first set takes ``(plateau_draws - 1) N`` more draws of ``P0``. Its factor
+is the share of those further draws alone: the first ``N`` decided that they
+were drawn, and a count that decides its own sample size is biased (stopping
+at the ``m``-th hit overstates ``p`` by about ``m / (m - 1)``); all of the
+set's particles below the level seed chains. With some below, the levels go
+on (few chains: a wider interval, from their correlation). With none counted,
+the answer is a bound, as naive Monte Carlo's with no hit: ``p`` is reported
+as 0 with the interval ``[0, u]``, ``u`` the product of the factors so far
+times the exact 95% upper bound of a share of 0 of the last set
+(``details["bound_only"]``). The same holds for a later set whose particles
+all tie at its level. No run stops on a flat ``f``: it is an event the draws
+never came near, not a proof that it cannot happen.
 
 Standard error
 --------------
@@ -169,6 +193,13 @@ class SplittingSettings(EstimatorSettings):
         pCN proposals per kept chain state (``> 1`` thins the chains).
     initial_beta : float, default=0.6
         pCN step of the first moves, in (0, 1]; then adapted.
+    min_survivors : int, default=10
+        Fewest of the first ``N`` draws of ``P0`` that must lie below a tie of
+        ``f`` at their level (a plateau, e.g. a capped TTC); fewer, and the
+        first set grows to ``plateau_draws N`` draws (*Plateaus*).
+    plateau_draws : int, default=8
+        Draws of a first set grown on a plateau, in multiples of ``N`` (1:
+        never grown).
     """
 
     n_particles: int = Field(2000, ge=10, description="Particles per level N.")
@@ -190,6 +221,12 @@ class SplittingSettings(EstimatorSettings):
     initial_beta: float = Field(
         0.6, gt=0.0, le=1.0, description="pCN step of the first level's moves."
     )
+    min_survivors: int = Field(
+        10, ge=1, description="Fewest draws of P0 below a plateau of f before more."
+    )
+    plateau_draws: int = Field(
+        8, ge=1, description="Draws of a first set grown on a plateau, times N."
+    )
 
     @field_validator("p0_max")
     @classmethod
@@ -210,15 +247,25 @@ class ParticleSet(NamedTuple):
         failed, NaN past the chain's end). Set 0 has ``N`` chains of length 1.
     level : float
         The next level chosen from these particles (``gamma`` on the last set).
+    counted_from : int, default=0
+        First chain whose states the set's factor counts: ``N`` for a first
+        set grown on a plateau, whose first ``N`` draws decided that it grows
+        (*Plateaus*), else 0.
     """
 
     values: FloatArray
     level: float
+    counted_from: int = 0
 
     @property
     def flat(self) -> FloatArray:
         """The ``N`` values, chain after chain, shape (N,)."""
         return self.values[~np.isnan(self.values)]
+
+    @property
+    def counted(self) -> FloatArray:
+        """The chains the factor counts, shape (n_chains - counted_from, max_length)."""
+        return self.values[self.counted_from :]
 
 
 class SplittingState(NamedTuple):
@@ -315,11 +362,13 @@ class SubsetSimulation:
     def budget(self) -> int:
         """An upper bound for the progress bar: ``max_levels`` full sets.
 
-        ``N`` draws, then at most ``N n_moves`` proposals per further set; a
-        run that reaches ``gamma`` sooner, as most do, makes fewer calls.
+        ``N`` draws (``plateau_draws N`` on a plateau), then at most ``N
+        n_moves`` proposals per further set; a run that reaches ``gamma``
+        sooner, as most do, makes fewer calls.
         """
         s = self.settings
-        return s.n_particles * (1 + (s.max_levels - 1) * s.n_moves)
+        first = s.n_particles * s.plateau_draws
+        return first + s.n_particles * (s.max_levels - 1) * s.n_moves
 
     def budget_not_redrawn(self) -> int:
         """All of :meth:`budget`: its points are drawn in standard space and moved."""
@@ -351,23 +400,30 @@ class SubsetSimulation:
         Raises
         ------
         SplittingError
-            If the level cannot fall below the current one, if ``max_levels``
-            sets do not reach ``gamma``, or if the chains stop moving.
+            If ``max_levels`` sets do not reach ``gamma``, or if the chains
+            stop moving.
         """
         s = self.settings
+        current = state.sets[-1].level if state.sets else math.inf
+        counted_from = 0
         if state.sets:
-            moved = move_chains(state, problem, context, s.n_moves)
+            moved = move_chains(state, problem, context, s.n_moves, s.n_particles)
         else:
             moved = _draw_p0(state, problem, context, s.n_particles)
-        current = state.sets[-1].level if state.sets else math.inf
+            if s.plateau_draws > 1 and _on_plateau(moved.values, problem.gamma, s):
+                counted_from = s.n_particles
+                more = (s.plateau_draws - 1) * s.n_particles
+                moved = _drawn_more(moved, problem, context, more)
         flat = moved.values[~np.isnan(moved.values)]
-        level = next_level(
-            flat, current, problem.gamma, s.p0, s.p0_max, len(state.sets)
-        )
-        sets = (*state.sets, ParticleSet(moved.values, level))
+        level = next_level(flat, current, problem.gamma, s.p0, s.p0_max)
+        if level is None or (
+            level > problem.gamma and np.count_nonzero(flat <= level) == flat.size
+        ):
+            level = problem.gamma  # nothing below a tie: a bound (*Plateaus*)
+        sets = (*state.sets, ParticleSet(moved.values, level, counted_from))
         reached = level == problem.gamma
         if not reached and len(sets) == s.max_levels:
-            p_so_far = math.prod(_survivors(sets)) / s.n_particles ** len(sets)
+            p_so_far = math.prod(_factors(sets))
             raise SplittingError(
                 f"after max_levels={s.max_levels} levels the level is f <= "
                 f"{level:g}, still above gamma = {problem.gamma:g} "
@@ -393,7 +449,7 @@ class SubsetSimulation:
             n_chains=moved.values.shape[0],
             acceptance=moved.acceptance,
             beta=moved.beta,
-            cov=math.sqrt(level_cov_squared(moved.values, level)),
+            cov=math.sqrt(level_cov_squared(sets[-1].counted, level)),
             n_failed=moved.n_failed,
             n_evals=n_evals,
         )
@@ -407,9 +463,9 @@ class SubsetSimulation:
     ) -> Estimate:
         """The product estimate and its Au & Beck error for every threshold."""
         n = self.settings.n_particles
-        by_gamma = {problem.gamma: _estimate_at(state.sets, problem.gamma, n)}
+        by_gamma = {problem.gamma: _estimate_at(state.sets, problem.gamma)}
         for g in problem.thresholds[1:]:
-            by_gamma[g] = _estimate_at(state.sets, g, n, by_gamma[problem.gamma].ci[1])
+            by_gamma[g] = _estimate_at(state.sets, g, by_gamma[problem.gamma].ci[1])
         if state.n_failed:
             warnings.warn(
                 f"{state.n_failed} evaluations of f failed; subset simulation counts "
@@ -427,10 +483,12 @@ class SubsetSimulation:
                 "levels": [ps.level for ps in state.sets],
                 "survivors": _survivors(state.sets),
                 "level_cov": [
-                    math.sqrt(level_cov_squared(ps.values, ps.level))
+                    math.sqrt(level_cov_squared(ps.counted, ps.level))
                     for ps in state.sets
                 ],
                 "n_particles": n,
+                "first_set_draws": state.sets[0].flat.size,
+                "bound_only": by_gamma[problem.gamma].n_hits == 0,
                 "n_failed": state.n_failed,
                 "stderr_method": STDERR_METHOD,
             },
@@ -492,8 +550,7 @@ def next_level(
     gamma: float,
     p0: float,
     p0_max: float,
-    index: int = 0,
-) -> float:
+) -> float | None:
     """The next level from a particle set's ``f`` (*Ties* in the module docstring).
 
     Parameters
@@ -507,19 +564,13 @@ def next_level(
         Threshold of the event.
     p0, p0_max : float
         Quantile level; largest share of survivors ties may leave.
-    index : int, default=0
-        Index of the set (for the message).
 
     Returns
     -------
-    float
+    float or None
         ``gamma`` when the ``p0``-quantile is at or below it, else a level
-        below ``current``.
-
-    Raises
-    ------
-    SplittingError
-        If every particle has ``f = current``: the level cannot fall.
+        below ``current``; None when none can fall below it (every particle
+        at ``current``: a plateau).
 
     Examples
     --------
@@ -528,22 +579,17 @@ def next_level(
     1.0
     >>> float(next_level(values, np.inf, -1.0, p0=0.2, p0_max=0.4))  # below the ties
     0.0
+    >>> print(next_level(np.full(10, 7.0), np.inf, -1.0, p0=0.2, p0_max=0.5))
+    None
     """
     quantile = float(np.quantile(values, p0, method="inverted_cdf"))
     if quantile > gamma and np.count_nonzero(values <= quantile) > p0_max * values.size:
         below = values[values < quantile]
         if below.size:
             quantile = float(below.max())
-    level = max(quantile, gamma)
-    if level >= current:
-        raise SplittingError(
-            f"all {values.size} particles of level {index} have f = {current:g}, "
-            f"above gamma = {gamma:g}: f is flat there, so the levels cannot go "
-            "lower (is f <= gamma possible? splitting needs an f that decreases "
-            "towards the event; a mostly constant or infinite f gives it nothing "
-            "to follow)"
-        )
-    return level
+    if max(quantile, gamma) >= current:
+        return None
+    return max(quantile, gamma)
 
 
 def level_cov_squared(values: FloatArray, threshold: float) -> float:
@@ -573,7 +619,9 @@ def level_cov_squared(values: FloatArray, threshold: float) -> float:
         pairs = np.count_nonzero(present[:, :-lag] & present[:, lag:])
         both = np.count_nonzero(hits[:, :-lag] & hits[:, lag:])
         correlation += pairs / n * (both / pairs - p * p) / variance
-    return (1 - p) / (n * p) * (1 + 2 * correlation)
+    # chains of pCN states are positively correlated; a negative estimate is
+    # noise, and would make the interval narrower than independent draws'
+    return (1 - p) / (n * p) * max(1.0, 1 + 2 * correlation)
 
 
 def _survivors(sets: Sequence[ParticleSet]) -> list[int]:
@@ -581,27 +629,67 @@ def _survivors(sets: Sequence[ParticleSet]) -> list[int]:
     return [int(np.count_nonzero(ps.flat <= ps.level)) for ps in sets]
 
 
+def _factors(sets: Sequence[ParticleSet]) -> list[float]:
+    """Each set's factor: the share of its counted states at or below its level."""
+    return [_share(ps.counted, ps.level) for ps in sets]
+
+
+def _share(values: FloatArray, threshold: float) -> float:
+    """Share of the present (non-NaN) ``values`` at or below ``threshold``."""
+    present = values[~np.isnan(values)]
+    return np.count_nonzero(present <= threshold) / present.size
+
+
+def _on_plateau(values: FloatArray, gamma: float, settings: SplittingSettings) -> bool:
+    """Whether draws of ``P0`` hold too few particles below a tie (*Plateaus*).
+
+    Parameters
+    ----------
+    values : ndarray of shape (N_0, 1)
+        ``f`` of the first set's draws.
+    gamma : float
+    settings : SplittingSettings
+        ``p0``, ``p0_max`` and ``min_survivors``.
+    """
+    flat = values.ravel()
+    level = next_level(flat, math.inf, gamma, settings.p0, settings.p0_max)
+    if level is None:  # every draw at +inf
+        return True
+    # without ties the level keeps at least p0 N survivors: fewer means a tie
+    survivors = int(np.count_nonzero(flat <= level))
+    few = min(settings.min_survivors, settings.p0 * flat.size)
+    return level > gamma and (survivors < few or survivors == flat.size)
+
+
 def _estimate_at(
-    sets: Sequence[ParticleSet], g: float, n: int, bound: float = 1.0
+    sets: Sequence[ParticleSet], g: float, bound: float = 1.0
 ) -> GammaEstimate:
     """``P0(f <= g)`` from the deepest set conditioned on a level ``>= g``.
 
-    ``bound`` is the upper end of the interval when no particle of that set
-    has ``f <= g`` (the interval of ``gamma``, for ``g`` below it).
+    With no particle of that set at or below ``g``, ``p`` is 0 and the
+    interval reaches up to the upper end of the factors above times the exact
+    upper bound of a share of 0 of that set, or ``bound`` if lower (the
+    interval of ``gamma``, for ``g`` below it).
     """
     deepest = max(i for i in range(len(sets)) if i == 0 or sets[i - 1].level >= g)
     above = sets[:deepest]
-    last = sets[deepest]
-    n_hits = int(np.count_nonzero(last.flat <= g))
-    p = math.prod(c / n for c in _survivors(above)) * n_hits / n
+    counted = sets[deepest].counted
+    n_last = int(np.count_nonzero(~np.isnan(counted)))
+    n_hits = int(np.count_nonzero(counted <= g))
+    p_above = math.prod(_factors(above))
+    p = p_above * n_hits / n_last
     cov_squared = sum(
-        level_cov_squared(ps.values, ps.level) for ps in above
-    ) + level_cov_squared(last.values, g)
+        level_cov_squared(ps.counted, ps.level) for ps in above
+    ) + level_cov_squared(counted, g)
+    z = stats.norm.ppf(0.5 + CONFIDENCE / 2)
     if n_hits:
-        half = stats.norm.ppf(0.5 + CONFIDENCE / 2) * math.sqrt(math.log1p(cov_squared))
+        half = z * math.sqrt(math.log1p(cov_squared))
         ci = (p * math.exp(-half), min(1.0, p * math.exp(half)))
-    else:
-        ci = (0.0, bound)
+    else:  # the upper ends of the factors above and of a share of 0
+        cov_above = cov_squared - level_cov_squared(counted, g)
+        upper_above = p_above * math.exp(z * math.sqrt(math.log1p(cov_above)))
+        upper = -math.expm1(math.log((1 - CONFIDENCE) / 2) / n_last)
+        ci = (0.0, min(bound, upper_above * upper))
     return GammaEstimate(
         gamma=g,
         p=p,
@@ -609,7 +697,7 @@ def _estimate_at(
         ci=ci,
         n_hits=n_hits,
         ess=float(n_hits),
-        n_samples=n,
+        n_samples=n_last,
         confidence=CONFIDENCE,
         interval=INTERVAL_METHOD,
     )
@@ -632,20 +720,34 @@ def _draw_p0(
     state: SplittingState, problem: RareEventProblem, context: EstimationContext, n: int
 ) -> _Moved:
     """Set 0: ``n`` draws of ``P0`` (standard normals mapped by the base)."""
-    stage = state.n_stages + 1
+    empty = _Moved(
+        np.empty((0, problem.base.dim)),
+        np.empty((0, 1)),
+        math.nan,
+        0,
+        state.beta,
+        state.n_stages,
+        0,
+        state.rounds_without_move,
+    )
+    return _drawn_more(empty, problem, context, n)
+
+
+def _drawn_more(
+    first: _Moved, problem: RareEventProblem, context: EstimationContext, n: int
+) -> _Moved:
+    """The first set with ``n`` more draws of ``P0``, a stage of their own."""
+    stage = first.n_stages + 1
     z = np.random.default_rng([context.seed, stage]).standard_normal(
         (n, problem.base.dim)
     )
     values, n_failed, n_stages = _evaluate(problem, context, z, stage)
-    return _Moved(
-        z,
-        values[:, None],
-        math.nan,
-        n,
-        state.beta,
-        state.n_stages + n_stages,
-        n_failed,
-        state.rounds_without_move,
+    return first._replace(
+        z=np.concatenate([first.z, z]),
+        values=np.concatenate([first.values, values[:, None]]),
+        n_calls=first.n_calls + n,
+        n_stages=first.n_stages + n_stages,
+        n_failed=first.n_failed + n_failed,
     )
 
 
@@ -654,12 +756,13 @@ def move_chains(
     problem: RareEventProblem,
     context: EstimationContext,
     n_moves: int,
+    n: int,
 ) -> _Moved:
-    """The next set: chains from the last set's survivors, moved by pCN."""
+    """The next set, ``n`` states of chains from the last set's survivors (pCN)."""
     last = state.sets[-1]
     flat = last.flat
     seeds = np.flatnonzero(flat <= last.level)
-    n_chains, n = seeds.size, flat.size
+    n_chains = seeds.size
     lengths = np.full(n_chains, n // n_chains)
     lengths[: n % n_chains] += 1  # the longer chains first: who moves is a prefix
     z_chain = np.zeros((n_chains, lengths[0], state.z.shape[1]))
@@ -681,12 +784,12 @@ def move_chains(
             n_accepted = int(np.count_nonzero(accept))
             beta = _adapted(beta, n_accepted, moving, n_chains)
             stuck = 0 if n_accepted else stuck + 1
-            if stuck >= MAX_ROUNDS_WITHOUT_MOVE:
+            if stuck >= MAX_ROUNDS_WITHOUT_MOVE and beta == MIN_BETA:
                 raise SplittingError(
                     f"no chain accepted a pCN proposal in {stuck} rounds in a row at "
-                    f"level f <= {last.level:g} (beta shrank to {beta:.2g}): "
-                    "the set below the level may have no volume, or f may jump "
-                    "there (a stochastic f whose outcome hardly depends on x?)"
+                    f"level f <= {last.level:g}, with the smallest step beta = "
+                    f"{MIN_BETA:g}: the set below the level may have no volume, or f "
+                    "may jump there (a stochastic f whose outcome hardly depends on x?)"
                 )
             accepted += n_accepted
             proposed += moving
@@ -697,7 +800,7 @@ def move_chains(
     return _Moved(
         z_chain[present],
         values,
-        accepted / proposed,
+        accepted / proposed if proposed else math.nan,
         proposed,
         beta,
         n_stages,

@@ -100,6 +100,7 @@ using Gaussian densities revisited." Structural Safety 76, 2019.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from typing import Any, Literal, NamedTuple
 
@@ -621,12 +622,17 @@ class SplittingImportanceSampling(SubsetSimulation):
     ) -> Estimate:
         """Move the hits at ``gamma``, fit the proposal, sample it ``n_final`` times.
 
+        With no hit at ``gamma`` (a plateau no particle left), subset
+        simulation's bound is the answer (its module docstring, *Plateaus*).
+
         The fit's generator comes from the run seed, so a resumed run fits the
         same proposal and replays the recorded final stage.
         """
         s = self.settings
         levels = super().finalize(state, problem, context)
-        moved = move_chains(state, problem, context, s.n_moves)
+        if levels.details["bound_only"]:  # no particle to fit: the levels' bound
+            return dataclasses.replace(levels, method="splitting_is")
+        moved = move_chains(state, problem, context, s.n_moves, s.n_particles)
         rng = np.random.default_rng(
             np.random.SeedSequence([context.seed], spawn_key=(FIT_STREAM,))
         )

@@ -268,7 +268,7 @@ def test_compare_defaults_finish_in_minutes():
     assert method == "splitting_is" and options == {"n_final": 10_000}
     s = splitting.settings
     four_sets = 4 * s.n_particles + s.n_particles + s.n_final
-    assert four_sets == 20_000 and splitting.budget() == 36_000
+    assert four_sets == 20_000 and splitting.budget() == 50_000
 
 
 def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(

@@ -215,20 +215,61 @@ def test_next_level_is_the_quantile_or_the_value_below_its_ties(
 @pytest.mark.parametrize(
     ("values", "current"), [([3.0] * 10, 3.0), ([np.inf] * 10, np.inf)]
 )
-def test_next_level_refuses_a_set_flat_at_the_current_level(values, current):
-    with pytest.raises(SplittingError, match="f is flat there"):
-        next_level(np.array(values), current, -1.0, 0.1, 0.5)
+def test_next_level_finds_none_below_a_set_flat_at_the_current_level(values, current):
+    assert next_level(np.array(values), current, -1.0, 0.1, 0.5) is None
 
 
-def test_an_f_flat_above_gamma_is_an_error_not_a_number():
-    # floor(2 x) but never below -3: the event f <= -5 is impossible
+def plateau_f(share: float, cap: float = 5.0, p_below: float = 1e-2):
+    """``f`` tied at ``cap`` on all but ``share`` of P0 (2-d normal), and its exact p.
+
+    Off the plateau (``x_1 >= t``, ``P0 = share``) ``f = min(cap, b - x_0)``;
+    ``P0(f <= 0) = share * P(x_0 >= b) = share * p_below``.
+    """
+    t, b = stats.norm.isf(share), stats.norm.isf(p_below)
+
+    def f(x):
+        return np.where(x[:, 1] >= t, np.minimum(cap, b - x[:, 0]), cap)
+
+    return f, share * p_below
+
+
+def zero_hit_bound(n: int) -> float:
+    """Exact (Clopper-Pearson) 95% upper bound of a share of 0 in ``n``."""
+    return -np.expm1(np.log(0.025) / n)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_plateau_of_f_grows_the_first_set_and_the_levels_go_on(seed):
+    # 99.9% of P0 ties at f = 5 (a capped TTC): 1,000 draws hold one below it
+    # on average; the first set grows to 8,000 and the estimate covers p
+    f, p = plateau_f(1e-3)
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    est = subset_simulation(f, base, 0.0, n_particles=1000, seed=seed)
+    assert est.details["first_set_draws"] == 8000
+    assert not est.details["bound_only"]
+    assert est.ci[0] < p < est.ci[1]
+
+
+def test_a_plateau_nothing_leaves_gives_an_honest_bound_not_an_error():
+    # floor(2 x) but never below -3: the chains at f = -3 cannot go lower
     def f(x):
         return np.maximum(np.floor(2 * x[:, 0]), -3.0)
 
-    with pytest.raises(SplittingError, match=r"have f = -3, above gamma = -5"):
-        subset_simulation(f, NORMAL_1D, -5.0, n_particles=500)
-    with pytest.raises(SplittingError, match=r"have f = inf"):
-        subset_simulation(lambda x: np.full(len(x), np.inf), NORMAL_1D, 0.0)
+    est = subset_simulation(f, NORMAL_1D, -5.0, n_particles=500)
+    assert est.p == 0.0 and est.details["bound_only"]
+    # the share of the draws at f <= -3 (its upper end) times the bound of 0
+    # in 500 states
+    first = est.details["survivors"][0] / 500
+    assert abs(first - stats.norm.cdf(-1.0)) < 0.05
+    assert est.ci[0] == 0.0
+    assert first * zero_hit_bound(500) < est.ci[1] < 1.5 * first * zero_hit_bound(500)
+    # an f infinite everywhere: the first set grows, then a bound from the
+    # 3,500 draws after the first 500
+    est = subset_simulation(
+        lambda x: np.full(len(x), np.inf), NORMAL_1D, 0.0, n_particles=500
+    )
+    assert est.p == 0.0 and est.details["first_set_draws"] == est.n_evals == 4000
+    assert est.ci == (0.0, pytest.approx(zero_hit_bound(3500)))
 
 
 def test_an_event_out_of_reach_of_the_levels_is_an_error_not_a_number():
@@ -240,16 +281,26 @@ def test_an_event_out_of_reach_of_the_levels_is_an_error_not_a_number():
         subset_simulation(f, NORMAL_1D, 5.0, n_particles=500, max_levels=4)
 
 
-def test_chains_that_never_move_are_an_error():
+def test_chains_that_never_move_are_an_error_once_their_step_is_smallest():
     calls = []
 
     def f(x):  # finite on the draws of P0 only: every proposal is rejected
         calls.append(len(x))
         return x[:, 0] if len(calls) == 1 else np.full(len(x), np.inf)
 
-    with pytest.raises(SplittingError, match="no chain accepted"):
+    with pytest.raises(SplittingError, match="no chain accepted.*smallest step"):
         subset_simulation(f, NORMAL_1D, -5.0, n_particles=500)
-    assert len(calls) == 1 + MAX_ROUNDS_WITHOUT_MOVE
+    # beta falls from 0.6 by exp(-0.3) a round to 1e-3, then 10 more rounds
+    assert MAX_ROUNDS_WITHOUT_MOVE < len(calls) - 1 < 50
+
+
+def test_a_single_chain_that_is_refused_a_while_goes_on():
+    # two chains in a thin region: runs of rejections are common, not fatal
+    f, p = plateau_f(1e-3)
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    est = subset_simulation(f, base, 0.0, n_particles=1000, seed=1, plateau_draws=2)
+    assert est.details["first_set_draws"] == 2000
+    assert est.details["survivors"][0] == 2 and est.ci[0] < p < est.ci[1]
 
 
 def test_failed_evaluations_count_as_outside_the_level_and_are_reported():
@@ -288,7 +339,8 @@ def test_test_thresholds_come_from_the_deepest_level_that_holds_them():
         assert abs(part.p - stats.norm.sf(beta - g)) < 5 * part.stderr
         assert part.ci[0] < part.p < part.ci[1]
     unseen = est.by_gamma[-4.0]  # below every particle: bounded by gamma's interval
-    assert unseen.p == unseen.n_hits == 0 and unseen.ci == (0.0, est.ci[1])
+    assert unseen.p == unseen.n_hits == 0 and 0.0 == unseen.ci[0] < unseen.ci[1]
+    assert unseen.ci[1] <= est.ci[1]
 
 
 def test_the_au_beck_cov_grows_with_correlation_along_the_chains():
@@ -311,7 +363,7 @@ def test_settings_are_validated_by_name():
 
 def test_protocol_budget_progress_checkpoint_and_diagnostics():
     method = get_estimator("splitting", n_particles=400, max_levels=6, n_moves=2)
-    assert method.budget() == 400 * (1 + 5 * 2)
+    assert method.budget() == 400 * (8 + 5 * 2)  # 8 N draws on a plateau
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, 2 moves per state"
     )

@@ -235,7 +235,7 @@ def test_an_interrupted_run_resumes_to_the_same_summary(tmp_path):
 
 def test_settings_budget_and_description():
     method = get_estimator("splitting_is", n_particles=400, max_levels=6, n_final=900)
-    assert method.budget() == 400 * (1 + 5) + 400 + 900
+    assert method.budget() == 400 * (8 + 5) + 400 + 900
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, then IS 900 "
         "(4 components, defensive 0.1)"
@@ -289,3 +289,14 @@ def test_each_estimators_advice_names_only_its_own_settings():
     assert named[ADVICE] <= set(SplittingISSettings.model_fields)
     assert named[SEARCH_ADVICE] == {"n_final", "n_iter", "n_per_iter", "rho"}
     assert named[SEARCH_ADVICE] <= set(CESettings.model_fields)
+
+
+def test_a_plateau_nothing_leaves_gives_the_levels_bound():
+    # f = 7 everywhere but where x_0 > 6 (P0 1e-9): no draw leaves the tie
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    est = splitting_is(
+        lambda x: np.where(x[:, 0] > 6.0, -1.0, 7.0), base, 0.0, n_particles=500
+    )
+    assert est.method == "splitting_is" and est.details["bound_only"]
+    assert est.p == 0.0 and est.n_evals == 4000
+    assert est.ci == (0.0, pytest.approx(-np.expm1(np.log(0.025) / 3500)))
