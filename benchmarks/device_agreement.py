@@ -14,7 +14,9 @@ The draws are those of issue 42's GPU reference of ``highway_idm``: chunk
 chunk_rng(seed, 0, k))`` and its rollout seeds from ``sample_seeds(seed, 0,
 arange(k * chunk_size, (k + 1) * chunk_size))``. Rows are independent of the
 batch they are simulated in (each rollout has its own seed), so
-``--sub-batch`` only sets memory and speed.
+``--sub-batch`` and ``--group`` (chunks simulated together) only set memory
+and speed. With ``--chunk-size 8192`` the chunks are those of
+``benchmarks/reference.py`` for the same seed.
 
 Usage (chunks as files under ``OUT``; rerunning skips the chunks done;
 ``--shard I/K`` does chunks ``k = I mod K`` for K processes side by side)::
@@ -107,47 +109,56 @@ def simulate(args: argparse.Namespace) -> None:
     i, _, k = args.shard.partition("/")
     todo = [c for c in _parse_range(args.chunks) if c % int(k) == int(i)]
     args.out.mkdir(parents=True, exist_ok=True)
-    for chunk in todo:
-        path = _chunk_path(args.out, chunk)
-        if path.is_file():
-            continue
+    todo = [c for c in todo if not _chunk_path(args.out, c).is_file()]
+    for first in range(0, len(todo), args.group):
+        group = todo[first : first + args.group]
         start = time.perf_counter()
-        x, seeds = chunk_draws(spec, args.seed, chunk, args.chunk_size)
+        draws = [chunk_draws(spec, args.seed, c, args.chunk_size) for c in group]
+        x, seeds = (np.concatenate(part) for part in zip(*draws, strict=True))
         rows = simulate_rows(sim, x, seeds, args.sub_batch)
-        record = {
-            "schema": SCHEMA,
-            "scenario": spec.name,
-            "seed": args.seed,
-            "chunk": chunk,
-            "chunk_size": args.chunk_size,
-            "sub_batch": args.sub_batch,
-            "near_threshold": args.near,
-            "defines_p": objective.definition(),
-            "computed_with": objective.computed_with(),
-            "seconds": time.perf_counter() - start,
-            **chunk_record(rows, args.near),
-        }
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(record) + "\n")
-        os.replace(tmp, path)
+        seconds = (time.perf_counter() - start) / len(group)
+        for j, chunk in enumerate(group):
+            mine = slice(j * args.chunk_size, (j + 1) * args.chunk_size)
+            record = {
+                "schema": SCHEMA,
+                "scenario": spec.name,
+                "seed": args.seed,
+                "chunk": chunk,
+                "chunk_size": args.chunk_size,
+                "sub_batch": args.sub_batch,
+                "near_threshold": args.near,
+                "defines_p": objective.definition(),
+                "computed_with": objective.computed_with(),
+                "seconds": seconds,
+                **chunk_record({k: v[mine] for k, v in rows.items()}, args.near),
+            }
+            path = _chunk_path(args.out, chunk)
+            tmp = path.with_suffix(".tmp")
+            tmp.write_text(json.dumps(record) + "\n")
+            os.replace(tmp, path)
+        hits = int(np.count_nonzero(rows["f"] <= GAMMAS[0]))
         print(
-            f"chunk {chunk}: {record['n'] / record['seconds']:.0f} rollouts/s, "
-            f"hits {record['hits']}, crashes {record['crashes']}",
+            f"chunks {group[0]}-{group[-1]}: {args.chunk_size / seconds:.0f} "
+            f"rollouts/s, hits at {GAMMAS[0]:g} s: {hits}",
             file=sys.stderr,
             flush=True,
         )
 
 
-def read_chunks(folder: Path) -> dict[int, dict]:
-    """Recorded chunks of one folder, by chunk index."""
+def read_chunks(source: Path) -> dict[int, dict]:
+    """Recorded chunks of a folder (``chunk_*.json``) or a ``.jsonl`` of them."""
+    if source.is_file():
+        texts = source.read_text().splitlines()
+    else:
+        texts = [path.read_text() for path in sorted(source.glob("chunk_*.json"))]
     chunks = {}
-    for path in sorted(folder.glob("chunk_*.json")):
-        record = json.loads(path.read_text())
+    for text in texts:
+        record = json.loads(text)
         if record.get("schema") != SCHEMA:
-            sys.exit(f"{path}: not a {SCHEMA} record")
+            sys.exit(f"{source}: not {SCHEMA} records")
         chunks[record["chunk"]] = record
     if not chunks:
-        sys.exit(f"{folder}: no recorded chunks")
+        sys.exit(f"{source}: no recorded chunks")
     return chunks
 
 
@@ -309,6 +320,30 @@ def fixture(args: argparse.Namespace) -> None:
     print(f"wrote {len(x)} rows to {args.out}", file=sys.stderr)
 
 
+def against_reference(args: argparse.Namespace) -> None:
+    """Each chunk's hits against ``benchmarks/reference.py``'s record of it."""
+    mine = read_chunks(args.folder)
+    recorded = {}
+    for path in args.lines:
+        for text in path.read_text().splitlines():
+            line = json.loads(text)
+            recorded[line["chunk"]] = line
+    common = sorted(set(mine) & set(recorded))
+    differ = []
+    for c in common:
+        theirs = {k: sum(v.values()) for k, v in recorded[c]["hits"].items()}
+        if any(theirs[k] != n for k, n in mine[c]["hits"].items()):
+            differ.append(c)
+    totals = {
+        key: sum(mine[c]["hits"][key] for c in common)
+        for key in mine[common[0]]["hits"]
+    }
+    print(
+        f"{len(common)} chunks ({sum(mine[c]['n'] for c in common):,} rollouts) in "
+        f"both: hits {totals}; chunks whose hits differ: {differ or 'none'}"
+    )
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -318,6 +353,9 @@ def main(argv: list[str] | None = None) -> None:
     run.add_argument("--chunks", default="0-13", help="First-last chunk index.")
     run.add_argument("--chunk-size", type=int, default=262_144)
     run.add_argument("--sub-batch", type=int, default=8192)
+    run.add_argument(
+        "--group", type=int, default=1, help="Chunks simulated together (a GPU batch)."
+    )
     run.add_argument("--device", default="cpu")
     run.add_argument(
         "--near", type=float, default=1.0, help="Rows kept: f <= NEAR [s]."
@@ -337,9 +375,20 @@ def main(argv: list[str] | None = None) -> None:
     )
     fix.add_argument("--rows", type=int, default=64)
     fix.add_argument("--device", default="cpu")
+    ref = sub.add_parser(
+        "against-reference", help="Hits per chunk against reference.py's lines."
+    )
+    ref.add_argument("folder", type=Path, help="Chunks of --chunk-size 8192.")
+    ref.add_argument("lines", type=Path, nargs="+", help="OUT.shard*.chunks.jsonl")
     args = parser.parse_args(argv)
     torch.set_num_threads(getattr(args, "threads", 1))
-    {"simulate": simulate, "compare": compare, "fixture": fixture}[args.command](args)
+    commands = {
+        "simulate": simulate,
+        "compare": compare,
+        "fixture": fixture,
+        "against-reference": against_reference,
+    }
+    commands[args.command](args)
 
 
 if __name__ == "__main__":
