@@ -43,6 +43,7 @@ from avrisk.rare.estimator import (
     EstimationContext,
     EstimatorSettings,
     estimate_black_box,
+    no_doubts,
     register_estimator,
 )
 from avrisk.rare.evaluation import Evaluator
@@ -501,6 +502,7 @@ class CrossEntropy:
 
     #: Whether the search reached a threshold and held it.
     convergence = staticmethod(search_convergence)
+    doubts = staticmethod(no_doubts)
 
 
 @register_estimator

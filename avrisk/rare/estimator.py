@@ -64,6 +64,7 @@ __all__ = [
     "estimate_black_box",
     "estimator_names",
     "get_estimator",
+    "no_doubts",
     "register_estimator",
     "run_estimator",
 ]
@@ -452,6 +453,22 @@ class Estimator(Protocol, Generic[State, Info]):
         Monte Carlo) or always end at ``gamma`` (subset simulation).
         """
         ...
+
+    @staticmethod
+    def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
+        """Reasons, from a summary's estimate, not to take its interval at its word.
+
+        What the estimator knows beyond the diagnostics every estimate has
+        (:func:`avrisk.rare.trust.trust_at`): independent replicates that
+        disagree, a level held by a handful of particles; :func:`no_doubts`
+        for one that knows nothing more.
+        """
+        ...
+
+
+def no_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
+    """:meth:`Estimator.doubts` of an estimator with nothing to add: none."""
+    return ()
 
 
 _ESTIMATORS = Registry("estimator")

@@ -102,6 +102,7 @@ from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
     estimate_black_box,
+    no_doubts,
     register_estimator,
 )
 from avrisk.rare.evaluation import Evaluator
@@ -669,6 +670,7 @@ class MixtureCrossEntropy:
 
     #: Whether the search reached a threshold and held it.
     convergence = staticmethod(search_convergence)
+    doubts = staticmethod(no_doubts)
 
 
 def mixture_ce(

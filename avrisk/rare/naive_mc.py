@@ -20,6 +20,7 @@ from avrisk.rare.estimator import (
     EstimationContext,
     EstimatorSettings,
     estimate_black_box,
+    no_doubts,
     register_estimator,
 )
 from avrisk.rare.evaluation import Evaluator
@@ -124,6 +125,8 @@ class NaiveMC:
     def convergence(estimate: dict[str, Any], gamma: float) -> SearchConvergence | None:
         """None: nothing is searched."""
         return None
+
+    doubts = staticmethod(no_doubts)
 
 
 def naive_mc(

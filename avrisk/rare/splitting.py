@@ -141,7 +141,7 @@ from avrisk.rare.estimator import (
 )
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
-from avrisk.rare.final_stage import CONFIDENCE
+from avrisk.rare.final_stage import CONFIDENCE, MIN_RELIABLE_ESS
 from avrisk.rare.problem import (
     SAMPLE_CHUNK,
     BatchFunction,
@@ -201,6 +201,8 @@ class SplittingSettings(EstimatorSettings):
         Draws of a first set grown on a plateau, in multiples of ``N`` (1:
         never grown).
     """
+
+    OMIT_IF_DEFAULT = ("min_survivors", "plateau_draws")
 
     n_particles: int = Field(2000, ge=10, description="Particles per level N.")
     p0: float = Field(
@@ -326,6 +328,9 @@ class SplittingInfo(NamedTuple):
         Evaluations of this set that failed.
     n_evals : int
         Calls of ``f`` so far, this set included.
+    replicate : int, default=0
+        Independent replicate of the levels the set belongs to (several in
+        :mod:`avrisk.rare.splitting_importance`).
     """
 
     index: int
@@ -337,6 +342,7 @@ class SplittingInfo(NamedTuple):
     cov: float
     n_failed: int
     n_evals: int
+    replicate: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (NaN becomes ``None``)."""
@@ -462,10 +468,6 @@ class SubsetSimulation:
         context: EstimationContext,
     ) -> Estimate:
         """The product estimate and its Au & Beck error for every threshold."""
-        n = self.settings.n_particles
-        by_gamma = {problem.gamma: _estimate_at(state.sets, problem.gamma)}
-        for g in problem.thresholds[1:]:
-            by_gamma[g] = _estimate_at(state.sets, g, by_gamma[problem.gamma].ci[1])
         if state.n_failed:
             warnings.warn(
                 f"{state.n_failed} evaluations of f failed; subset simulation counts "
@@ -474,25 +476,7 @@ class SubsetSimulation:
                 UserWarning,
                 stacklevel=2,
             )
-        return Estimate(
-            method="subset_simulation",
-            gamma=problem.gamma,
-            by_gamma=by_gamma,
-            n_evals=state.n_evals,
-            details={
-                "levels": [ps.level for ps in state.sets],
-                "survivors": _survivors(state.sets),
-                "level_cov": [
-                    math.sqrt(level_cov_squared(ps.counted, ps.level))
-                    for ps in state.sets
-                ],
-                "n_particles": n,
-                "first_set_draws": state.sets[0].flat.size,
-                "bound_only": by_gamma[problem.gamma].n_hits == 0,
-                "n_failed": state.n_failed,
-                "stderr_method": STDERR_METHOD,
-            },
-        )
+        return levels_estimate(state, problem, self.settings.n_particles)
 
     def progress(self, info: SplittingInfo) -> str:
         """``"set 3: f <= 1.23, 212 survivors, accepted 31%, beta 0.42"``."""
@@ -542,6 +526,54 @@ class SubsetSimulation:
     def convergence(estimate: dict[str, Any], gamma: float) -> SearchConvergence | None:
         """None: its levels end at ``gamma``, or the run fails (SplittingError)."""
         return None
+
+    @staticmethod
+    def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
+        """A level held by fewer than ``MIN_RELIABLE_ESS`` particles (a plateau).
+
+        Its factor then rests on a handful of draws and its chains on as
+        many seeds: the interval, from normal approximations, is too narrow.
+        """
+        survivors = (estimate.get("details") or {}).get("survivors") or []
+        few = [int(k) for k in survivors[:-1] if k < MIN_RELIABLE_ESS]
+        if not few:
+            return ()
+        return (
+            f"a level of the search held only {min(few)} particles below it (f "
+            "ties on a plateau?): its interval is likely too narrow",
+        )
+
+
+def levels_estimate(
+    state: SplittingState, problem: RareEventProblem, n_particles: int
+) -> Estimate:
+    """Subset simulation's estimate of every threshold from a run's particle sets.
+
+    ``details`` holds the levels, the survivors of each set, their c.o.v.s,
+    the first set's draws, whether the answer is a bound only (no particle at
+    or below ``gamma``: *Plateaus*) and the failed evaluations.
+    """
+    by_gamma = {problem.gamma: _estimate_at(state.sets, problem.gamma)}
+    for g in problem.thresholds[1:]:
+        by_gamma[g] = _estimate_at(state.sets, g, by_gamma[problem.gamma].ci[1])
+    return Estimate(
+        method="subset_simulation",
+        gamma=problem.gamma,
+        by_gamma=by_gamma,
+        n_evals=state.n_evals,
+        details={
+            "levels": [ps.level for ps in state.sets],
+            "survivors": _survivors(state.sets),
+            "level_cov": [
+                math.sqrt(level_cov_squared(ps.counted, ps.level)) for ps in state.sets
+            ],
+            "n_particles": n_particles,
+            "first_set_draws": state.sets[0].flat.size,
+            "bound_only": by_gamma[problem.gamma].n_hits == 0,
+            "n_failed": state.n_failed,
+            "stderr_method": STDERR_METHOD,
+        },
+    )
 
 
 def next_level(

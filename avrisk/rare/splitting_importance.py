@@ -78,13 +78,27 @@ no coordinate selection helps; the shrunk shift over all of them leaves noise
 particles per level: relative RMSE 0.17). Where ``f`` falls along one
 direction, the shift along its fitted slope leaves ``1 / n_eff``.
 
+Replicates
+----------
+Steps 1-2 run ``replicates`` times, independently, with ``n_particles /
+replicates`` particles each (the same calls of ``f`` as one run of
+``n_particles``), and step 3 fits one proposal to the particles of them all.
+A failure region one replicate's levels never reach (a region that holds most
+of ``p`` but whose intermediate levels are rarer than another's) is then in
+the proposal if another reached it; and two replicates' own estimates of ``p``
+that differ beyond their errors (:func:`replicates_disagree`) are the one
+sign, inside a run, that a search can miss a region: such a run says caution
+(``details["replicates_disagree"]``). One run cannot see a region no
+replicate reached.
+
 The estimate is that of the importance-sampling stage alone: the proposal is
 fixed before its samples are drawn, so it is unbiased whatever the particles,
 and its standard error is the weighted mean's (the usual CLT interval, trusted
 while the hits' weights have Pareto ``k <= 0.7``). The splitting estimate of
 the same run is kept beside it in ``details`` (``splitting``) as a cross-check
-from the same budget; the two are not independent (one run's particles made
-the proposal) but have different errors.
+from the same budget (the replicates' mean, and each replicate's in
+``details["replicates"]``); the two are not independent (the run's particles
+made the proposal) but have different errors.
 
 :class:`SplittingImportanceSampling` is registered as ``"splitting_is"``;
 :func:`splitting_is` is the top-level function.
@@ -105,7 +119,8 @@ from collections.abc import Callable, Sequence
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, ValidationInfo, field_validator
+from scipy import stats
 from scipy.special import logsumexp
 
 from avrisk.rare.cross_entropy import ShareOfP0
@@ -133,6 +148,7 @@ from avrisk.rare.splitting import (
     SplittingSettings,
     SplittingState,
     SubsetSimulation,
+    levels_estimate,
     move_chains,
 )
 from avrisk.rare.stages import BatchCache, BatchRecorder
@@ -150,6 +166,7 @@ __all__ = [
     "shrink",
     "slope_direction",
     "splitting_is",
+    "with_light_regions",
 ]
 
 #: Candidate thresholds, in standard errors, beyond which a coordinate's particle
@@ -159,6 +176,14 @@ __all__ = [
 THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
 #: Blocks of chains whose means give those standard errors.
 N_BLOCKS = 20
+
+#: A particle farther from every fitted shift than a draw of it is with this
+#: probability lies in a region of its own (:func:`with_light_regions`).
+OUTLIER_TAIL = 1e-6
+#: Fewest such particles that make a region of their own.
+MIN_REGION_PARTICLES = 3
+#: Least proposal weight of a region kept for its separation alone.
+LIGHT_REGION_SHARE = 0.02
 
 #: A proposal's fit to particles and their chains: its components, their
 #: weights and the coordinates it shifts (inside :func:`particle_proposal`).
@@ -176,6 +201,11 @@ ADVICE = Advice(
     heavy_tail="raise n_particles and n_final, or compare subset simulation's own "
     "estimate of the run (details['splitting']) and runs with other seeds",
 )
+
+#: Standard errors of the difference of two replicates' ``log p`` beyond which
+#: they disagree (*Replicates*): two-sided 0.3% for normal errors, as subset
+#: simulation's own errors are somewhat optimistic.
+DISAGREEMENT_Z = 3.0
 
 #: Extra key of the fit's generator (k-means++ seeding), so that it draws no
 #: chunk's stream.
@@ -204,6 +234,9 @@ class SplittingISSettings(SplittingSettings):
         Which standard coordinates the shifts may move: all of them, or only
         those the base's cross-entropy box searches
         (:meth:`~avrisk.rare.families.base.ExponentialFamily.searched_coordinates`).
+    replicates : int, default=2
+        Independent replicates of the levels, ``n_particles / replicates``
+        particles each (*Replicates*).
     """
 
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
@@ -224,6 +257,20 @@ class SplittingISSettings(SplittingSettings):
         description="Standard coordinates the shifts may move: 'all', or those the "
         "base's CE box searches ('searched').",
     )
+    replicates: int = Field(
+        2, ge=1, description="Independent replicates of the levels (N split)."
+    )
+
+    @field_validator("replicates")
+    @classmethod
+    def _particles_each(cls, replicates: int, info: ValidationInfo) -> int:
+        n = info.data.get("n_particles")
+        if n is not None and n // replicates < 10:
+            raise ValueError(
+                f"{replicates} replicates of n_particles={n} leave fewer than 10 "
+                "particles each"
+            )
+        return replicates
 
 
 class ParticleFit(NamedTuple):
@@ -422,10 +469,70 @@ def particle_proposal(
         if along is not None and clearly_better(held_out_points(fit_along), points[k]):
             chosen, threshold, along_slope = fit_along, 0.0, True
     components, weights, shifted = chosen(z, chain)
+    components, weights = with_light_regions(z, components, weights, shifted, base, rng)
     proposal = MixtureProposal(components, weights, base, settings.defensive)
     return ParticleFit(
         proposal, threshold, int(np.count_nonzero(shifted)), along_slope=along_slope
     )
+
+
+def with_light_regions(
+    z: FloatArray,
+    components: Sequence[ExponentialFamily],
+    weights: FloatArray,
+    shifted: np.ndarray,
+    base: ExponentialFamily,
+    rng: np.random.Generator,
+) -> tuple[list[ExponentialFamily], FloatArray]:
+    """The fit, plus a component for each region its components leave out.
+
+    A particle farther from every fitted shift than a draw of it would be
+    with probability ``OUTLIER_TAIL`` (its squared distance over the shifted
+    coordinates against ``chi^2`` of as many degrees of freedom) lies in a
+    region of its own: a region few chains reached, which the held-out halves
+    cannot vouch for (one half holds it, the other not) and EM drops under
+    ``min_weight``. With at least ``MIN_REGION_PARTICLES`` such particles,
+    shifts are fitted to them alone (k-means++ seeding, EM, merging) and kept
+    unshrunk, each with a weight of its particles' share but at least
+    ``LIGHT_REGION_SHARE``: their share of the particles is that of ``p``
+    only on average, and a region a search barely reached may hold more.
+
+    Parameters
+    ----------
+    z : ndarray of shape (n, D)
+        The particles in standard-normal space.
+    components : sequence of StandardSpaceShift
+        The fitted shifts; ``weights`` their weights, shape (K,).
+    shifted : ndarray of bool, shape (D,)
+        The coordinates the shifts move.
+    base : ExponentialFamily
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    components : list of ExponentialFamily
+    weights : ndarray of shape (K',), summing to 1
+    """
+    d = int(np.count_nonzero(shifted))
+    if d == 0:
+        return list(components), weights
+    masked = np.where(shifted, z, 0.0)
+    means = np.array([c.mean for c in components])
+    far = ((masked[:, None, :] - means[None]) ** 2).sum(axis=2).min(axis=1)
+    outside = far > stats.chi2.isf(OUTLIER_TAIL, d)
+    n_out = int(np.count_nonzero(outside))
+    if n_out < MIN_REGION_PARTICLES:
+        return list(components), weights
+    structure = StandardSpaceShift(base, searched=shifted)
+    points = masked[outside]
+    even = np.full(n_out, 1.0 / n_out)
+    k = max(1, n_out // MIN_REGION_PARTICLES)
+    start = seed_components(structure, points, even, k, rng)
+    fit = fit_mixture(*start, points, even, 1.0 / n_out)
+    light, shares = merge_overlapping(fit.components, fit.weights)
+    light_weights = np.maximum(shares * n_out / len(z), LIGHT_REGION_SHARE)
+    kept = np.asarray(weights) * (1.0 - light_weights.sum())
+    return [*components, *light], np.concatenate([kept, light_weights])
 
 
 def shrink(
@@ -554,9 +661,92 @@ class SplittingImportanceSampling(SubsetSimulation):
     settings: SplittingISSettings
 
     def budget(self) -> int:
-        """Subset simulation's bound, the moves at ``gamma`` and the final stage."""
+        """Subset simulation's bound, the moves at ``gamma`` and the final stage.
+
+        The replicates share the ``N`` particles of a level, so they change
+        no bound.
+        """
         s = self.settings
         return super().budget() + s.n_particles * s.n_moves + s.n_final
+
+    @property
+    def levels(self) -> SubsetSimulation:
+        """One replicate's subset simulation: ``n_particles / replicates`` each."""
+        s = self.settings
+        each = {name: getattr(s, name) for name in SplittingSettings.model_fields}
+        each["n_particles"] = s.n_particles // s.replicates
+        return SubsetSimulation(SplittingSettings(**each))
+
+    def init(self, problem: RareEventProblem) -> ReplicatesState:  # type: ignore[override]
+        """The first replicate's levels, not yet begun."""
+        return ReplicatesState((), self.levels.init(problem))
+
+    def done(self, state: ReplicatesState) -> bool:  # type: ignore[override]
+        """Once the last replicate's levels reach ``gamma``."""
+        return len(state.finished) + 1 == self.settings.replicates and (
+            state.current.reached
+        )
+
+    def step(  # type: ignore[override]
+        self,
+        state: ReplicatesState,
+        problem: RareEventProblem,
+        context: EstimationContext,
+    ) -> tuple[ReplicatesState, SplittingInfo]:
+        """The next set of the replicate under way, or the first of the next.
+
+        A replicate's stages follow the last one's, so that every stage has
+        its own random numbers and a resumed run replays them in order.
+        """
+        levels = self.levels
+        if state.current.reached:
+            fresh = levels.init(problem)._replace(
+                n_stages=state.current.n_stages, n_evals=state.current.n_evals
+            )
+            state = ReplicatesState((*state.finished, state.current), fresh)
+        current, info = levels.step(state.current, problem, context)
+        return (
+            state._replace(current=current),
+            info._replace(replicate=len(state.finished)),
+        )
+
+    @staticmethod
+    def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
+        """Replicates whose own estimates of ``p`` disagree (*Replicates*).
+
+        Few particles at a level do not bias the importance-sampling stage
+        (its weights' diagnostics speak for it); replicates that ended in
+        different places say a failure region may be missing from the
+        proposal.
+        """
+        details = estimate.get("details") or {}
+        if not details.get("replicates_disagree"):
+            return ()
+        own = ", ".join(f"{r['p']:.2g}" for r in details["replicates"])
+        return (
+            f"independent replicates of the search found p = {own}, further "
+            "apart than their errors allow: the search may miss a failure region "
+            "(compare runs with other seeds, or raise n_particles)",
+        )
+
+    def progress(self, info: SplittingInfo) -> str:
+        """``"replicate 2/2, set 3: f <= 1.23, 212 survivors, ..."``."""
+        text = super().progress(info)
+        r = self.settings.replicates
+        return text if r == 1 else f"replicate {info.replicate + 1}/{r}, {text}"
+
+    def checkpoint(  # type: ignore[override]
+        self, state: ReplicatesState, infos: Sequence[SplittingInfo]
+    ) -> dict[str, Any]:
+        """The levels so far, every replicate's (for inspection and reports)."""
+        sets = sum(len(r.sets) for r in (*state.finished, state.current))
+        return {
+            "replicates_done": len(state.finished),
+            "levels_done": sets,
+            "n_evals": state.current.n_evals,
+            "beta": state.current.beta,
+            "levels": [i.to_dict() for i in infos],
+        }
 
     def budget_not_redrawn(self) -> int:
         """All but the final stage, a fresh draw of the fitted proposal."""
@@ -614,57 +804,187 @@ class SplittingImportanceSampling(SubsetSimulation):
             ),
         ]
 
-    def finalize(
+    def finalize(  # type: ignore[override]
         self,
-        state: SplittingState,
+        state: ReplicatesState,
         problem: RareEventProblem,
         context: EstimationContext,
     ) -> Estimate:
-        """Move the hits at ``gamma``, fit the proposal, sample it ``n_final`` times.
+        """Move the replicates' hits at ``gamma``, fit one proposal, sample it.
 
-        With no hit at ``gamma`` (a plateau no particle left), subset
-        simulation's bound is the answer (its module docstring, *Plateaus*).
-
-        The fit's generator comes from the run seed, so a resumed run fits the
-        same proposal and replays the recorded final stage.
+        The proposal is fitted to every replicate's particles at once, and
+        sampled ``n_final`` times. With no hit at ``gamma`` in any replicate
+        (a plateau no particle left), subset simulation's bound is the answer
+        (its module docstring, *Plateaus*). The fit's generator comes from the
+        run seed, so a resumed run fits the same proposal and replays the
+        recorded final stage.
         """
         s = self.settings
-        levels = super().finalize(state, problem, context)
-        if levels.details["bound_only"]:  # no particle to fit: the levels' bound
-            return dataclasses.replace(levels, method="splitting_is")
-        moved = move_chains(state, problem, context, s.n_moves, s.n_particles)
+        replicates = (*state.finished, state.current)
+        n_each = s.n_particles // s.replicates
+        own = [levels_estimate(r, problem, n_each) for r in replicates]
+        combined = combined_levels(own, problem, s.n_particles)
+        with_hits = [r for r, e in zip(replicates, own, strict=True) if e.n_hits]
+        if not with_hits:  # no particle to fit: the levels' bound
+            return dataclasses.replace(combined, method="splitting_is")
+        moves = [move_chains(r, problem, context, s.n_moves, n_each) for r in with_hits]
         rng = np.random.default_rng(
             np.random.SeedSequence([context.seed], spawn_key=(FIT_STREAM,))
         )
-        chain = np.nonzero(~np.isnan(moved.values))[0]
-        slope = slope_direction(state.z, state.sets[-1].flat)
-        fitted = particle_proposal(moved.z, chain, problem.base, s, rng, slope)
+        z = np.concatenate([m.z for m in moves])
+        chain = _pooled_chains([m.values for m in moves])
+        slope = slope_direction(
+            np.concatenate([r.z for r in with_hits]),
+            np.concatenate([r.sets[-1].flat for r in with_hits]),
+        )
+        fitted = particle_proposal(z, chain, problem.base, s, rng, slope)
         proposal = fitted.proposal
-        n_evals = state.n_evals + moved.n_calls
+        n_evals = state.current.n_evals + sum(m.n_calls for m in moves)
         stage = context.stage(
             problem, proposal, s.n_final, FINAL_STAGE, final_after=n_evals
         )
+        by_gamma = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
         return Estimate(
             method="splitting_is",
             gamma=problem.gamma,
-            by_gamma=weighted_stage_estimates(stage, problem.thresholds, ADVICE),
+            by_gamma=by_gamma,
             n_evals=n_evals + stage.values.size,
             proposal=proposal,
             stopped_by=stage.stopped_by or "budget",
             details={
-                **levels.details,
-                "n_failed": state.n_failed + moved.n_failed,  # the moves at gamma too
-                "fit_acceptance": moved.acceptance,
+                **combined.details,
+                "n_failed": combined.details["n_failed"]
+                + sum(m.n_failed for m in moves),  # the moves at gamma too
+                "fit_acceptance": float(
+                    np.mean(
+                        [m.acceptance for m in moves if not np.isnan(m.acceptance)]
+                        or [np.nan]
+                    )
+                ),
                 "n_components": proposal.n_components,
                 "informative_threshold": fitted.threshold,
                 "along_slope": fitted.along_slope,
                 "n_shifted": fitted.n_shifted,
                 "splitting": {
                     str(g): {"p": e.p, "ci": list(e.ci)}
-                    for g, e in levels.by_gamma.items()
+                    for g, e in combined.by_gamma.items()
                 },
+                "replicates": [
+                    {"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own
+                ],
+                "replicates_disagree": replicates_disagree(own),
             },
         )
+
+
+def replicates_disagree(own: Sequence[Estimate]) -> bool:
+    """Whether two replicates' estimates of ``p`` disagree beyond their errors.
+
+    Two with hits disagree when their ``log p`` differ by more than
+    ``DISAGREEMENT_Z`` standard errors (``Var(log p) = log(1 + cov^2)``); one
+    with hits and one without, when the first's interval lies above the
+    second's bound. Independent searches that end in different places are the
+    sign of a failure region one of them did not find, and so perhaps one
+    that none found.
+    """
+    for i, a in enumerate(own):
+        for b in own[i + 1 :]:
+            if a.n_hits and b.n_hits:
+                var = sum(np.log1p((e.stderr / e.p) ** 2) for e in (a, b))
+                if abs(np.log(a.p / b.p)) > DISAGREEMENT_Z * np.sqrt(var):
+                    return True
+            elif a.n_hits or b.n_hits:
+                hit, bound = (a, b) if a.n_hits else (b, a)
+                if hit.ci[0] > bound.ci[1]:
+                    return True
+    return False
+
+
+class ReplicatesState(NamedTuple):
+    """Replicates of the levels: the finished ones and the one under way.
+
+    Attributes
+    ----------
+    finished : tuple of SplittingState
+        Replicates whose levels reached ``gamma``, in order.
+    current : SplittingState
+        The replicate under way (the last one once :meth:`done`).
+    """
+
+    finished: tuple[SplittingState, ...]
+    current: SplittingState
+
+
+def _pooled_chains(values: Sequence[FloatArray]) -> np.ndarray:
+    """Chain numbers of the pooled particles of several replicates' moves.
+
+    Parameters
+    ----------
+    values : sequence of ndarray of shape (n_chains_r, length_r)
+        Each replicate's moved states by chain (NaN past a chain's end).
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        One number per present state, in the order of the replicates' ``z``:
+        the first half of every replicate's chains (in their ancestors' order)
+        before all second halves, so the fit's two halves
+        (:func:`particle_proposal`) each hold half of every replicate.
+    """
+    keys = []
+    for r, v in enumerate(values):
+        c = np.nonzero(~np.isnan(v))[0]
+        keys.append(np.stack([c >= (v.shape[0] + 1) // 2, np.full_like(c, r), c], 1))
+    key = np.concatenate(keys)
+    _, number = np.unique(key, axis=0, return_inverse=True)
+    return number.ravel()
+
+
+def combined_levels(
+    own: Sequence[Estimate], problem: RareEventProblem, n_particles: int
+) -> Estimate:
+    """Subset simulation's estimate of the run: the replicates' mean.
+
+    Each replicate's product estimate has its own error; their mean has
+    variance ``sum(stderr_r^2) / R^2`` and a log-normal interval as one
+    replicate's. Zero hits in every replicate: the largest of their bounds
+    (each is a 95% bound of ``p`` on its own).
+    """
+    first = own[0]
+    if len(own) == 1:
+        return first
+    by_gamma = {}
+    for g in first.by_gamma:
+        parts = [e.by_gamma[g] for e in own]
+        p = float(np.mean([e.p for e in parts]))
+        stderr = float(np.sqrt(sum(e.stderr**2 for e in parts))) / len(parts)
+        if p > 0:
+            half = 1.959963984540054 * np.sqrt(np.log1p((stderr / p) ** 2))
+            ci = (p * float(np.exp(-half)), min(1.0, p * float(np.exp(half))))
+        else:
+            ci = (0.0, max(e.ci[1] for e in parts))
+        by_gamma[g] = dataclasses.replace(
+            parts[0],
+            p=p,
+            stderr=stderr,
+            ci=ci,
+            n_hits=sum(e.n_hits for e in parts),
+            ess=float(sum(e.ess for e in parts)),
+            n_samples=sum(e.n_samples for e in parts),
+        )
+    details = {
+        key: [e.details[key] for e in own]
+        for key in ("levels", "survivors", "level_cov", "first_set_draws")
+    }
+    details |= {
+        "n_particles": n_particles,
+        "bound_only": by_gamma[problem.gamma].n_hits == 0,
+        "n_failed": sum(e.details["n_failed"] for e in own),
+        "stderr_method": first.details["stderr_method"],
+    }
+    return dataclasses.replace(
+        first, by_gamma=by_gamma, n_evals=own[-1].n_evals, details=details
+    )
 
 
 def splitting_is(

@@ -1,13 +1,9 @@
 """The one answer a report or a terminal leads with, and whether to trust it.
 
 A run's ``summary.json`` holds an estimate at every threshold with the
-estimator's own diagnostics: hits, effective hits (ESS), the Pareto tail index
-of the hits' weights, rollouts that failed to evaluate. :func:`trust_at` reads
-them into ``ok`` or ``caution`` with the reasons (the rules of
-:func:`avrisk.rare.final_stage.is_reliable`, no other), and
-:func:`threshold_trust` adds whether the estimator's search converged there
-(a cross-entropy search that never reached the threshold, or did not hold
-it: :class:`avrisk.rare.results.SearchConvergence`); :func:`headline` picks
+estimator's own diagnostics; :func:`threshold_trust` reads them into ``ok`` or
+``caution`` with the reasons by the engine's one rule for every method
+(:mod:`avrisk.rare.trust`), in a scenario's words; :func:`headline` picks
 the answer among one or more runs and says it in one sentence, with its time
 base: ``p`` is per rollout, one rollout being ``horizon`` seconds of driving
 from a situation drawn from P0.
@@ -15,95 +11,19 @@ from a situation drawn from P0.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from avrisk.rare.estimator import estimator_class
-from avrisk.rare.final_stage import MIN_RELIABLE_ESS
 from avrisk.rare.results import SearchConvergence, jsonable
-from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
+from avrisk.rare.trust import Trust, Wording, estimate_trust
 
 SECONDS_PER_HOUR = 3600.0
 
 
-@dataclass(frozen=True)
-class Trust:
-    """Whether an estimate's interval can be taken at its word.
-
-    Attributes
-    ----------
-    reasons : tuple of str
-        Why not, one clause each; empty when the diagnostics raise nothing.
-    """
-
-    reasons: tuple[str, ...] = ()
-
-    @property
-    def ok(self) -> bool:
-        """No diagnostic raised a doubt."""
-        return not self.reasons
-
-    @property
-    def word(self) -> str:
-        """``"ok"`` or ``"caution"``."""
-        return "ok" if self.ok else "caution"
-
-    def __str__(self) -> str:
-        """``"ok"`` or ``"caution (reason; reason)"``."""
-        return self.word if self.ok else f"caution ({'; '.join(self.reasons)})"
-
-
-def trust_at(threshold: Mapping[str, Any], weighted: bool) -> Trust:
-    """What an estimate's own diagnostics say of it, at one threshold.
-
-    Parameters
-    ----------
-    threshold : mapping
-        One entry of a summary's ``estimate.by_gamma`` (``n_hits``, ``ess``,
-        ``pareto_k``, ``n_failed``; the last two may be missing or None in
-        older summaries).
-    weighted : bool
-        Whether the estimator weights its samples (importance sampling): then
-        effective hits and the weights' tail decide, else the hits alone.
-
-    Returns
-    -------
-    Trust
-        Caution for no hit, fewer than ``MIN_RELIABLE_ESS`` (effective) hits,
-        hit weights with a heavy tail (Pareto k above
-        ``MAX_RELIABLE_PARETO_K``), or rollouts that failed to evaluate.
-    """
-    hits = int(threshold["n_hits"])
-    ess = threshold.get("ess") or 0.0
-    tail = threshold.get("pareto_k")
-    reasons = []
-    if hits == 0:
-        reasons.append("no rollout reached the threshold: the interval is a bound only")
-    elif not weighted and hits < MIN_RELIABLE_ESS:
-        reasons.append(
-            f"only {hits} {'hit' if hits == 1 else 'hits'}: relative standard error "
-            f"about {1 / math.sqrt(hits):.0%}"
-        )
-    elif weighted and ess < MIN_RELIABLE_ESS:
-        reasons.append(
-            f"only {ess:.1f} effective hits: a few weights dominate, so the "
-            "standard error is unreliable"
-        )
-    elif weighted and tail is not None and tail > MAX_RELIABLE_PARETO_K:
-        reasons.append(
-            f"the hits' weights have a heavy tail (Pareto k = {tail:.2f} > "
-            f"{MAX_RELIABLE_PARETO_K:g}): the standard error is unreliable, likely "
-            "too small"
-        )
-    failed = int(threshold.get("n_failed") or 0)
-    if failed:
-        reasons.append(
-            f"{failed:,} rollouts failed to evaluate: p counts them safe, the "
-            "interval reaches counting them dangerous"
-        )
-    return Trust(tuple(reasons))
+#: How a scenario's reasons name its measure and samples.
+SCENARIO_WORDING = Wording("min TTC", " s", "rollout")
 
 
 def main_threshold(summary: Mapping[str, Any]) -> dict[str, Any]:
@@ -113,7 +33,7 @@ def main_threshold(summary: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def threshold_trust(summary: Mapping[str, Any], threshold: Mapping[str, Any]) -> Trust:
-    """:func:`trust_at` one threshold of a run, and whether its search converged there.
+    """The engine's one trust rule (:mod:`avrisk.rare.trust`) at one threshold.
 
     Parameters
     ----------
@@ -121,25 +41,14 @@ def threshold_trust(summary: Mapping[str, Any], threshold: Mapping[str, Any]) ->
         The run's ``summary.json``.
     threshold : mapping
         One entry of its ``estimate.by_gamma``.
-
-    Returns
-    -------
-    Trust
-        The search's failure to converge first (:meth:`Estimator.convergence
-        <avrisk.rare.estimator.Estimator.convergence>`), then the final
-        stage's own reasons.
     """
     estimator = estimator_class(summary["method"])
-    own = trust_at(threshold, estimator.weighted)
-    search = estimator.convergence(summary["estimate"], threshold["gamma"])
-    if search is None or search.converged:
-        return own
-    return Trust((search_sentence(search), *own.reasons))
+    return estimate_trust(estimator, summary["estimate"], threshold, SCENARIO_WORDING)
 
 
 def search_sentence(search: SearchConvergence) -> str:
     """:meth:`SearchConvergence.sentence` of a search on the minimum TTC [s]."""
-    return search.sentence("min TTC", " s")
+    return search.sentence(SCENARIO_WORDING.measure, SCENARIO_WORDING.unit)
 
 
 def run_trust(summary: Mapping[str, Any]) -> Trust:

@@ -50,8 +50,12 @@ def sis(problem, seed=0, **kw):
 def test_finds_p_of_exact_problems_within_its_stderr(problem):
     est = check_estimator(sis, problem, seed=4)
     assert est.n_samples == 5000  # the estimate is the importance-sampling stage's
-    last = est.history[-1]  # its survivors seed the moves at gamma: N states each
-    assert est.n_evals == last.n_evals + (2000 - last.n_survivors) + 5000
+    # each replicate's last set (level gamma) seeds moves at gamma: N / 2 states
+    lasts = [h for h in est.history if h.level == problem.gamma]
+    assert [h.replicate for h in lasts] == [0, 1]
+    moves = sum(1000 - h.n_survivors for h in lasts)
+    assert est.n_evals == est.history[-1].n_evals + moves + 5000
+    assert not est.details["replicates_disagree"]
     assert est.main.pareto_k < 0.7
     levels = est.details["splitting"][str(problem.gamma)]
     assert levels["ci"][0] <= levels["p"] <= levels["ci"][1]  # the cross-check
@@ -298,5 +302,6 @@ def test_a_plateau_nothing_leaves_gives_the_levels_bound():
         lambda x: np.where(x[:, 0] > 6.0, -1.0, 7.0), base, 0.0, n_particles=500
     )
     assert est.method == "splitting_is" and est.details["bound_only"]
+    # two replicates of 250 particles, each of 2,000 draws, 1,750 counted
     assert est.p == 0.0 and est.n_evals == 4000
-    assert est.ci == (0.0, pytest.approx(-np.expm1(np.log(0.025) / 3500)))
+    assert est.ci == (0.0, pytest.approx(-np.expm1(np.log(0.025) / 1750)))

@@ -1,6 +1,6 @@
 import pytest
 
-from avrisk.report.answer import Trust, headline, run_trust, threshold_trust, trust_at
+from avrisk.report.answer import headline, run_trust, threshold_trust
 
 
 def summary(method="ce", p=1e-4, ci=(0.5e-4, 1.5e-4), quantiles=(), **main):
@@ -12,25 +12,13 @@ def summary(method="ce", p=1e-4, ci=(0.5e-4, 1.5e-4), quantiles=(), **main):
     return {"method": method, "estimate": est}
 
 
-def test_the_estimators_own_diagnostics_decide_the_trust():
-    good = {"n_hits": 50, "ess": 40.0, "pareto_k": 0.4}
-    assert trust_at(good, weighted=True) == Trust()
-    assert str(trust_at(good, weighted=True)) == "ok"
-    heavy = trust_at({**good, "pareto_k": 0.9}, weighted=True)
-    assert not heavy.ok and "Pareto k = 0.90 > 0.7" in str(heavy)
-    assert "effective hits" in str(trust_at({**good, "ess": 3.0}, weighted=True))
-    assert "no rollout" in str(trust_at({**good, "n_hits": 0}, weighted=True))
-    # naive Monte Carlo: its hits decide, weights have no tail to speak of
-    assert trust_at({"n_hits": 50, "ess": 50.0}, weighted=False).ok
-    few = trust_at({"n_hits": 4, "ess": 4.0}, weighted=False)
-    assert str(few) == "caution (only 4 hits: relative standard error about 50%)"
-    failed = trust_at({**good, "n_failed": 3}, weighted=True)
-    assert failed.reasons == (
-        "3 rollouts failed to evaluate: p counts them safe, the interval reaches "
-        "counting them dangerous",
+def test_a_run_s_trust_speaks_of_its_rollouts_and_min_ttc():
+    no_hit = summary("naive", n_hits=0, ess=0.0)
+    assert run_trust(no_hit).reasons == (
+        "no rollout reached min TTC <= 0.1 s: the interval is a bound only",
     )
-    # an older summary without pareto_k is read on its effective hits
-    assert trust_at({"n_hits": 50, "ess": 40.0, "pareto_k": None}, True).ok
+    failed = summary("naive", n_hits=50, ess=50.0, n_failed=3)
+    assert "3 rollouts failed to evaluate" in str(run_trust(failed))
 
 
 def test_the_headline_is_the_trusted_run_with_the_narrowest_interval():

@@ -1,0 +1,92 @@
+"""The engine's one trust rule: diagnostics, search, and each estimator's doubts."""
+
+import numpy as np
+from scipy import stats
+
+from avrisk.rare import (
+    Estimate,
+    FixedCovNormal,
+    GammaEstimate,
+    splitting_is,
+    subset_simulation,
+)
+from avrisk.rare.estimator import estimator_class
+from avrisk.rare.splitting_importance import replicates_disagree
+from avrisk.rare.trust import GENERIC, Trust, Wording, estimate_trust, trust_at
+
+GOOD = {"gamma": 0.0, "n_hits": 50, "ess": 40.0, "pareto_k": 0.4}
+
+
+def test_the_estimate_s_own_diagnostics_decide_in_the_problem_s_words():
+    assert trust_at(GOOD, weighted=True) == Trust()
+    assert str(trust_at(GOOD, weighted=True)) == "ok"
+    heavy = trust_at({**GOOD, "pareto_k": 0.9}, weighted=True)
+    assert not heavy.ok and "Pareto k = 0.90 > 0.7" in str(heavy)
+    assert "effective hits" in str(trust_at({**GOOD, "ess": 3.0}, weighted=True))
+    assert trust_at({**GOOD, "n_hits": 0}, weighted=True).reasons == (
+        "no sample reached f <= 0: the interval is a bound only",
+    )
+    ttc = Wording("min TTC", " s", "rollout")
+    assert "no rollout reached min TTC <= 0 s" in str(
+        trust_at({**GOOD, "n_hits": 0}, True, ttc)
+    )
+    # naive Monte Carlo: its hits decide, weights have no tail to speak of
+    assert trust_at({"gamma": 0.0, "n_hits": 50, "ess": 50.0}, weighted=False).ok
+    few = trust_at({"gamma": 0.0, "n_hits": 4, "ess": 4.0}, weighted=False)
+    assert str(few) == "caution (only 4 hits: relative standard error about 50%)"
+    failed = trust_at({**GOOD, "n_failed": 3}, weighted=True, wording=GENERIC)
+    assert failed.reasons == (
+        "3 samples failed to evaluate: p counts them safe, the interval reaches "
+        "counting them dangerous",
+    )
+    # an older summary without pareto_k is read on its effective hits
+    assert trust_at({**GOOD, "pareto_k": None}, True).ok
+
+
+def trust_of(method, estimate):
+    as_dict = estimate.to_dict()
+    main = next(g for g in as_dict["by_gamma"] if g["gamma"] == estimate.gamma)
+    return estimate_trust(estimator_class(method), as_dict, main)
+
+
+def replicate(p, stderr, n_hits=100):
+    """A replicate's estimate at gamma 0 (its interval log-normal)."""
+    half = 1.96 * np.sqrt(np.log1p((stderr / p) ** 2)) if p else 0.0
+    ci = (p * np.exp(-half), p * np.exp(half)) if p else (0.0, stderr)
+    g = GammaEstimate(0.0, p, stderr, ci, n_hits, float(n_hits), 1000)
+    return Estimate("subset_simulation", 0.0, {0.0: g}, 1000)
+
+
+def test_replicates_disagree_beyond_their_errors_only():
+    assert not replicates_disagree([replicate(1e-6, 3e-7), replicate(2e-6, 6e-7)])
+    # log p 2.3 apart, standard error of the difference about 0.42
+    assert replicates_disagree([replicate(1e-6, 3e-7), replicate(1e-5, 3e-6)])
+    # a bound below the other's interval, and one that is not
+    assert replicates_disagree([replicate(1e-5, 2e-6), replicate(0.0, 1e-6, 0)])
+    assert not replicates_disagree([replicate(1e-6, 2e-7), replicate(0.0, 1e-5, 0)])
+
+
+def test_replicates_that_disagree_make_a_run_say_caution():
+    f = lambda x: 4.0 - x[:, 0]  # noqa: E731
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    est = splitting_is(f, base, 0.0, n_particles=1000, n_final=4000, seed=0)
+    assert not est.details["replicates_disagree"]
+    assert trust_of("splitting_is", est).ok
+    as_dict = est.to_dict()
+    as_dict["details"]["replicates_disagree"] = True
+    main = as_dict["by_gamma"][0]
+    trust = estimate_trust(estimator_class("splitting_is"), as_dict, main)
+    assert not trust.ok and "independent replicates of the search found p" in str(trust)
+
+
+def test_a_level_held_by_a_handful_of_particles_makes_splitting_say_caution():
+    t, b = stats.norm.isf(1e-3), stats.norm.isf(1e-2)
+
+    def f(x):  # 99.9% of P0 ties at 5: one in 1,000 draws below it
+        return np.where(x[:, 1] >= t, np.minimum(5.0, b - x[:, 0]), 5.0)
+
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    est = subset_simulation(f, base, 0.0, n_particles=1000, seed=1, plateau_draws=2)
+    assert est.details["survivors"][0] == 2
+    trust = trust_of("splitting", est)
+    assert "held only 2 particles" in str(trust)
