@@ -164,6 +164,7 @@ def _run_openturns(problem: Any, method: str, seed: int, settings: dict) -> dict
         x = base.from_standard_normal(np.asarray(u, dtype=float))
         return np.asarray(f(x), dtype=float)[:, None]
 
+    ot.TBB.SetThreadsNumber(1)  # one core, as the engine's runs
     ot.RandomGenerator.SetSeed(seed)
     function = ot.PythonFunction(base.dim, 1, func_sample=g)
     vector = ot.CompositeRandomVector(function, ot.RandomVector(ot.Normal(base.dim)))
