@@ -76,6 +76,9 @@ SUITE_BUDGET = 100_000
 COUNT_SETTINGS = ("n_particles", "n_per_iter", "n_final")
 #: OpenTURNS: samples per subset level / cross-entropy iteration.
 OT_PER_STEP = 8_000
+#: OpenTURNS: samples evaluated together (SubsetSampling's chains take one
+#: step per block: a block of all ``OT_PER_STEP`` would leave them unmixed).
+OT_BLOCK = 100
 OT_METHODS = ("ot_subset", "ot_ce")
 DEFAULT_METHODS = ("splitting_is", "splitting", "mixture", "ce", *OT_METHODS)
 LABELS = {
@@ -97,7 +100,7 @@ class BudgetExceeded(RuntimeError):
 def suite_settings(method: str) -> dict[str, Any]:
     """The suite's one setting of ``method`` (see the module docstring)."""
     if method in OT_METHODS:
-        return {"per_step": OT_PER_STEP, "max_calls": SUITE_BUDGET}
+        return {"per_step": OT_PER_STEP, "block": OT_BLOCK, "max_calls": SUITE_BUDGET}
     from avrisk.cli.run import CLI_DEFAULTS
     from avrisk.rare.estimator import estimator_class, get_estimator
 
@@ -173,8 +176,10 @@ def _run_openturns(problem: Any, method: str, seed: int, settings: dict) -> dict
         algo = ot.SubsetSampling(event)
     else:
         algo = ot.StandardSpaceCrossEntropyImportanceSampling(event)
-    algo.setMaximumOuterSampling(1)
-    algo.setBlockSize(settings["per_step"])
+    # outer x block samples a step; SubsetSampling moves each chain one
+    # Metropolis-Hastings step per outer iteration, so the blocks stay small
+    algo.setMaximumOuterSampling(settings["per_step"] // settings["block"])
+    algo.setBlockSize(settings["block"])
     algo.run()
     result = algo.getResult()
     p = result.getProbabilityEstimate()
