@@ -41,7 +41,8 @@ not a crash of the sweep.
 * gross misses: the interval misses ``p`` and the estimate is off by more than
   2 times either way; with how many of those the trust rule
   (``avrisk.report.answer.run_trust``, the CLI's) labelled ``ok``;
-* the share of covering runs labelled ``caution`` (a label that cries wolf);
+* the share of covering runs labelled ``caution`` (a label that cries wolf),
+  bound-only answers left out of it;
 * bound-only answers (no hit: the interval is an upper bound), apart.
 
 OpenTURNS's runs have no trust label (``n/a``).
@@ -370,7 +371,11 @@ def _row(problem: str, method: str, runs: list[dict]) -> dict:
         "mean_calls": float(np.mean([r["n_calls"] for r in finished])) if n else None,
         "gross": len(gross),
         "gross_ok": sum(r["trust"] == "ok" for r in gross) if labelled else None,
-        "covering_caution": sum(r["trust"] == "caution" for r in covers)
+        # bound-only answers (no hit) are counted apart, not as crying wolf
+        "covering_answered": sum(r.get("n_hits") != 0 for r in covers),
+        "covering_caution": sum(
+            r["trust"] == "caution" and r.get("n_hits") != 0 for r in covers
+        )
         if labelled
         else None,
         "bound_only": sum(r.get("n_hits") == 0 for r in finished),
@@ -397,7 +402,7 @@ def _fmt(row: dict) -> str:
     caution = (
         "n/a"
         if row["covering_caution"] is None
-        else f"{row['covering_caution']}/{row['covered']}"
+        else f"{row['covering_caution']}/{row['covering_answered']}"
     )
     raised = str(row["raised"])
     if row["errors"]:
