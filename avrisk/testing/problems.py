@@ -39,6 +39,12 @@ class AnalyticProblem:
     gamma : float
     p_exact : float
         ``P_base(f(X) <= gamma)``.
+    reference : str
+        How ``p_exact`` was computed (closed form, quadrature, conditional
+        Monte Carlo), one phrase.
+    p_rel_error : float
+        Relative standard error of ``p_exact``: 0 for a closed form or a
+        quadrature to near machine precision; a Monte Carlo reference's own.
     """
 
     name: str
@@ -46,6 +52,8 @@ class AnalyticProblem:
     f: BatchFunction
     gamma: float
     p_exact: float
+    reference: str = "closed form"
+    p_rel_error: float = 0.0
 
 
 def gaussian_linear_problem(dim: int, p: float = 1e-6) -> AnalyticProblem:
@@ -182,4 +190,6 @@ def four_branch_problem() -> AnalyticProblem:
         epsrel=1e-12,
     )
     p_exact = 2 * float(stats.norm.sf(3.5)) + inside
-    return AnalyticProblem("four_branch", base, f, 0.0, p_exact)
+    return AnalyticProblem(
+        "four_branch", base, f, 0.0, p_exact, reference="quadrature over v"
+    )
