@@ -63,6 +63,7 @@ from avrisk.cli.readback import (
     stored_params,
 )
 from avrisk.cli.tables import add_columns, compact_table
+from avrisk.extras import MissingExtraError
 from avrisk.pipeline.files import write_parquet_atomic
 from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE, RunDirectory, samples_table
@@ -257,7 +258,7 @@ def simulate(
     ] = None,
 ) -> None:
     """Sample scenarios from P0, simulate them, write one Parquet row per rollout."""
-    with user_errors(ScenarioSpecError):
+    with user_errors(ScenarioSpecError, ComponentError, MissingExtraError):
         spec = load_spec(scenario)
         out = _out_path(out, DEFAULT_ROLLOUTS, (".parquet", ".pq"))
         if threads is not None:
@@ -343,7 +344,9 @@ def replay(
     from avrisk.assembly import resimulate
     from avrisk.report.animate import animate_rollouts, save_frame_png
 
-    with user_errors(ScenarioSpecError, ComponentError, RegenerationError):
+    with user_errors(
+        ScenarioSpecError, ComponentError, MissingExtraError, RegenerationError
+    ):
         if file.is_dir() and not (file / SAMPLES_FILE).is_file():
             parts = sorted(p.parent.name for p in file.glob(f"*/{SAMPLES_FILE}"))
             hint = f"; a comparison: give one of its runs, e.g. {file / parts[0]}"
