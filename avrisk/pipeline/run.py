@@ -322,9 +322,15 @@ def _estimate(
         monitor.advance(len(batch.values), replayed=False)
 
     def cache(stage: int, chunk: int) -> StageBatch | None:
+        """A recorded chunk to replay; None for one with failed rollouts.
+
+        Such a chunk is evaluated again (:func:`~avrisk.rare.stages.run_stage`):
+        it is counted once, as simulated, not also as replayed.
+        """
         batch = run_dir.cached(stage, chunk)
-        if batch is not None:
-            monitor.advance(len(batch.values), replayed=True)
+        if batch is None or batch.failed.any():
+            return None
+        monitor.advance(len(batch.values), replayed=True)
         return batch
 
     infos: list[Any] = []

@@ -313,6 +313,50 @@ def test_failed_rollouts_bracket_p_and_are_evaluated_again_on_rerun(tmp_path):
     assert again["estimate"]["by_gamma"][0]["p"] == clean["p"]
 
 
+class Counting:
+    """A monitor that adds up the rollouts it is told of, replayed and simulated."""
+
+    def __init__(self):
+        self.total, self.replayed, self.simulated = 0, 0, 0
+
+    def start(self, total, description):
+        self.total = total
+
+    def advance(self, n, *, replayed):
+        if replayed:
+            self.replayed += n
+        else:
+            self.simulated += n
+
+    def status(self, text):
+        pass
+
+    def disk(self, row_bytes, *, full):
+        pass
+
+
+def test_a_rerun_counts_each_rollout_once_replayed_or_simulated_again(tmp_path):
+    naive = RunSettings("naive", gamma=0.0, gamma_test=(0.5,), n_final=30_000, seed=1)
+    path = tmp_path / "run"
+    run(path, settings=naive, f=flaky(lambda x: x[:, 0] > 3.7))
+    chunk = pq.read_table(path / "samples.parquet", columns=["chunk", "status"])
+    failed_chunks = chunk["chunk"].to_numpy()[chunk["status"].to_numpy() != 0]
+    to_redo = int(np.isin(chunk["chunk"].to_numpy(), failed_chunks).sum())
+    monitor = Counting()
+    again = run_estimation(
+        RunDirectory(path, NAMES),
+        PROBLEM.base,
+        flaky(lambda x: x[:, 0] > 99),
+        naive,
+        context={"scenario": {"name": "gaussian"}},
+        monitor=monitor,
+    )
+    # a chunk holding failed rollouts is simulated again, not also replayed
+    assert 0 < monitor.simulated == to_redo
+    assert monitor.replayed + monitor.simulated == monitor.total == 30_000
+    assert again["timing"]["rollouts_replayed"] == monitor.replayed
+
+
 def test_too_many_failures_stop_the_run_with_a_clear_message(tmp_path):
     from avrisk.rare.estimator import TooManyFailuresError
 
