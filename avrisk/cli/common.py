@@ -30,8 +30,9 @@ class CliError(Exception):
     """A problem to report to the user in one sentence, without a traceback."""
 
 
-#: Warnings of an estimate's own diagnostics, raised once per threshold: the
-#: first of each kind is printed, the others are in the results' trust column.
+#: Warnings of an estimate's own diagnostics, raised at each run's main
+#: threshold (the others' are in the results' trust column): the first of each
+#: kind is printed, those of a comparison's other runs are in the table too.
 ONCE_PER_COMMAND = (UnreliableEstimateWarning, ZeroHitsWarning)
 
 
@@ -68,9 +69,9 @@ def user_errors(*expected: type[Exception]) -> Iterator[None]:
     """Turn expected failures into a red one-line message and exit code 2.
 
     Warnings raised meanwhile are printed as yellow lines instead of Python's
-    source-line format; of an estimate's diagnostics (zero or few effective
-    hits, a heavy tail), only the first of each kind (the results give each
-    threshold's trust).
+    source-line format; of an estimate's diagnostics at its main threshold
+    (zero or few effective hits, a heavy tail), only the first of each kind
+    (the results give each threshold's trust).
     """
     try:
         with warnings.catch_warnings():
