@@ -251,6 +251,7 @@ def run_estimation(
         holds a different run.
     """
     created = not run_dir.path.exists()
+    run_dir.refuse_foreign()  # before the lock: a user's folder is left as it was
     with run_lock(run_dir.path):
         try:
             monitor = monitor or SilentMonitor()

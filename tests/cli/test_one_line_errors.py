@@ -1,15 +1,18 @@
 """What a new user gets wrong first, each answered in one line (no traceback).
 
-A misspelt ego, an unknown or unsafe parameter of the external ego, and an
-install without an optional extra: the command ends with one red line and
-exit status 2, naming the problem and what to do.
+A misspelt ego, an unknown or unsafe parameter of the external ego, an
+install without an optional extra, a folder of the user's given as ``--out``
+and a run whose recorded chunks were deleted: the command ends with one red
+line and exit status 2, naming the problem and what to do.
 """
 
+import shutil
 import sys
 
 import pytest
 
-from tests.cli.test_bad_input import invoke, one_error
+from avrisk.pipeline import RunDirectory
+from tests.cli.test_bad_input import SMALL, invoke, one_error
 from tests.scenario_files import shortened_scenario
 
 ARGS = ("--method", "naive", "--n-final", 10, "--failures", 0)
@@ -79,3 +82,38 @@ def test_avrisk_gym_without_gymnasium_is_an_import_error_naming_the_extra(
     _uninstalled(monkeypatch, "gymnasium")
     with pytest.raises(ImportError, match=r"pip install 'avrisk\[gymnasium\]'"):
         import avrisk.gym  # noqa: F401
+
+
+def _tree(folder):
+    return sorted(
+        (str(p.relative_to(folder)), p.stat().st_mtime_ns) for p in folder.rglob("*")
+    )
+
+
+def test_a_folder_of_the_users_given_as_out_is_refused_and_left_as_found(tmp_path):
+    out = tmp_path / "mine"
+    (out / "data").mkdir(parents=True)
+    (out / "notes.txt").write_text("mine")
+    before = _tree(out)
+    result = invoke("run", "highway_idm", "--out", out, *ARGS)
+    one_error(result, "is not an avrisk run directory", "choose an empty or new")
+    assert _tree(out) == before  # no .lock, nothing touched
+
+
+def test_an_unfinished_run_whose_chunks_were_deleted_is_one_line(tmp_path, monkeypatch):
+    scenario, out = _with_ego(tmp_path, {"policy": "idm_mobil"}), tmp_path / "run"
+    args = ("run", scenario, "--out", out, *SMALL)  # three chunks
+    record = RunDirectory.record
+    calls = []
+
+    def interrupted(self, batch):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return record(self, batch)
+
+    monkeypatch.setattr(RunDirectory, "record", interrupted)
+    assert invoke(*args).exit_code == 130
+    monkeypatch.setattr(RunDirectory, "record", record)
+    shutil.rmtree(out / "chunks")
+    one_error(invoke(*args), "unfinished run whose chunks/ folder", f"delete {out}")

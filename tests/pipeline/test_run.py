@@ -105,10 +105,12 @@ def test_a_directory_holding_a_different_run_is_refused_by_name(tmp_path):
         run(tmp_path / "run", settings=other)
 
 
-def test_a_non_run_directory_with_files_is_refused(tmp_path):
+def test_a_non_run_directory_with_files_is_refused_and_left_as_found(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(RunDirectoryError, match="not an avrisk run directory"):
         run(tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]  # no .lock
+    assert (tmp_path / "notes.txt").read_text() == "mine"
 
 
 def test_nan_before_anything_is_recorded_leaves_no_directory(tmp_path):
