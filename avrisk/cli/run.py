@@ -16,6 +16,7 @@ it (``--rho`` is cross-entropy's).
 
 from __future__ import annotations
 
+import difflib
 import math
 from pathlib import Path
 from typing import Annotated, Any
@@ -240,25 +241,53 @@ def foreign(method: str, names: list[str], flag_names: set[str]) -> str:
     Each is named as given (a flag of ``flag_names`` as ``--n-iter``) with
     the methods that have it, then the method's own settings: ``--rho: not a
     setting of method 'splitting_is', the default (--rho belongs to ce,
-    defensive, mixture: choose one with --method); its settings: ...``.
+    defensive, mixture: choose one with --method); its settings: ...``. A
+    name no method has is answered with the closest setting, the method's own
+    first: ``n_particle: ... (did you mean n_particles?)``.
     """
     shown = {n: f"--{n.replace('_', '-')}" if n in flag_names else n for n in names}
+    known = estimator_class(method).Settings.model_fields
     owners: dict[str, list[str]] = {}
+    misspelt = []
     for name in names:
-        methods = ", ".join(methods_with(name)) or "no method"
-        owners.setdefault(methods, []).append(shown[name])
+        methods = methods_with(name)
+        if methods:
+            owners.setdefault(", ".join(methods), []).append(shown[name])
+        else:
+            misspelt.append(_closest_setting(name, list(known)))
     whose = "; ".join(
         f"{', '.join(given)} {'belongs' if len(given) == 1 else 'belong'} to {methods}"
         for methods, given in owners.items()
     )
+    reasons = [f"{whose}: choose one with --method"] if owners else []
     default = ", the default" if method == DEFAULT_METHOD else ""
-    known = estimator_class(method).Settings.model_fields
     return (
         f"{', '.join(shown.values())}: not "
         f"{'a setting' if len(names) == 1 else 'settings'} of method "
-        f"{method!r}{default} ({whose}: choose one with --method); its settings: "
+        f"{method!r}{default} ({'; '.join(reasons + misspelt)}); its settings: "
         f"{', '.join(known)}"
     )
+
+
+def _closest_setting(name: str, own: list[str]) -> str:
+    """``"did you mean n_particles?"`` for a ``name`` no estimator has.
+
+    The closest of the method's ``own`` settings, else of every estimator's
+    (saying whose), else that no method has it.
+    """
+    close = difflib.get_close_matches(name, own, n=1)
+    if close:
+        return f"did you mean {close[0]}?"
+    every = {
+        s for m in estimator_names() for s in estimator_class(m).Settings.model_fields
+    }
+    close = difflib.get_close_matches(name, sorted(every), n=1)
+    if close:
+        return (
+            f"did you mean {close[0]}, a setting of "
+            f"{', '.join(methods_with(close[0]))}? choose one with --method"
+        )
+    return f"{name} is no method's setting"
 
 
 #: The options of ``run`` and ``compare`` that are estimator settings by name.
