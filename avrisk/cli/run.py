@@ -12,6 +12,9 @@ The estimators' settings are options by name: those with a flag (``--rho``,
 ``--n-iter`` ...) and any other through ``--set NAME=VALUE``; a setting the
 chosen estimator does not have is refused by name, with the methods that have
 it (``--rho`` is cross-entropy's).
+
+The simulator (torch) is imported by the commands' bodies, not by this module:
+``--help`` shows the estimators' settings without it.
 """
 
 from __future__ import annotations
@@ -24,7 +27,6 @@ from typing import Annotated, Any
 import typer
 import yaml
 
-from avrisk.assembly import ScenarioSimulator, SimulationObjective, param_layout
 from avrisk.cli.backends import Address, Backend, BackendOption, Workers, open_evaluator
 from avrisk.cli.common import (
     CliError,
@@ -35,21 +37,6 @@ from avrisk.cli.common import (
 )
 from avrisk.cli.readback import check_recorded, check_samples, read_config
 from avrisk.cli.results import ratio_rows, show_results
-from avrisk.cli.workflow import (
-    EXPECTED,
-    NAIVE_PART,
-    REFERENCE_PART,
-    check_thresholds,
-    compare_runs,
-    comparison_parts,
-    cost_meter,
-    execute,
-    method_label,
-    planned,
-    samples_directory,
-    settings,
-    write_run_report,
-)
 from avrisk.pipeline import RunSettings
 from avrisk.pipeline.store import SAMPLES_FILE
 from avrisk.rare import estimator_names
@@ -314,6 +301,8 @@ def _run_settings(
     **stopping: Any,
 ) -> RunSettings:
     """Run settings from a command's options; ``flags``: the estimator flags."""
+    from avrisk.cli.workflow import settings
+
     return settings(
         method,
         gamma=_threshold(gamma),
@@ -370,6 +359,17 @@ def run(
     back and its report rebuilt. The run ends at its planned size or at the
     first stopping rule given, and says which.
     """
+    from avrisk.assembly import SimulationObjective
+    from avrisk.cli.workflow import (
+        EXPECTED,
+        check_thresholds,
+        cost_meter,
+        execute,
+        method_label,
+        planned,
+        write_run_report,
+    )
+
     with user_errors(*EXPECTED), resumable(ctx):
         check_output_folder(out)
         spec = load_spec(scenario)
@@ -456,6 +456,8 @@ def compare(
     2,000 + 10,000; a reference of 50,000) take minutes; the plan's cost is
     printed before the first rollout.
     """
+    from avrisk.cli.workflow import EXPECTED, compare_runs
+
     with user_errors(*EXPECTED), resumable(ctx):
         check_output_folder(out)
         tested = _run_settings(
@@ -510,6 +512,17 @@ def report(
     Failures are animated from the traces recorded during the run; the run
     directory alone suffices (it never makes avrisk import code).
     """
+    from avrisk.assembly import ScenarioSimulator, param_layout
+    from avrisk.cli.workflow import (
+        EXPECTED,
+        NAIVE_PART,
+        REFERENCE_PART,
+        comparison_parts,
+        method_label,
+        samples_directory,
+        write_run_report,
+    )
+
     with user_errors(*EXPECTED):
         single = (run_dir / "config.json").is_file()
         parts = [] if single else comparison_parts(run_dir)

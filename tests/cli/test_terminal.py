@@ -313,6 +313,8 @@ def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(
 
 
 LIGHT = [["--help"], ["scenarios"], ["scenarios", "show", "--help"]]
+LIGHT += [[name, "--help"] for name in ("run", "compare", "report", "simulate")]
+LIGHT += [[name, "--help"] for name in ("replay", "demo", "realism")]
 
 
 @pytest.mark.parametrize("args", LIGHT, ids=" ".join)
