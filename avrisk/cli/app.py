@@ -7,8 +7,8 @@ commands from their docstrings, read from the source.
 """
 
 import ast
-import importlib
 import importlib.util
+from importlib import import_module
 from pathlib import Path
 from typing import ClassVar
 
@@ -69,7 +69,7 @@ class LazyGroup(TyperGroup):
         if self._listing:
             return click.Command(name, help=docstring(module, function))
         with loading():
-            callback = getattr(importlib.import_module(module), function)
+            callback = getattr(import_module(module), function)
         return get_command_from_info(
             CommandInfo(name=name, callback=callback),
             pretty_exceptions_short=app.pretty_exceptions_short,
