@@ -233,10 +233,20 @@ class Registry:
             If ``name`` is not registered; the message lists the known names.
         """
         if name not in self._factories:
-            raise UnknownComponentError(
-                f"unknown {self.kind} {name!r}; known: {', '.join(self.names())}"
-            )
+            raise self._unknown(name)
         return self._factories[name][0]
+
+    def _unknown(self, name: str, *, also: str = "") -> UnknownComponentError:
+        """The error for an unregistered ``name``: the closest name, then all.
+
+        ``also`` is added after the known names (another form a name may take).
+        """
+        close = difflib.get_close_matches(name, self.names(), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        return UnknownComponentError(
+            f"unknown {self.kind} {name!r}{hint}; known: {', '.join(self.names())}"
+            f"{also}"
+        )
 
     def build(
         self,
@@ -288,9 +298,8 @@ class Registry:
         elif name in self._factories:
             factory, model = self._factories[name]
         else:
-            raise UnknownComponentError(
-                f"unknown {self.kind} {name!r}; known: {', '.join(self.names())} "
-                "(or an import path 'package.module:attribute')"
+            raise self._unknown(
+                name, also=" (or an import path 'package.module:attribute')"
             )
         params = params or {}
         context = _accepted(factory, context)
@@ -348,7 +357,11 @@ def _validate_params(
             where = ".".join(["params", *(str(p) for p in err["loc"])])
             msg = err["msg"].removeprefix("Value error, ")
             if err["type"] == "extra_forbidden":
-                msg = f"unknown; allowed: {', '.join(model.model_fields)}"
+                close = difflib.get_close_matches(
+                    str(err["loc"][-1]), model.model_fields, n=1
+                )
+                hint = f"did you mean {close[0]!r}? " if close else ""
+                msg = f"unknown; {hint}allowed: {', '.join(model.model_fields)}"
             elif not isinstance(err["input"], Mapping | list):
                 msg = f"{msg} (got {err['input']!r})"
             lines.append(f"{component}: {where}: {msg}")

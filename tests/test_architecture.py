@@ -28,9 +28,9 @@ import_graph = _load_import_graph()
 # subpackage -> the only avrisk subpackages (or top-level modules) it may import
 ALLOWED = {
     "tensors": set(),
-    "rare": {"registry"},
+    "rare": {"registry", "extras"},
     "sim": {"tensors", "registry"},
-    "agents": {"sim", "tensors", "registry"},
+    "agents": {"sim", "tensors", "registry", "extras"},
     "safety": {"sim", "tensors", "registry"},
     # the camera renderer implements the simulator's camera seam
     "render": {"sim", "tensors"},
@@ -51,7 +51,7 @@ ALLOWED = {
     "report": {"pipeline", "rare", "assembly", "scenario"},
     "testing": {"rare"},
     # the Gymnasium environment: a scenario built and stepped by hand
-    "gym": {"assembly", "agents", "scenario", "sim"},
+    "gym": {"assembly", "agents", "scenario", "sim", "extras"},
     # the realism report: learned drivers against held-out human data, in the
     # simulator; no estimator (the scenario layer gives it the xi prior)
     "realism": {

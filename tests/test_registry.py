@@ -37,7 +37,10 @@ def test_params_are_validated_by_the_component_and_errors_name_the_field():
         "ego policy 'constant': params.accel: Input should be a valid number, "
         "unable to parse string as a number (got 'fast')"
     )
-    with pytest.raises(ComponentError, match=r"params.acel: unknown; allowed: accel"):
+    with pytest.raises(
+        ComponentError,
+        match=r"params.acel: unknown; did you mean .accel.\? allowed: accel",
+    ):
         get_policy("constant", {"acel": 1.0})
     reg = _registry()
     assert reg.build("p_control", {"gain": 2}) == (2.0, 0.1)
@@ -76,6 +79,16 @@ def test_an_unknown_name_lists_the_known_ones():
         KeyError, match="constant, external, idm_mobil, lidar_imitation"
     ):
         get_policy("pilotnet")
+
+
+def test_a_misspelt_name_is_given_the_closest_registered_one():
+    with pytest.raises(UnknownComponentError) as info:
+        get_policy("idm_mobill")
+    assert str(info.value).startswith(
+        "unknown ego policy 'idm_mobill' (did you mean 'idm_mobil'?); known: "
+    )
+    with pytest.raises(UnknownComponentError, match=r"^unknown ego policy 'zz'; k"):
+        get_policy("zz")  # nothing close: no suggestion
 
 
 def test_registered_names_are_lowercase_identifiers_and_unique():

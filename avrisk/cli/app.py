@@ -1,22 +1,94 @@
 """The ``avrisk`` Typer application: every command, registered in one place.
 
 Command modules define plain functions and know nothing of this application.
+A command's module is imported only when that command runs or shows its own
+help (most import torch, which takes seconds): ``avrisk --help`` lists the
+commands from their docstrings, read from the source.
 """
 
-import typer
+import ast
+import importlib.util
+from importlib import import_module
+from pathlib import Path
+from typing import ClassVar
 
-from avrisk.cli.demo import demo
-from avrisk.cli.realism import realism_command
-from avrisk.cli.run import compare, report, run
-from avrisk.cli.scenarios import list_scenarios, show_scenario
-from avrisk.cli.serve_ego import serve_ego
-from avrisk.cli.simulate import replay, simulate
-from avrisk.cli.train_drivers import train_drivers_command
-from avrisk.cli.train_vision import train_vision_command
+import click
+import typer
+from typer.core import TyperGroup
+from typer.main import get_command_from_info
+from typer.models import CommandInfo
+
+from avrisk.cli import loading
 from avrisk.tensors.allocator import keep_freed_memory
+
+#: The commands in the order ``--help`` lists them, each as (module, function);
+#: ``scenarios`` follows (a group of its own).
+COMMANDS = {
+    "run": ("avrisk.cli.run", "run"),
+    "compare": ("avrisk.cli.run", "compare"),
+    "report": ("avrisk.cli.run", "report"),
+    "simulate": ("avrisk.cli.simulate", "simulate"),
+    "replay": ("avrisk.cli.simulate", "replay"),
+    "demo": ("avrisk.cli.demo", "demo"),
+    "train-drivers": ("avrisk.cli.train_drivers", "train_drivers_command"),
+    "train-vision": ("avrisk.cli.train_vision", "train_vision_command"),
+    "serve-ego": ("avrisk.cli.serve_ego", "serve_ego"),
+    "realism": ("avrisk.cli.realism", "realism_command"),
+}
+
+
+def docstring(module: str, function: str) -> str:
+    """The docstring of ``module.function``, read from the source, not imported."""
+    spec = importlib.util.find_spec(module)
+    assert spec is not None and spec.origin is not None, module
+    for node in ast.parse(Path(spec.origin).read_text()).body:
+        if isinstance(node, ast.FunctionDef) and node.name == function:
+            return ast.get_docstring(node) or ""
+    raise LookupError(f"{module} has no function {function}")
+
+
+class LazyGroup(TyperGroup):
+    """A group whose :attr:`lazy` commands are each imported when used.
+
+    Listing them (``--help``) builds a stand-in of each from its docstring;
+    running one, or its ``--help``, imports its module.
+    """
+
+    #: Command name -> (module, function), listed before any other command.
+    lazy: ClassVar[dict[str, tuple[str, str]]] = COMMANDS
+    _listing = False
+
+    def list_commands(self, ctx: click.Context) -> list[str]:  # noqa: D102
+        return [*self.lazy, *super().list_commands(ctx)]
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        """The command ``name``: a stand-in while listing, else the command itself."""
+        if name not in self.lazy:
+            return super().get_command(ctx, name)
+        module, function = self.lazy[name]
+        if self._listing:
+            return click.Command(name, help=docstring(module, function))
+        with loading():
+            callback = getattr(import_module(module), function)
+        return get_command_from_info(
+            CommandInfo(name=name, callback=callback),
+            pretty_exceptions_short=app.pretty_exceptions_short,
+            rich_markup_mode=self.rich_markup_mode,
+        )
+
+    def format_commands(  # noqa: D102
+        self, ctx: click.Context, formatter: click.HelpFormatter
+    ) -> None:
+        self._listing = True
+        try:
+            super().format_commands(ctx, formatter)
+        finally:
+            self._listing = False
+
 
 app = typer.Typer(
     name="avrisk",
+    cls=LazyGroup,
     help="Rare-event risk estimation for autonomous-vehicle policies.",
     no_args_is_help=True,
     add_completion=False,
@@ -48,14 +120,14 @@ def _root(
     keep_freed_memory()
 
 
-for command in (run, compare, report, simulate, replay, demo):
-    app.command()(command)
-app.command("train-drivers")(train_drivers_command)
-app.command("train-vision")(train_vision_command)
-app.command("serve-ego")(serve_ego)
-app.command("realism")(realism_command)
+class _ScenarioCommands(LazyGroup):
+    lazy: ClassVar[dict[str, tuple[str, str]]] = {
+        "show": ("avrisk.cli.scenarios", "show_scenario")
+    }
+
 
 scenarios = typer.Typer(
+    cls=_ScenarioCommands,
     help="The bundled scenarios: list them (no command), or show one.",
     invoke_without_command=True,
     rich_markup_mode=None,
@@ -66,8 +138,9 @@ scenarios = typer.Typer(
 def _scenarios(ctx: typer.Context) -> None:
     """List the bundled scenarios with their descriptions; 'show NAME' prints one."""
     if ctx.invoked_subcommand is None:
+        from avrisk.cli.scenarios import list_scenarios
+
         list_scenarios()
 
 
-scenarios.command("show")(show_scenario)
 app.add_typer(scenarios, name="scenarios")

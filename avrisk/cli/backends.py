@@ -12,15 +12,17 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 from enum import StrEnum
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from avrisk.assembly import ObjectiveFactory, SimulationObjective
 from avrisk.cli.common import CliError
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import ProcessPoolEvaluator
 from avrisk.rare.ray_evaluator import RayEvaluator
+
+if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
+    from avrisk.assembly import ObjectiveFactory, SimulationObjective
 
 
 class Backend(StrEnum):
@@ -71,6 +73,8 @@ def open_evaluator(
     if backend == Backend.local and workers is None:
         yield None
         return
+    from avrisk.assembly import ObjectiveFactory
+
     factory = ObjectiveFactory.of(objective, allow_import=True)
     evaluator: ProcessPoolEvaluator | RayEvaluator
     if backend == Backend.local:

@@ -30,8 +30,9 @@ class CliError(Exception):
     """A problem to report to the user in one sentence, without a traceback."""
 
 
-#: Warnings of an estimate's own diagnostics, raised once per threshold: the
-#: first of each kind is printed, the others are in the results' trust column.
+#: Warnings of an estimate's own diagnostics, raised at each run's main
+#: threshold (the others' are in the results' trust column): the first of each
+#: kind is printed, those of a comparison's other runs are in the table too.
 ONCE_PER_COMMAND = (UnreliableEstimateWarning, ZeroHitsWarning)
 
 
@@ -68,9 +69,9 @@ def user_errors(*expected: type[Exception]) -> Iterator[None]:
     """Turn expected failures into a red one-line message and exit code 2.
 
     Warnings raised meanwhile are printed as yellow lines instead of Python's
-    source-line format; of an estimate's diagnostics (zero or few effective
-    hits, a heavy tail), only the first of each kind (the results give each
-    threshold's trust).
+    source-line format; of an estimate's diagnostics at its main threshold
+    (zero or few effective hits, a heavy tail), only the first of each kind
+    (the results give each threshold's trust).
     """
     try:
         with warnings.catch_warnings():
@@ -225,7 +226,8 @@ def check_output_folder(path: Path, flag: str = "--out") -> None:
         raise CliError(
             f"{flag} {path}: {existing} is a file, so no folder can be made there"
         )
-    _check_writable(existing, path, flag)
+    made = "cannot write in" if existing == path else "cannot create that folder in"
+    _check_writable(existing, f"{flag} {path}: {made} {existing}")
 
 
 def check_output_file(path: Path, flag: str = "--out") -> None:
@@ -243,18 +245,26 @@ def check_output_file(path: Path, flag: str = "--out") -> None:
         raise CliError(
             f"{flag} {path}: folder {path.parent} does not exist; create it first"
         )
-    _check_writable(path.parent, path, flag)
+    _check_writable(path.parent, f"{flag} {path}: cannot write in {path.parent}")
 
 
-def _check_writable(folder: Path, path: Path, flag: str) -> None:
-    """Write a scratch file in ``folder``: the only sure test (root, read-only FS)."""
+def _check_writable(folder: Path, problem: str) -> None:
+    """Write a scratch file in ``folder``: the only sure test (root, read-only FS).
+
+    ``problem`` starts the error's line; the reason follows. A folder that
+    exists but answers "No such file or directory" (``/proc``) takes no new
+    files: said so, not that.
+    """
     try:
         with tempfile.TemporaryFile(dir=folder):
             pass
     except OSError as exc:
-        raise CliError(
-            f"{flag} {path}: cannot write in {folder}: {exc.strerror or exc}"
-        ) from None
+        reason = (
+            "it takes no new files"
+            if exc.errno == errno.ENOENT
+            else exc.strerror or str(exc)
+        )
+        raise CliError(f"{problem}: {reason}") from None
 
 
 #: Error numbers of a write that failed for want of room, anywhere.

@@ -28,7 +28,6 @@ from avrisk.cli.common import (
 )
 from avrisk.cli.progress import RichRunMonitor
 from avrisk.cli.tables import add_columns, compact_table
-from avrisk.cli.workflow import EXPECTED, compare_runs, settings
 from avrisk.rare import CrossEntropy, Estimate, cross_entropy, naive_mc
 from avrisk.rare.cross_entropy import CESettings
 from avrisk.testing import AnalyticProblem, beta_sum_problem, gaussian_linear_problem
@@ -170,6 +169,9 @@ def _scenario_part(
     about as precise in most seeds but far off, with too narrow an interval, in
     some.
     """
+    # the simulator (torch) is loaded here, not for the command's --help
+    from avrisk.cli.workflow import EXPECTED, compare_runs, settings
+
     method = settings(
         "splitting_is",
         gamma=0.1,

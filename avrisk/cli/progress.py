@@ -282,6 +282,11 @@ class RichRunMonitor:
 
     def __exit__(self, *exc: object) -> None:
         assert self._progress is not None
+        if exc[0] is None and self.started:
+            # A run that ends below its planned rollouts (levels that reach
+            # gamma sooner than the bound, a stopping rule) ends its bar full.
+            done = self.replayed + self.simulated
+            self._progress.update(self._task, total=done)
         self._progress.__exit__(*exc)  # type: ignore[arg-type]
         if exc[0] is None and self.replayed:
             self.console.print(

@@ -12,10 +12,14 @@ The estimators' settings are options by name: those with a flag (``--rho``,
 ``--n-iter`` ...) and any other through ``--set NAME=VALUE``; a setting the
 chosen estimator does not have is refused by name, with the methods that have
 it (``--rho`` is cross-entropy's).
+
+The simulator (torch) is imported by the commands' bodies, not by this module:
+``--help`` shows the estimators' settings without it.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
 from pathlib import Path
 from typing import Annotated, Any
@@ -23,7 +27,6 @@ from typing import Annotated, Any
 import typer
 import yaml
 
-from avrisk.assembly import ScenarioSimulator, SimulationObjective, param_layout
 from avrisk.cli.backends import Address, Backend, BackendOption, Workers, open_evaluator
 from avrisk.cli.common import (
     CliError,
@@ -34,21 +37,6 @@ from avrisk.cli.common import (
 )
 from avrisk.cli.readback import check_recorded, check_samples, read_config
 from avrisk.cli.results import ratio_rows, show_results
-from avrisk.cli.workflow import (
-    EXPECTED,
-    NAIVE_PART,
-    REFERENCE_PART,
-    check_thresholds,
-    compare_runs,
-    comparison_parts,
-    cost_meter,
-    execute,
-    method_label,
-    planned,
-    samples_directory,
-    settings,
-    write_run_report,
-)
 from avrisk.pipeline import RunSettings
 from avrisk.pipeline.store import SAMPLES_FILE
 from avrisk.rare import estimator_names
@@ -240,25 +228,53 @@ def foreign(method: str, names: list[str], flag_names: set[str]) -> str:
     Each is named as given (a flag of ``flag_names`` as ``--n-iter``) with
     the methods that have it, then the method's own settings: ``--rho: not a
     setting of method 'splitting_is', the default (--rho belongs to ce,
-    defensive, mixture: choose one with --method); its settings: ...``.
+    defensive, mixture: choose one with --method); its settings: ...``. A
+    name no method has is answered with the closest setting, the method's own
+    first: ``n_particle: ... (did you mean n_particles?)``.
     """
     shown = {n: f"--{n.replace('_', '-')}" if n in flag_names else n for n in names}
+    known = estimator_class(method).Settings.model_fields
     owners: dict[str, list[str]] = {}
+    misspelt = []
     for name in names:
-        methods = ", ".join(methods_with(name)) or "no method"
-        owners.setdefault(methods, []).append(shown[name])
+        methods = methods_with(name)
+        if methods:
+            owners.setdefault(", ".join(methods), []).append(shown[name])
+        else:
+            misspelt.append(_closest_setting(name, list(known)))
     whose = "; ".join(
         f"{', '.join(given)} {'belongs' if len(given) == 1 else 'belong'} to {methods}"
         for methods, given in owners.items()
     )
+    reasons = [f"{whose}: choose one with --method"] if owners else []
     default = ", the default" if method == DEFAULT_METHOD else ""
-    known = estimator_class(method).Settings.model_fields
     return (
         f"{', '.join(shown.values())}: not "
         f"{'a setting' if len(names) == 1 else 'settings'} of method "
-        f"{method!r}{default} ({whose}: choose one with --method); its settings: "
+        f"{method!r}{default} ({'; '.join(reasons + misspelt)}); its settings: "
         f"{', '.join(known)}"
     )
+
+
+def _closest_setting(name: str, own: list[str]) -> str:
+    """``"did you mean n_particles?"`` for a ``name`` no estimator has.
+
+    The closest of the method's ``own`` settings, else of every estimator's
+    (saying whose), else that no method has it.
+    """
+    close = difflib.get_close_matches(name, own, n=1)
+    if close:
+        return f"did you mean {close[0]}?"
+    every = {
+        s for m in estimator_names() for s in estimator_class(m).Settings.model_fields
+    }
+    close = difflib.get_close_matches(name, sorted(every), n=1)
+    if close:
+        return (
+            f"did you mean {close[0]}, a setting of "
+            f"{', '.join(methods_with(close[0]))}? choose one with --method"
+        )
+    return f"{name} is no method's setting"
 
 
 #: The options of ``run`` and ``compare`` that are estimator settings by name.
@@ -285,6 +301,8 @@ def _run_settings(
     **stopping: Any,
 ) -> RunSettings:
     """Run settings from a command's options; ``flags``: the estimator flags."""
+    from avrisk.cli.workflow import settings
+
     return settings(
         method,
         gamma=_threshold(gamma),
@@ -341,6 +359,17 @@ def run(
     back and its report rebuilt. The run ends at its planned size or at the
     first stopping rule given, and says which.
     """
+    from avrisk.assembly import SimulationObjective
+    from avrisk.cli.workflow import (
+        EXPECTED,
+        check_thresholds,
+        cost_meter,
+        execute,
+        method_label,
+        planned,
+        write_run_report,
+    )
+
     with user_errors(*EXPECTED), resumable(ctx):
         check_output_folder(out)
         spec = load_spec(scenario)
@@ -427,6 +456,8 @@ def compare(
     2,000 + 10,000; a reference of 50,000) take minutes; the plan's cost is
     printed before the first rollout.
     """
+    from avrisk.cli.workflow import EXPECTED, compare_runs
+
     with user_errors(*EXPECTED), resumable(ctx):
         check_output_folder(out)
         tested = _run_settings(
@@ -481,6 +512,17 @@ def report(
     Failures are animated from the traces recorded during the run; the run
     directory alone suffices (it never makes avrisk import code).
     """
+    from avrisk.assembly import ScenarioSimulator, param_layout
+    from avrisk.cli.workflow import (
+        EXPECTED,
+        NAIVE_PART,
+        REFERENCE_PART,
+        comparison_parts,
+        method_label,
+        samples_directory,
+        write_run_report,
+    )
+
     with user_errors(*EXPECTED):
         single = (run_dir / "config.json").is_file()
         parts = [] if single else comparison_parts(run_dir)

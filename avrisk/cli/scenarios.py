@@ -52,11 +52,13 @@ def list_scenarios() -> None:
             Padding(escape(" ".join((spec.description or "").split())), (0, 0, 1, 4)),
             highlight=False,
         )
+    # The folder on a line of its own, whole (to copy), however long.
     err_console.print(
-        f"bundled in {escape(str(bundled_folder()))}; start your own with: avrisk "
-        "scenarios show NAME --write my_scenario.yaml",
+        f"bundled in {escape(str(bundled_folder()))}", highlight=False, soft_wrap=True
+    )
+    err_console.print(
+        "start your own with: avrisk scenarios show NAME --write my_scenario.yaml",
         highlight=False,
-        soft_wrap=True,
     )
 
 

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from contextlib import suppress
 from typing import Annotated
 
 import typer
 
 from avrisk.agents.external.params import DEFAULT_ADDRESS, is_loopback
+from avrisk.cli.common import user_errors
+from avrisk.extras import MissingExtraError
 
 
 def serve_ego(
@@ -28,12 +31,13 @@ def serve_ego(
     until interrupted; test it with a scenario whose ego is
     {policy: external, params: {address: ADDRESS}}.
     """
-    from avrisk.agents.external.server import AccController, EgoServer, serve
-
     if not remote and not is_loopback(address):
         raise typer.BadParameter(f"{address} is not loopback; add --remote to allow")
-    server = EgoServer(AccController(speed=speed, noise=noise))
-    try:
-        serve(server, address, ready=lambda a: typer.echo(f"serving the ego at {a}"))
-    except KeyboardInterrupt:
-        pass
+    with user_errors(MissingExtraError):
+        from avrisk.agents.external.server import AccController, EgoServer, serve
+
+        server = EgoServer(AccController(speed=speed, noise=noise))
+        with suppress(KeyboardInterrupt):
+            serve(
+                server, address, ready=lambda a: typer.echo(f"serving the ego at {a}")
+            )

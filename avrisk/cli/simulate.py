@@ -13,6 +13,9 @@ The resolved scenario spec travels in the file's schema metadata, so
 run directory (or its ``samples.parquet``) too, whose spec is its
 ``config.json``. A spec read back from a file never makes avrisk import code:
 one that names user code by import path must be given again (``--scenario``).
+
+The simulator (torch) is imported where it runs, not by this module: ``--help``
+starts without it.
 """
 
 from __future__ import annotations
@@ -38,12 +41,6 @@ from rich.progress import (
 from rich.table import Table
 
 import avrisk
-from avrisk.assembly import (
-    ScenarioSimulator,
-    SimulationObjective,
-    base_distribution,
-    param_layout,
-)
 from avrisk.cli.common import (
     CliError,
     Device,
@@ -63,6 +60,7 @@ from avrisk.cli.readback import (
     stored_params,
 )
 from avrisk.cli.tables import add_columns, compact_table
+from avrisk.extras import MissingExtraError
 from avrisk.pipeline.files import write_parquet_atomic
 from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE, RunDirectory, samples_table
@@ -137,6 +135,8 @@ def simulate_rollouts(
     -------
     SimulationRun
     """
+    from avrisk.assembly import SimulationObjective, base_distribution
+
     objective = SimulationObjective(spec, device=device)
     p0 = base_distribution(spec)
     problem = RareEventProblem(p0, objective, gamma=0.0, batch_size=batch_size)
@@ -257,7 +257,7 @@ def simulate(
     ] = None,
 ) -> None:
     """Sample scenarios from P0, simulate them, write one Parquet row per rollout."""
-    with user_errors(ScenarioSpecError):
+    with user_errors(ScenarioSpecError, ComponentError, MissingExtraError):
         spec = load_spec(scenario)
         out = _out_path(out, DEFAULT_ROLLOUTS, (".parquet", ".pq"))
         if threads is not None:
@@ -340,10 +340,17 @@ def replay(
     ] = None,
 ) -> None:
     """Re-simulate chosen rows of a samples table and write a top-down GIF."""
-    from avrisk.assembly import resimulate
+    from avrisk.assembly import (
+        ScenarioSimulator,
+        base_distribution,
+        param_layout,
+        resimulate,
+    )
     from avrisk.report.animate import animate_rollouts, save_frame_png
 
-    with user_errors(ScenarioSpecError, ComponentError, RegenerationError):
+    with user_errors(
+        ScenarioSpecError, ComponentError, MissingExtraError, RegenerationError
+    ):
         if file.is_dir() and not (file / SAMPLES_FILE).is_file():
             parts = sorted(p.parent.name for p in file.glob(f"*/{SAMPLES_FILE}"))
             hint = f"; a comparison: give one of its runs, e.g. {file / parts[0]}"

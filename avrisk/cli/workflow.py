@@ -30,6 +30,7 @@ from avrisk.cli.common import CliError, err_console, write_failures
 from avrisk.cli.progress import CostMeter, PlannedRun, RichRunMonitor
 from avrisk.cli.readback import check_recorded
 from avrisk.cli.results import ratio_rows, show_results
+from avrisk.extras import MissingExtraError
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
 from avrisk.pipeline.provenance import (
     ProvenanceMismatchError,
@@ -44,6 +45,7 @@ from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import WorkerError
 from avrisk.rare.splitting import SplittingError
+from avrisk.registry import ComponentError
 from avrisk.report.animate import animate_rollouts, animate_samples
 from avrisk.report.camera_video import animate_camera_rollout
 from avrisk.report.html import write_report
@@ -52,6 +54,8 @@ from avrisk.scenario import ScenarioSpec, ScenarioSpecError, load_spec
 #: Failures reported as one red line (no traceback).
 EXPECTED = (
     ScenarioSpecError,
+    ComponentError,
+    MissingExtraError,
     RunDirectoryError,
     RegenerationError,
     InvalidOutputError,

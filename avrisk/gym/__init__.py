@@ -10,10 +10,14 @@ Importing this package registers ``avrisk/Highway-v0``::
     # each row a Highway-v0 of its own (seed + i; next-step autoreset)
 
 (``gymnasium.make("avrisk.gym:avrisk/Highway-v0")`` imports it itself.) See
-:mod:`avrisk.gym.env` for the spaces, reward and ``info``.
+:mod:`avrisk.gym.env` for the spaces, reward and ``info``. Without the extra,
+importing it is an ImportError that says ``pip install 'avrisk[gymnasium]'``.
 """
 
-import gymnasium
+from avrisk.extras import needs_extra
+
+with needs_extra("gymnasium", "avrisk.gym"):
+    import gymnasium
 
 from avrisk.gym.env import (
     OBSERVATION_FIELDS,

@@ -15,6 +15,7 @@ such a stamp::
 from __future__ import annotations
 
 import subprocess
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -36,36 +37,54 @@ class ProvenanceMismatchError(ValueError):
 
 
 def code_version() -> dict[str, Any]:
-    """The version of avrisk, and its git commit when run from a checkout.
+    """The version of avrisk, and its git commit when run from an avrisk checkout.
 
     Returns
     -------
     dict
         ``avrisk`` (version), ``git_commit`` (hex or None), ``git_dirty``
         (uncommitted changes to tracked files; None outside a checkout).
+        The commit is avrisk's only where the package's folder is the top of
+        a git work tree whose ``pyproject.toml`` names avrisk: a package
+        installed in a virtual environment inside a user's repository is not
+        stamped with the user's commit.
     """
     root = Path(avrisk.__file__).resolve().parents[1]
-
-    def git(*args: str) -> str | None:
-        try:
-            done = subprocess.run(
-                ["git", "-C", str(root), *args],
-                capture_output=True,
-                text=True,
-                timeout=10,
-                check=True,
-            )
-        except (OSError, subprocess.SubprocessError):
-            return None
-        return done.stdout.strip()
-
-    commit = git("rev-parse", "HEAD")
-    dirty = git("status", "--porcelain", "--untracked-files=no")
+    top = _git(root, "rev-parse", "--show-toplevel")
+    checkout = top is not None and Path(top).resolve() == root and _names_avrisk(root)
+    commit = _git(root, "rev-parse", "HEAD") if checkout else None
+    dirty = (
+        _git(root, "status", "--porcelain", "--untracked-files=no") if commit else None
+    )
     return {
         "avrisk": avrisk.__version__,
         "git_commit": commit,
         "git_dirty": None if commit is None or dirty is None else bool(dirty),
     }
+
+
+def _git(root: Path, *args: str) -> str | None:
+    """The output of ``git -C root ARGS``, or None where it fails (no git, no repo)."""
+    try:
+        done = subprocess.run(
+            ["git", "-C", str(root), *args],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.strip()
+
+
+def _names_avrisk(root: Path) -> bool:
+    """Whether ``root/pyproject.toml`` is avrisk's own (``[project] name``)."""
+    try:
+        project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, KeyError):
+        return False
+    return isinstance(project, dict) and project.get("name") == "avrisk"
 
 
 def stamp(defines_p: dict[str, Any], computed_with: dict[str, Any]) -> dict[str, Any]:

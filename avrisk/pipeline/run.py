@@ -251,6 +251,7 @@ def run_estimation(
         holds a different run.
     """
     created = not run_dir.path.exists()
+    run_dir.refuse_foreign()  # before the lock: a user's folder is left as it was
     with run_lock(run_dir.path):
         try:
             monitor = monitor or SilentMonitor()
@@ -322,9 +323,15 @@ def _estimate(
         monitor.advance(len(batch.values), replayed=False)
 
     def cache(stage: int, chunk: int) -> StageBatch | None:
+        """A recorded chunk to replay; None for one with failed rollouts.
+
+        Such a chunk is evaluated again (:func:`~avrisk.rare.stages.run_stage`):
+        it is counted once, as simulated, not also as replayed.
+        """
         batch = run_dir.cached(stage, chunk)
-        if batch is not None:
-            monitor.advance(len(batch.values), replayed=True)
+        if batch is None or batch.failed.any():
+            return None
+        monitor.advance(len(batch.values), replayed=True)
         return batch
 
     infos: list[Any] = []

@@ -157,10 +157,13 @@ class RunDirectory:
         Raises
         ------
         RunDirectoryError
-            If the directory holds a different run, or other files.
+            If the directory holds a different run, or other files
+            (:meth:`refuse_foreign`), or an unfinished run whose ``chunks/``
+            folder (what it recorded) is gone.
         """
         config = json.loads(json.dumps(config))  # normalise tuples, keys
         config_path = self.path / CONFIG_FILE
+        self.refuse_foreign()
         if config_path.is_file():
             previous = json.loads(config_path.read_text())
             config = {k: v for k, v in config.items() if k in previous}
@@ -171,16 +174,37 @@ class RunDirectory:
                     f"{', '.join(changed)}); choose another output directory "
                     "or delete this one"
                 )
+            if not self.is_complete and not (self.path / CHUNKS_DIR).is_dir():
+                raise RunDirectoryError(
+                    f"{self.path} holds an unfinished run whose {CHUNKS_DIR}/ folder, "
+                    "what it recorded, is missing: restore that folder, or delete "
+                    f"{self.path} to run it anew"
+                )
+            return
+        (self.path / CHUNKS_DIR).mkdir(parents=True, exist_ok=True)
+        self._manifest.create()  # before config.json: a new run is always verified
+        write_json(config_path, config)
+
+    def refuse_foreign(self) -> None:
+        """Refuse an existing directory that holds files but no avrisk run.
+
+        A run checks this before it takes the directory's lock, so that a
+        folder of the user's is left exactly as it was found (no lock file).
+
+        Raises
+        ------
+        RunDirectoryError
+            If the directory has files besides the lock and the manifest and
+            no ``config.json``.
+        """
+        if not self.path.is_dir() or (self.path / CONFIG_FILE).is_file():
             return
         ours = (LOCK_FILE, MANIFEST_FILE)
-        if self.path.exists() and any(p.name not in ours for p in self.path.iterdir()):
+        if any(p.name not in ours for p in self.path.iterdir()):
             raise RunDirectoryError(
                 f"{self.path} exists and is not an avrisk run directory "
                 f"(no {CONFIG_FILE}); choose an empty or new directory"
             )
-        (self.path / CHUNKS_DIR).mkdir(parents=True, exist_ok=True)
-        self._manifest.create()  # before config.json: a new run is always verified
-        write_json(config_path, config)
 
     @property
     def is_complete(self) -> bool:

@@ -166,56 +166,62 @@ def importance_estimates(
     """Importance sampling: ``mean(w 1{f <= g})``, its standard error, a normal CI.
 
     With zero hits the data bound nothing better than ``p <= 1`` (the weights of
-    unseen events are unknown), so that is the interval reported, with a warning.
-    Few effective hits and a heavy tail of the hits' weights are warned about
-    too; each warning ends with the remedy ``advice`` gives.
+    unseen events are unknown), so that is the interval reported. Zero hits,
+    few effective hits and a heavy tail of the hits' weights are warned about
+    at the first threshold, the run's ``gamma``
+    (:attr:`~avrisk.rare.problem.RareEventProblem.thresholds`), each warning
+    ending with the remedy ``advice`` gives: the proposal was made for that
+    threshold. The other thresholds' diagnostics are in their estimates
+    (``n_hits``, ``ess``, ``pareto_k``), for a table, not warnings.
     """
     out = {}
     for g in thresholds:
         hits = values <= g
         k = int(np.count_nonzero(hits))
         p, se = weighted_mean_and_stderr(log_w, hits)
-        if k == 0:
-            warnings.warn(
-                f"no sample of the final stage reached f <= {g:g}; the estimate is 0 "
-                f"with the uninformative interval (0, 1): {advice.no_hit}",
-                ZeroHitsWarning,
-                stacklevel=3,
-            )
-            ci = (0.0, 1.0)
-        else:
-            ci = normal_interval(p, se, CONFIDENCE)
-        ess = kish_ess(log_w[hits])
-        tail = pareto_tail_index(log_w[hits])
-        if 0 < k and ess < MIN_RELIABLE_ESS:
-            warnings.warn(
-                f"f <= {g:g}: {k} hits but an effective number of only {ess:.1f}; "
-                "a few weights dominate and the standard error is unreliable "
-                f"({advice.degenerate})",
-                UnreliableEstimateWarning,
-                stacklevel=3,
-            )
-        elif tail > MAX_RELIABLE_PARETO_K:
-            warnings.warn(
-                f"f <= {g:g}: the hits' weights have a heavy tail (Pareto k = "
-                f"{tail:.2f} > {MAX_RELIABLE_PARETO_K}); the standard error is "
-                f"unreliable, likely too small ({advice.heavy_tail})",
-                UnreliableEstimateWarning,
-                stacklevel=3,
-            )
         out[g] = GammaEstimate(
             gamma=g,
             p=p,
             stderr=se,
-            ci=ci,
+            ci=normal_interval(p, se, CONFIDENCE) if k else (0.0, 1.0),
             n_hits=k,
-            ess=ess,
+            ess=kish_ess(log_w[hits]),
             n_samples=values.size,
             confidence=CONFIDENCE,
-            pareto_k=tail,
+            pareto_k=pareto_tail_index(log_w[hits]),
             interval=INTERVAL_NAMES["normal" if k else "uninformative"],
         )
+    if thresholds:
+        _warn_if_unreliable(out[thresholds[0]], advice)
     return out
+
+
+def _warn_if_unreliable(est: GammaEstimate, advice: Advice) -> None:
+    """Warn of zero hits, few effective hits or a heavy tail of weights in ``est``."""
+    g, k, ess, tail = est.gamma, est.n_hits, est.ess, est.pareto_k
+    if k == 0:
+        warnings.warn(
+            f"no sample of the final stage reached f <= {g:g}; the estimate is 0 "
+            f"with the uninformative interval (0, 1): {advice.no_hit}",
+            ZeroHitsWarning,
+            stacklevel=4,
+        )
+    elif ess < MIN_RELIABLE_ESS:
+        warnings.warn(
+            f"f <= {g:g}: {k} hits but an effective number of only {ess:.1f}; "
+            "a few weights dominate and the standard error is unreliable "
+            f"({advice.degenerate})",
+            UnreliableEstimateWarning,
+            stacklevel=4,
+        )
+    elif tail > MAX_RELIABLE_PARETO_K:
+        warnings.warn(
+            f"f <= {g:g}: the hits' weights have a heavy tail (Pareto k = "
+            f"{tail:.2f} > {MAX_RELIABLE_PARETO_K}); the standard error is "
+            f"unreliable, likely too small ({advice.heavy_tail})",
+            UnreliableEstimateWarning,
+            stacklevel=4,
+        )
 
 
 def weighted_stage_estimates(

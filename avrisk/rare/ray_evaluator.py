@@ -17,6 +17,7 @@ from collections.abc import Iterable, Iterator
 from concurrent.futures import Future
 from typing import Any
 
+from avrisk.extras import needs_extra
 from avrisk.rare.evaluation import EvalResult, EvalTask
 from avrisk.rare.parallel import (
     Factory,
@@ -42,12 +43,8 @@ def import_ray(loopback_only: bool = False) -> Any:
     """
     if loopback_only:
         os.environ.update(LOOPBACK_ONLY)
-    try:
+    with needs_extra("ray", "the ray backend"):
         import ray
-    except ImportError:
-        raise ImportError(
-            "the ray backend needs Ray: pip install 'avrisk[ray]'"
-        ) from None
     return ray
 
 

@@ -102,3 +102,25 @@ def test_the_protocol_page_describes_the_handshake_avrisk_sends():
     codes = set(re.findall(r'`"(\w\d)"` \w', page.split("## Arrays")[1]))
     assert codes == set(DTYPES)
     assert f"{_REPLY_OVERHEAD // 1024} KiB + 32 bytes per rollout" in page
+
+
+def test_the_protocol_page_tables_the_params_and_the_action_limits():
+    """Each param of ExternalParams with its default; the simulator's clip limits."""
+    import re
+    from pathlib import Path
+
+    import yaml
+
+    from avrisk.sim.simulator import SimConfig
+
+    page = (Path(__file__).parents[2] / "docs" / "ego-protocol.md").read_text()
+    section = page.split("## The scenario's params")[1].split("\n## ")[0]
+    rows = re.findall(r"^\| `(\w+)` \| `([^`]+)`", section, flags=re.M)
+    assert {name: yaml.safe_load(default) for name, default in rows} == {
+        name: field.default for name, field in ExternalParams.model_fields.items()
+    }
+    limits = SimConfig()
+    accel = f"`accel` to [{limits.accel_min:g}, {limits.accel_max:g}] m/s^2"
+    steer = f"`steer` to [{-limits.max_steer:g}, {limits.max_steer:g}] rad"
+    text = " ".join(page.split())
+    assert accel in text and steer in text

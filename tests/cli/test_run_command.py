@@ -158,6 +158,14 @@ def test_every_registered_method_is_offered_and_foreign_settings_refused(tmp_pat
         "error: n_particles: not a setting of method 'ce' (n_particles belongs to "
         "splitting, splitting_is: choose one with --method)"
     ) in " ".join(by_name.output.split())
+    # a name no method has: the closest setting, the method's own first
+    for given, hint in [
+        ("n_particle=1000", "(did you mean n_particles?)"),
+        ("n_iters=3", "(did you mean n_iter, a setting of ce, defensive, mixture? "),
+        ("zzz=1", "(zzz is no method's setting)"),
+    ]:
+        misspelt = invoke("run", "highway_idm", "--out", out, "--set", given)
+        assert misspelt.exit_code == 2 and hint in " ".join(misspelt.output.split())
     unknown = invoke("run", "highway_idm", "--out", out, "--method", "splitz")
     assert unknown.exit_code == 2 and "method must be one of" in unknown.output
     bad_set = invoke("run", "highway_idm", "--out", out, "--set", "rho")

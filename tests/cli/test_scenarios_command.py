@@ -4,7 +4,12 @@ import yaml
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
-from avrisk.scenario import bundled_scenario_text, bundled_scenarios, load_spec
+from avrisk.scenario import (
+    bundled_folder,
+    bundled_scenario_text,
+    bundled_scenarios,
+    load_spec,
+)
 
 
 def invoke(*args):
@@ -37,6 +42,8 @@ def test_scenarios_lists_every_bundled_scenario_with_its_whole_description():
     for name in bundled_scenarios():  # each description whole, wrapped
         assert " ".join(load_spec(name).description.split()) in text
     assert "avrisk/data/scenarios" in result.stderr  # where they live
+    where = f"bundled in {bundled_folder()}"  # whole, to copy, however long
+    assert all(len(ln) <= 80 or ln == where for ln in result.stderr.splitlines())
 
 
 def test_show_prints_a_scenario_and_write_makes_a_starting_file(tmp_path):

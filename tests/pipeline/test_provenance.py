@@ -1,7 +1,11 @@
 """Provenance stamps: results of different probabilities are never paired."""
 
+import shutil
+import subprocess
+
 import pytest
 
+import avrisk
 from avrisk.fingerprint import sha256_json
 from avrisk.pipeline.provenance import (
     ProvenanceMismatchError,
@@ -35,3 +39,42 @@ def test_other_computations_of_the_same_p_are_shown_not_refused():
         "the reference run was computed with device = 'cuda:0' (this run: 'cpu')"
     ]
     assert "no provenance stamp" in check_same_definition(mine, None, "it")[0]
+
+
+def _repository(folder, pyproject):
+    """A git repository at ``folder`` with one commit; its HEAD."""
+    folder.mkdir(parents=True, exist_ok=True)
+    if pyproject is not None:
+        (folder / "pyproject.toml").write_text(pyproject)
+    git = ["git", "-C", str(folder), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run([*git, "init", "-q"], check=True)
+    subprocess.run([*git, "commit", "-q", "--allow-empty", "-m", "x"], check=True)
+    done = subprocess.run([*git, "rev-parse", "HEAD"], check=True, capture_output=True)
+    return done.stdout.decode().strip()
+
+
+def _installed_at(monkeypatch, package):
+    package.mkdir(parents=True, exist_ok=True)
+    (package / "__init__.py").write_text("")
+    monkeypatch.setattr(avrisk, "__file__", str(package / "__init__.py"))
+
+
+@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
+def test_only_an_avrisk_checkout_stamps_its_git_commit(tmp_path, monkeypatch):
+    ours = _repository(tmp_path / "checkout", '[project]\nname = "avrisk"\n')
+    _installed_at(monkeypatch, tmp_path / "checkout" / "avrisk")
+    assert code_version()["git_commit"] == ours
+    # installed in a virtual environment inside the user's repository
+    _repository(tmp_path / "user", '[project]\nname = "mine"\n')
+    site = tmp_path / "user" / ".venv" / "lib" / "site-packages"
+    _installed_at(monkeypatch, site / "avrisk")
+    assert code_version() == {
+        "avrisk": avrisk.__version__,
+        "git_commit": None,
+        "git_dirty": None,
+    }
+    # a package at the top of a repository that is not avrisk's
+    _installed_at(monkeypatch, tmp_path / "user" / "avrisk")
+    assert code_version()["git_commit"] is None
+    (tmp_path / "user" / "pyproject.toml").write_text("[project\nname = ")
+    assert code_version()["git_commit"] is None  # unreadable: not avrisk's

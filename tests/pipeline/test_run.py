@@ -105,10 +105,12 @@ def test_a_directory_holding_a_different_run_is_refused_by_name(tmp_path):
         run(tmp_path / "run", settings=other)
 
 
-def test_a_non_run_directory_with_files_is_refused(tmp_path):
+def test_a_non_run_directory_with_files_is_refused_and_left_as_found(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(RunDirectoryError, match="not an avrisk run directory"):
         run(tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]  # no .lock
+    assert (tmp_path / "notes.txt").read_text() == "mine"
 
 
 def test_nan_before_anything_is_recorded_leaves_no_directory(tmp_path):
@@ -311,6 +313,50 @@ def test_failed_rollouts_bracket_p_and_are_evaluated_again_on_rerun(tmp_path):
     assert 0 < sum(calls) == to_redo < 30_000  # only chunks holding failures
     assert again["estimate"]["by_gamma"][0]["n_failed"] == 0
     assert again["estimate"]["by_gamma"][0]["p"] == clean["p"]
+
+
+class Counting:
+    """A monitor that adds up the rollouts it is told of, replayed and simulated."""
+
+    def __init__(self):
+        self.total, self.replayed, self.simulated = 0, 0, 0
+
+    def start(self, total, description):
+        self.total = total
+
+    def advance(self, n, *, replayed):
+        if replayed:
+            self.replayed += n
+        else:
+            self.simulated += n
+
+    def status(self, text):
+        pass
+
+    def disk(self, row_bytes, *, full):
+        pass
+
+
+def test_a_rerun_counts_each_rollout_once_replayed_or_simulated_again(tmp_path):
+    naive = RunSettings("naive", gamma=0.0, gamma_test=(0.5,), n_final=30_000, seed=1)
+    path = tmp_path / "run"
+    run(path, settings=naive, f=flaky(lambda x: x[:, 0] > 3.7))
+    chunk = pq.read_table(path / "samples.parquet", columns=["chunk", "status"])
+    failed_chunks = chunk["chunk"].to_numpy()[chunk["status"].to_numpy() != 0]
+    to_redo = int(np.isin(chunk["chunk"].to_numpy(), failed_chunks).sum())
+    monitor = Counting()
+    again = run_estimation(
+        RunDirectory(path, NAMES),
+        PROBLEM.base,
+        flaky(lambda x: x[:, 0] > 99),
+        naive,
+        context={"scenario": {"name": "gaussian"}},
+        monitor=monitor,
+    )
+    # a chunk holding failed rollouts is simulated again, not also replayed
+    assert 0 < monitor.simulated == to_redo
+    assert monitor.replayed + monitor.simulated == monitor.total == 30_000
+    assert again["timing"]["rollouts_replayed"] == monitor.replayed
 
 
 def test_too_many_failures_stop_the_run_with_a_clear_message(tmp_path):

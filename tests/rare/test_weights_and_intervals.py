@@ -167,6 +167,22 @@ def test_the_warnings_give_the_remedies_of_the_estimator_that_made_the_stage():
     assert NEUTRAL_ADVICE.degenerate in text and "n_per_iter" not in text
 
 
+def test_only_the_main_threshold_is_warned_about_the_others_carry_it():
+    values = np.random.default_rng(5).uniform(size=1000)
+    values[0] = -2.0  # the one hit below -1.5: an effective number of 1
+    log_w = np.zeros(1000)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # gamma 0.5 is sound: no warning at all
+        quiet = importance_estimates(values, log_w, (0.5, -1.5, -3.0))
+    assert quiet[-1.5].n_hits == 1 and quiet[-1.5].ess == 1.0
+    assert quiet[-3.0].n_hits == 0 and quiet[-3.0].ci == (0.0, 1.0)
+    with pytest.warns(UnreliableEstimateWarning) as caught:
+        loud = importance_estimates(values, log_w, (-1.5, -3.0, 0.5))
+    (text,) = [str(w.message) for w in caught]  # -3.0's zero hits: not warned
+    assert text.startswith("f <= -1.5: 1 hits but an effective number of only 1.0")
+    assert loud == quiet
+
+
 @pytest.mark.parametrize(
     ("method", "settings", "words"),
     [

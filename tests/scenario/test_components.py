@@ -77,7 +77,10 @@ def test_a_registered_component_checks_its_params_when_built_not_when_parsed():
     with pytest.raises(ComponentError, match=r"'constant': params.x: unknown"):
         get_policy(spec.ego.policy, spec.ego.params)
     spec = spec_from_dict(_minimal(ego={"policy": "pilotnet"}))
-    with pytest.raises(ComponentError, match="unknown ego policy 'pilotnet'; known"):
+    with pytest.raises(
+        ComponentError,
+        match=r"ego policy 'pilotnet' \(did you mean 'vision_pilotnet'\?\); known",
+    ):
         get_policy(spec.ego.policy, spec.ego.params)
 
 

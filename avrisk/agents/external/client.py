@@ -36,6 +36,7 @@ from avrisk.agents.external.protocol import (
 )
 from avrisk.agents.external.spaces import hello_message, observation_arrays
 from avrisk.agents.policy import ego_only
+from avrisk.extras import needs_extra
 from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
@@ -63,13 +64,8 @@ class _Link:
     """One REQ socket to the AV, closed and opened again after a timeout."""
 
     def __init__(self, address: str, timeout_s: float, max_bytes: int) -> None:
-        try:
+        with needs_extra("external", "the external ego"):
             import zmq
-        except ImportError as err:  # the optional extra
-            raise ImportError(
-                "the external ego needs pyzmq and msgpack: "
-                "pip install 'avrisk[external]'"
-            ) from err
         self._zmq = zmq
         self._context = zmq.Context.instance()
         self.address = address

@@ -15,10 +15,13 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-import msgpack
 import numpy as np
 
 from avrisk.agents.external.params import DEFAULT_MAX_MESSAGE_BYTES
+from avrisk.extras import needs_extra
+
+with needs_extra("external", "the external ego"):
+    import msgpack
 
 __all__ = [
     "DEFAULT_MAX_MESSAGE_BYTES",

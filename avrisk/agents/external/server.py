@@ -30,6 +30,7 @@ from avrisk.agents.external.protocol import (
     unpack_array,
 )
 from avrisk.agents.external.spaces import hello_message, observation_arrays
+from avrisk.extras import needs_extra
 from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
@@ -267,7 +268,8 @@ def serve(
 
     ``ready``, if given, is called once the socket is bound (e.g. to print it).
     """
-    import zmq
+    with needs_extra("external", "the external ego"):
+        import zmq
 
     context = zmq.Context.instance()
     socket = context.socket(zmq.REP)
