@@ -39,8 +39,8 @@ not a crash of the sweep.
   that finished;
 * mean calls of ``f``;
 * gross misses: the interval misses ``p`` and the estimate is off by more than
-  2 times either way; with how many of those the trust rule
-  (``avrisk.report.answer.run_trust``, the CLI's) labelled ``ok``;
+  2 times either way; with how many of those the engine's trust rule
+  (``avrisk.rare.trust.estimate_trust``, the CLI's) labelled ``ok``;
 * the share of covering runs labelled ``caution`` (a label that cries wolf),
   bound-only answers left out of it;
 * bound-only answers (no hit: the interval is an upper bound), apart.
@@ -133,16 +133,22 @@ class _Counted:
 
 
 def _run_engine(problem: Any, method: str, seed: int, settings: dict) -> dict:
-    from avrisk.rare.estimator import EstimationContext, get_estimator, run_estimator
+    from avrisk.rare.estimator import (
+        EstimationContext,
+        estimator_class,
+        get_estimator,
+        run_estimator,
+    )
     from avrisk.rare.problem import RareEventProblem
-    from avrisk.report.answer import run_trust
+    from avrisk.rare.trust import estimate_trust
 
     f = _Counted(problem.f)
     estimator = get_estimator(method, **settings)
     rare = RareEventProblem(problem.base, f, problem.gamma)
     estimate = run_estimator(estimator, rare, EstimationContext(seed=seed))
-    summary = {"method": method, "estimate": estimate.to_dict()}
-    trust = run_trust(summary)
+    as_dict = estimate.to_dict()
+    main_dict = next(g for g in as_dict["by_gamma"] if g["gamma"] == estimate.gamma)
+    trust = estimate_trust(estimator_class(method), as_dict, main_dict)
     main = estimate.main
     return {
         "p": estimate.p,
