@@ -712,22 +712,37 @@ class SplittingImportanceSampling(SubsetSimulation):
 
     @staticmethod
     def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
-        """Replicates whose own estimates of ``p`` disagree (*Replicates*).
+        """Replicates that disagree, or importance sampling against the levels.
 
         Few particles at a level do not bias the importance-sampling stage
-        (its weights' diagnostics speak for it); replicates that ended in
+        (its weights' diagnostics speak for it). But replicates that ended in
         different places say a failure region may be missing from the
-        proposal.
+        proposal (*Replicates*); and an importance-sampling estimate far from
+        the levels' own estimate of the same run, beyond both their errors,
+        says the proposal misses where the particles were (a shift fitted on
+        too few coordinates, a region dropped), which its weights alone may
+        not show.
         """
         details = estimate.get("details") or {}
-        if not details.get("replicates_disagree"):
-            return ()
-        own = ", ".join(f"{r['p']:.2g}" for r in details["replicates"])
-        return (
-            f"independent replicates of the search found p = {own}, further "
-            "apart than their errors allow: the search may miss a failure region "
-            "(compare runs with other seeds, or raise n_particles)",
+        reasons = []
+        if details.get("replicates_disagree"):
+            own = ", ".join(f"{r['p']:.2g}" for r in details["replicates"])
+            reasons.append(
+                f"independent replicates of the search found p = {own}, further "
+                "apart than their errors allow: the search may miss a failure "
+                "region (compare runs with other seeds, or raise n_particles)"
+            )
+        main = next(
+            (g for g in estimate.get("by_gamma", ()) if g["gamma"] == gamma), None
         )
+        levels = (details.get("splitting") or {}).get(str(gamma))
+        if main and levels and estimates_disagree(main, levels):
+            reasons.append(
+                f"importance sampling found p = {main['p']:.2g} but the levels of "
+                f"the same run {levels['p']:.2g}, further apart than their errors "
+                "allow: the proposal may miss part of the failure set"
+            )
+        return tuple(reasons)
 
     def progress(self, info: SplittingInfo) -> str:
         """``"replicate 2/2, set 3: f <= 1.23, 212 survivors, ..."``."""
@@ -898,6 +913,25 @@ def replicates_disagree(own: Sequence[Estimate]) -> bool:
                 if hit.ci[0] > bound.ci[1]:
                     return True
     return False
+
+
+def estimates_disagree(sampled: dict[str, Any], levels: dict[str, Any]) -> bool:
+    """Whether the importance-sampling and the levels' estimates of ``p`` disagree.
+
+    Both as ``{"p", "ci"}`` (the sampled one with ``stderr``): their ``log
+    p`` differ by more than ``DISAGREEMENT_Z`` standard errors, the sampled
+    one's ``log(1 + (stderr / p)^2)``, the levels' from their log-normal
+    interval's half-width. An estimate of 0 disagrees with one whose interval
+    lies above its bound.
+    """
+    p, q = sampled["p"], levels["p"]
+    if p <= 0 or q <= 0:
+        return (p > 0 and sampled["ci"][0] > levels["ci"][1]) or (
+            q > 0 and levels["ci"][0] > sampled["ci"][1]
+        )
+    var = np.log1p((sampled["stderr"] / p) ** 2)
+    var += (np.log(levels["ci"][1] / q) / stats.norm.isf(0.025)) ** 2
+    return bool(abs(np.log(p / q)) > DISAGREEMENT_Z * np.sqrt(var))
 
 
 class ReplicatesState(NamedTuple):

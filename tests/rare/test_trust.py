@@ -11,7 +11,7 @@ from avrisk.rare import (
     subset_simulation,
 )
 from avrisk.rare.estimator import estimator_class
-from avrisk.rare.splitting_importance import replicates_disagree
+from avrisk.rare.splitting_importance import estimates_disagree, replicates_disagree
 from avrisk.rare.trust import GENERIC, Trust, Wording, estimate_trust, trust_at
 
 GOOD = {"gamma": 0.0, "n_hits": 50, "ess": 40.0, "pareto_k": 0.4}
@@ -90,3 +90,19 @@ def test_a_level_held_by_a_handful_of_particles_makes_splitting_say_caution():
     assert est.details["survivors"][0] == 2
     trust = trust_of("splitting", est)
     assert "held only 2 particles" in str(trust)
+
+
+def test_importance_sampling_far_from_its_own_levels_says_caution():
+    sampled = {"gamma": 0.0, "p": 1e-7, "stderr": 1e-8, "ci": [8e-8, 1.2e-7]}
+    levels = {"p": 1e-6, "ci": [5e-7, 2e-6]}
+    assert estimates_disagree(sampled, levels)
+    assert not estimates_disagree(sampled | {"p": 8e-7, "stderr": 8e-8}, levels)
+    as_dict = {
+        "gamma": 0.0,
+        "by_gamma": [{**sampled, "n_hits": 500, "ess": 400.0, "pareto_k": 0.2}],
+        "details": {"splitting": {"0.0": levels}},
+    }
+    trust = estimate_trust(
+        estimator_class("splitting_is"), as_dict, as_dict["by_gamma"][0]
+    )
+    assert "importance sampling found p = 1e-07 but the levels" in str(trust)
