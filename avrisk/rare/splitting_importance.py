@@ -85,11 +85,12 @@ replicates`` particles each (the same calls of ``f`` as one run of
 ``n_particles``), and step 3 fits one proposal to the particles of them all.
 A failure region one replicate's levels never reach (a region that holds most
 of ``p`` but whose intermediate levels are rarer than another's) is then in
-the proposal if another reached it; and two replicates' own estimates of ``p``
-that differ beyond their errors (:func:`replicates_disagree`) are the one
-sign, inside a run, that a search can miss a region: such a run says caution
-(``details["replicates_disagree"]``). One run cannot see a region no
-replicate reached.
+the proposal if another reached it. Replicates whose own estimates differ
+beyond their errors (:func:`replicates_disagree`, in
+``details["replicates_disagree"]`` and the report) show a search that can
+miss a region; the run says caution only when its importance-sampling
+estimate is borne out by no replicate's (:meth:`doubts`). One run cannot see
+a region no replicate reached.
 
 The estimate is that of the importance-sampling stage alone: the proposal is
 fixed before its samples are drawn, so it is unbiased whatever the particles,
@@ -712,37 +713,32 @@ class SplittingImportanceSampling(SubsetSimulation):
 
     @staticmethod
     def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
-        """Replicates that disagree, or importance sampling against the levels.
+        """An importance-sampling estimate that no replicate's levels bear out.
 
         Few particles at a level do not bias the importance-sampling stage
-        (its weights' diagnostics speak for it). But replicates that ended in
-        different places say a failure region may be missing from the
-        proposal (*Replicates*); and an importance-sampling estimate far from
-        the levels' own estimate of the same run, beyond both their errors,
-        says the proposal misses where the particles were (a shift fitted on
-        too few coordinates, a region dropped), which its weights alone may
-        not show.
+        (its weights' diagnostics speak for it), nor do replicates that ended
+        in different places: the proposal holds what either found
+        (*Replicates*). But an importance-sampling estimate far from every
+        replicate's own estimate, beyond both errors, says the proposal misses
+        where the particles were (a shift fitted on too few coordinates, a
+        region dropped), which its weights alone may not show.
         """
         details = estimate.get("details") or {}
-        reasons = []
-        if details.get("replicates_disagree"):
-            own = ", ".join(f"{r['p']:.2g}" for r in details["replicates"])
-            reasons.append(
-                f"independent replicates of the search found p = {own}, further "
-                "apart than their errors allow: the search may miss a failure "
-                "region (compare runs with other seeds, or raise n_particles)"
-            )
         main = next(
             (g for g in estimate.get("by_gamma", ()) if g["gamma"] == gamma), None
         )
-        levels = (details.get("splitting") or {}).get(str(gamma))
-        if main and levels and estimates_disagree(main, levels):
-            reasons.append(
-                f"importance sampling found p = {main['p']:.2g} but the levels of "
-                f"the same run {levels['p']:.2g}, further apart than their errors "
-                "allow: the proposal may miss part of the failure set"
-            )
-        return tuple(reasons)
+        own = details.get("replicates") or []
+        if gamma != estimate.get("gamma") or main is None or not own:
+            return ()
+        if not all(estimates_disagree(main, r) for r in own):
+            return ()
+        levels = ", ".join(f"{r['p']:.2g}" for r in own)
+        return (
+            f"importance sampling found p = {main['p']:.2g} but the levels of the "
+            f"same run {levels}, further apart than their errors allow: the "
+            "proposal may miss part of the failure set (compare runs with other "
+            "seeds, or raise n_particles)",
+        )
 
     def progress(self, info: SplittingInfo) -> str:
         """``"replicate 2/2, set 3: f <= 1.23, 212 survivors, ..."``."""
