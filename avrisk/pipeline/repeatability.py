@@ -143,7 +143,8 @@ def replayed_rows(run_dir: RunDirectory) -> list[tuple[StageBatch, int]]:
     evaluated its chunks (the first chunk's, unless all of them failed), and
     the :data:`LOWEST_ROWS` others of lowest ``f`` among all that succeeded.
     Only the chunks holding them are read in full (and verified); one that
-    does not verify is left out (the run evaluates it again).
+    does not verify is removed (the run evaluates it again) and the rows are
+    picked again from the others.
     """
     outcomes = run_dir.recorded_outcomes()
     if not outcomes:
@@ -165,11 +166,12 @@ def replayed_rows(run_dir: RunDirectory) -> list[tuple[StageBatch, int]]:
         ]
     )
     keys = [outcomes[w][:2] for w in which[picked]]
-    chunks = {key: run_dir.cached(*key) for key in sorted(set(keys))}
+    read = {key: run_dir.cached(*key) for key in sorted(set(keys))}
+    chunks = {key: batch for key, batch in read.items() if batch is not None}
+    if len(chunks) < len(read):  # cached removed one that did not verify
+        return replayed_rows(run_dir)
     return [
-        (chunks[key], int(row))
-        for key, row in zip(keys, rows[picked], strict=True)
-        if chunks[key] is not None
+        (chunks[key], int(row)) for key, row in zip(keys, rows[picked], strict=True)
     ]
 
 

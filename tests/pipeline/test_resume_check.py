@@ -6,9 +6,11 @@ first chunk do not see that change, the recorded rows of lowest ``f`` do.
 """
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
+from avrisk.pipeline.manifest import RecordIntegrityWarning
 from avrisk.pipeline.repeatability import (
     FIRST_ROWS,
     LOWEST_ROWS,
@@ -151,3 +153,16 @@ def test_a_resume_whose_replays_all_fail_now_stops(tmp_path):
     interrupted(path)
     with pytest.raises(NotRepeatableError, match="all failed now: start the ego"):
         run(path, check=failing)
+
+
+def test_a_changed_chunk_holding_picked_rows_is_left_to_the_run(tmp_path):
+    path = tmp_path / "run"
+    interrupted(path)
+    (lowest, _), *_ = replayed_rows(RunDirectory(path, NAMES))[FIRST_ROWS:]
+    chunk = path / "chunks" / f"stage{lowest.stage:04d}-chunk000000.parquet"
+    pq.write_table(pq.read_table(chunk), chunk, compression="none")  # other bytes
+    with pytest.warns(RecordIntegrityWarning, match="evaluated again"):
+        rows = replayed_rows(RunDirectory(path, NAMES))
+    assert len(rows) == FIRST_ROWS + LOWEST_ROWS  # picked again, elsewhere
+    assert {batch.stage for batch, _ in rows} == {3 - lowest.stage}
+    assert not chunk.exists()
