@@ -200,10 +200,10 @@ def _compare_with_record(
                 raise NotRepeatableError(
                     f"f differs from the run recorded in {run_dir.path}: the rollout "
                     f"of stage {batch.stage}, chunk {batch.chunk}, row {row} (seed "
-                    f"{int(batch.seeds[row])}) gives {name} = {now_i!r} now, "
-                    f"{was!r} recorded; the ego (or other code) changed since, or "
-                    "does not repeat its rollouts: resume with the ego the run was "
-                    "recorded with, or run into another output directory"
+                    f"{int(batch.seeds[row])}) gives {name} = {now_i.item()!r} "
+                    f"now, {was.item()!r} recorded; the ego (or other code) changed "
+                    "since, or does not repeat its rollouts: resume with the ego the "
+                    "run was recorded with, or run into another output directory"
                 )
 
 
