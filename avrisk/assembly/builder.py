@@ -439,7 +439,8 @@ class ScenarioSimulator:
 
         The built-in drivers do; an ego policy or driver model the scenario
         names may not (``deterministic = False``: the external ego, see
-        :func:`avrisk.sim.interfaces.deterministic`), and its runs check it.
+        :func:`avrisk.sim.interfaces.deterministic`): its new runs check it
+        first (every resume checks recorded rollouts, whatever the actors).
         """
         named = [*self._other_drivers, self.ego_policy]
         return all(deterministic(actor) for actor in named if actor is not None)

@@ -52,6 +52,13 @@ FACT_COLUMNS: dict[str, type[np.integer]] = {
 FAILURE_COLUMN = "failure"
 
 
+#: Largest change of a rollout's ``f`` [s] taken for rounding on a GPU: the
+#: same rollouts on a GPU and on the CPU differ by up to about 1e-5 s on the
+#: learned drivers of ``highway_default`` (``benchmarks/results/gpu_h100``),
+#: and not at all on ``highway_idm``; an ego that acts otherwise moves a
+#: near-hit by far more.
+GPU_F_TOLERANCE = 1e-4
+
 #: The per-rollout column by which ``p`` is decomposed, and its codes' names
 #: (:class:`avrisk.sim.collision.Contact`; ``-1``: not recorded).
 MECHANISMS: tuple[str, dict[int, str]] = (
@@ -150,6 +157,17 @@ class SimulationObjective:
     def device(self) -> str:
         """The simulator's torch device (``"cpu"``, ``"cuda:0"`` ...)."""
         return str(self.simulator.device)
+
+    @property
+    def replay_tolerance(self) -> float:
+        """How far ``f`` of a rollout replayed at a resume may be from its record [s].
+
+        0 on the CPU, whose rollouts do not depend on the batch they are
+        simulated in; :data:`GPU_F_TOLERANCE` on a GPU, whose kernels may
+        round otherwise for another batch size (and for a rollout recorded on
+        the CPU).
+        """
+        return 0.0 if self.simulator.device.type == "cpu" else GPU_F_TOLERANCE
 
     @property
     def layout(self) -> ParamLayout:

@@ -38,7 +38,7 @@ from avrisk.pipeline.provenance import (
     stamp,
 )
 from avrisk.pipeline.regenerate import RegenerationError
-from avrisk.pipeline.repeatability import NotRepeatableError
+from avrisk.pipeline.repeatability import NotRepeatableError, ReplayCheck
 from avrisk.pipeline.store import estimated_row_bytes
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
@@ -124,13 +124,14 @@ def execute(
     (default: in this process); worker processes record no traces (the
     report simulates the failures it shows again). ``store_full``: keep every
     column of the samples (else the learned drivers' ``xi`` is drawn again
-    when read). Where an actor does not vouch for its repeatability (an
-    external AV, :attr:`ScenarioSimulator.deterministic`), a few rollouts are
-    replayed first, in this process: an objective that is not repeatable
-    stops the run (an AV that ignores its seeds). ``cost``: told of every
-    rollout, to print the plan and the time measured on the first chunk
-    (:class:`CostMeter`). A run that was complete already says it was read
-    back; one that resumed, how many rollouts it reused.
+    when read). A resumed run first replays a few recorded rollouts, in this
+    process, and stops if the ego gives other results (it changed since); a
+    new run does so with fresh draws where an actor does not vouch for its
+    repeatability (an external AV, :attr:`ScenarioSimulator.deterministic`):
+    an AV that ignores its seeds (:mod:`avrisk.pipeline.repeatability`).
+    ``cost``: told of every rollout, to print the plan and the time measured
+    on the first chunk (:class:`CostMeter`). A run that was complete already
+    says it was read back; one that resumed, how many rollouts it reused.
     """
     check_recorded(out)  # a damaged config or summary: one line, not a traceback
     base = base_distribution(objective.simulator.spec)
@@ -158,7 +159,11 @@ def execute(
             evaluator=evaluator,
             provenance=stamp(definition, objective.computed_with()),
             mechanisms=MECHANISMS,
-            replay_check=None if plain.simulator.deterministic else plain,
+            replay_check=ReplayCheck(
+                plain,
+                fresh=not plain.simulator.deterministic,
+                tolerance=plain.replay_tolerance,
+            ),
         )
     if not monitor.started:
         err_console.print(

@@ -22,7 +22,7 @@ from avrisk.pipeline.lock import run_lock
 from avrisk.pipeline.manifest import RecordIntegrityWarning
 from avrisk.pipeline.mechanisms import decompose
 from avrisk.pipeline.regenerate import chunk_meta
-from avrisk.pipeline.repeatability import check_repeatable
+from avrisk.pipeline.repeatability import ReplayCheck, check_repeatable
 from avrisk.pipeline.store import RunDirectory, marginal_row_bytes
 from avrisk.rare import (
     Estimate,
@@ -200,7 +200,7 @@ def run_estimation(
     evaluator: Evaluator | None = None,
     provenance: dict[str, Any] | None = None,
     mechanisms: tuple[str, Mapping[int, str]] | None = None,
-    replay_check: Callable[..., Any] | None = None,
+    replay_check: ReplayCheck | None = None,
 ) -> dict[str, Any]:
     """Run (or resume, or just read back) one estimation into ``run_dir``.
 
@@ -232,12 +232,13 @@ def run_estimation(
         An integer output column of ``f`` and the names of its codes: ``p`` is
         decomposed by it (:mod:`avrisk.pipeline.mechanisms`) in the summary's
         ``mechanisms``, for estimators whose estimate is a final-stage mean.
-    replay_check : callable, optional
-        ``f`` without side effects (no trace recording), for a ``f`` that may
-        not be repeatable (an external AV): a few rollouts are replayed
-        before the run starts or resumes, and a ``f`` that is not repeatable
-        stops it (:func:`~avrisk.pipeline.repeatability.check_repeatable`).
-        None: no check (a ``f`` repeatable by construction).
+    replay_check : ReplayCheck, optional
+        ``f`` without side effects (no trace recording), replayed before the
+        run goes on: at a resume, on rows recorded by the earlier sessions (a
+        ``f`` that changed since stops the run); before a new run of a ``f``
+        that may not be repeatable, on fresh draws evaluated twice
+        (:func:`~avrisk.pipeline.repeatability.check_repeatable`). None: no
+        check.
 
     Returns
     -------

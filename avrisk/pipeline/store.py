@@ -352,6 +352,31 @@ class RunDirectory:
             seeds=cols["seed"],
         )
 
+    def recorded_outcomes(self) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
+        """``(stage, chunk, f, failed)`` of every chunk file, first stage first.
+
+        Only the ``f`` and ``status`` columns are read, unverified: to choose
+        rows cheaply among millions. :meth:`cached` verifies a chunk before
+        its rows are used; an unreadable file is left out.
+        """
+        found = []
+        for path in sorted((self.path / CHUNKS_DIR).glob("*.parquet")):
+            if _CHUNK_NAME.fullmatch(path.name) is None:
+                continue
+            try:
+                parquet = pq.ParquetFile(path)
+                names = parquet.schema_arrow.names
+                table = parquet.read(columns=[c for c in ("f", "status") if c in names])
+            except (pa.ArrowException, OSError):
+                continue
+            f = table["f"].to_numpy()
+            failed = np.zeros(len(f), dtype=bool)
+            if "status" in names:  # null in chunks of an older avrisk
+                status = table["status"].to_numpy(zero_copy_only=False)
+                failed = np.nan_to_num(status.astype(float)) != 0
+            found.append((*_chunk_key(path), f, failed))
+        return sorted(found, key=lambda c: (c[0] == FINAL_STAGE, c[0], c[1]))
+
     def _chunk_problem(
         self, path: Path, data: bytes, stage: int, chunk: int
     ) -> str | None:

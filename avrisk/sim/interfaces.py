@@ -54,10 +54,11 @@ Contracts:
 * repeatability: a rollout's result must depend only on its ``X`` and its
   seed (the noise above). An actor that cannot vouch for it (an AV in another
   process, an actor drawing from a generator of its own) says so with
-  ``deterministic = False``: the runs of its scenarios then replay a few
-  rollouts before they start or resume and stop where they differ
-  (:mod:`avrisk.pipeline.repeatability`). Without the attribute an actor is
-  taken at its word (:func:`deterministic`).
+  ``deterministic = False``: the runs of its scenarios then evaluate a few
+  rollouts twice before they start and stop where they differ
+  (:mod:`avrisk.pipeline.repeatability`; every resume replays recorded
+  rollouts, whatever the actors). Without the attribute an actor is taken at
+  its word (:func:`deterministic`).
 
 Safety measures
 ---------------

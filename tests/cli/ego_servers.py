@@ -8,6 +8,7 @@ the reference controller with one fault (:data:`FAULTS`) in the run's second bat
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import errno
 import os
 import sys
@@ -34,6 +35,25 @@ class InProcessAcc(LocalEgo):
 
     def __init__(self, noise: float = 0.0) -> None:
         super().__init__(AccController(noise=noise))
+
+
+@dataclasses.dataclass(frozen=True)
+class LateBrakingController(AccController):
+    """The reference controller braking 10% later: it sees gaps 10% longer."""
+
+    def act(self, obs, angles, seeds, step):  # noqa: D102
+        if "lidar_range" in obs:
+            obs = {**obs, "lidar_range": obs["lidar_range"] / 0.9}
+        return super().act(obs, angles, seeds, step)
+
+
+class LateBrakingAcc(LocalEgo):
+    """:class:`InProcessAcc` braking 10% later (an edit of the user's ego)."""
+
+    Params = InProcessAcc.Params
+
+    def __init__(self, noise: float = 0.0) -> None:
+        super().__init__(LateBrakingController(noise=noise))
 
 
 class UnvouchedAcc(InProcessAcc):
@@ -78,17 +98,28 @@ FAULTS = {
 
 
 class FaultyServer(EgoServer):
-    """The reference server with one fault in one batch (mode "none": none)."""
+    """The reference server with one fault in one batch (mode "none": none).
 
-    def __init__(self, mode: str, timeout_s: float = 0.5) -> None:
-        super().__init__(AccController())
+    ``batch``: the faulty batch's number; ``controller``: another AV.
+    """
+
+    def __init__(
+        self,
+        mode: str,
+        timeout_s: float = 0.5,
+        *,
+        batch: int = FAULTY_BATCH,
+        controller: AccController | None = None,
+    ) -> None:
+        super().__init__(controller or AccController())
         self.mode, self.timeout_s, self.batches = mode, timeout_s, 0
+        self.faulty_batch = batch
 
     def handle(self, raw: bytes) -> bytes:
         message = decode(raw, self.max_bytes)
         self.batches += message["type"] == "reset"
         reply = super().handle(raw)
-        faulty = self.mode == "unrepeatable" or self.batches == FAULTY_BATCH
+        faulty = self.mode == "unrepeatable" or self.batches == self.faulty_batch
         if message["type"] != "step" or not faulty or self.mode == "none":
             return reply
         if self.mode == "die":

@@ -22,12 +22,18 @@ pytest.importorskip("zmq")
 
 from avrisk.cli.app import app  # noqa: E402
 from avrisk.pipeline.repeatability import check_repeatable  # noqa: E402
-from tests.cli.ego_servers import FaultyServer, in_thread  # noqa: E402
+from tests.cli.ego_servers import (  # noqa: E402
+    FaultyServer,
+    LateBrakingController,
+    in_thread,
+)
 from tests.scenario_files import shortened_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 ARGS = ("--method", "naive", "--n-final", 200, "--batch-size", 50, "--failures", 0)
 TIMEOUT_S = 0.5
+#: What a resume with an AV that changed since says.
+CHANGED = "f differs from the run recorded in"
 
 
 def free_address():
@@ -214,18 +220,20 @@ def test_an_av_that_ignores_its_seeds_is_refused(tmp_path):
 
 @pytest.fixture
 def checked(monkeypatch):
-    """The run directories whose runs check repeatability (the checks still run)."""
-    names = []
+    """Each run's directory and whether it checks fresh draws (the checks run)."""
+    found = {}
 
-    def spy(run_dir, *args):
-        names.append(run_dir.path.name)
-        return check_repeatable(run_dir, *args)
+    def spy(run_dir, base, check, seed):
+        found[run_dir.path.name] = check.fresh
+        return check_repeatable(run_dir, base, check, seed)
 
     monkeypatch.setattr("avrisk.pipeline.run.check_repeatable", spy)
-    return names
+    return found
 
 
-def test_only_runs_of_egos_that_may_not_be_repeatable_check_it(tmp_path, checked):
+def test_only_new_runs_of_egos_that_may_not_be_repeatable_replay_fresh_draws(
+    tmp_path, checked
+):
     for name in ("InProcessAcc", "UnvouchedAcc"):
         ego = {"policy": f"tests.cli.ego_servers:{name}"}
         path = scenario(tmp_path, ego, name=name)
@@ -236,21 +244,39 @@ def test_only_runs_of_egos_that_may_not_be_repeatable_check_it(tmp_path, checked
         out = tmp_path / "external"
         result = invoke("run", external(tmp_path, address), "--out", out, *ARGS)
     assert result.exit_code == 0, result.output
-    assert checked == ["UnvouchedAcc", "external"]
+    assert checked == {"InProcessAcc": False, "UnvouchedAcc": True, "external": True}
 
 
-def test_a_resumed_run_refuses_an_av_that_changed(tmp_path):
+def test_an_av_braking_later_after_a_restart_is_refused(tmp_path):
     address = free_address()
     path = external(tmp_path, address)
     out = tmp_path / "run"
     with in_thread(FaultyServer("sleep", TIMEOUT_S), address):
         assert invoke("run", path, "--out", out, *ARGS).exit_code != 0
-    changed = FaultyServer("none")
-    changed.controller = type(changed.controller)(speed=25.0)
-    with in_thread(changed, address):
+    later = FaultyServer("none", controller=LateBrakingController())
+    with in_thread(later, address):
         result = invoke("run", path, "--out", out, *ARGS)
-    assert result.exit_code != 0
-    assert "recorded in" in result.output and "not repeatable" in result.output
+    assert result.exit_code == 2
+    assert CHANGED in result.output
+
+
+def test_an_av_braking_later_is_refused_after_a_first_chunk_that_all_failed(
+    tmp_path,
+):
+    """The AV was down for the whole first chunk and up for the second."""
+    address = free_address()
+    path = external(tmp_path, address)
+    out = tmp_path / "run"
+    two_chunks = ("--method", "naive", "--n-final", 8192 + 50, "--batch-size", 8192)
+    down = FaultyServer("error", TIMEOUT_S, batch=3)  # after the check's two
+    with in_thread(down, address):
+        first = invoke("run", path, "--out", out, *two_chunks, "--failures", 0)
+    assert "8192 of 8242 samples of stage 0 failed" in " ".join(first.output.split())
+    later = FaultyServer("none", controller=LateBrakingController())
+    with in_thread(later, address):
+        result = invoke("run", path, "--out", out, *two_chunks, "--failures", 0)
+    assert result.exit_code == 2
+    assert CHANGED in result.output and "chunk 1, row" in result.output
 
 
 def test_a_remote_address_is_refused_unless_allowed(tmp_path):
