@@ -129,8 +129,9 @@ def test_the_default_method_is_splitting_is_its_plan_a_bound_and_its_tables_show
         "then IS 100 (4 components, defensive 0.1)): at most 2,100 rollouts (fewer "
         "if the levels reach gamma sooner); samples take at most about"
     ) in err
-    assert "rollouts/s on the first 100: at most about" in err
-    assert "for at most 2,000 more" in err
+    # its first batch: the first replicate's first set, 50 particles
+    assert "rollouts/s on the first 50: at most about" in err
+    assert "for at most 2,050 more" in err
     assert_whole_at_80_columns(result.stdout)
     estimate = json.loads((out / "summary.json").read_text())["estimate"]
     n = estimate["n_evals"]
