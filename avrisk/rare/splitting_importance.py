@@ -838,7 +838,14 @@ class SplittingImportanceSampling(SubsetSimulation):
         with_hits = [r for r, e in zip(replicates, own, strict=True) if e.n_hits]
         if not with_hits:  # no particle to fit: the levels' bound
             return dataclasses.replace(combined, method="splitting_is")
-        moves = [move_chains(r, problem, context, s.n_moves, n_each) for r in with_hits]
+        moves, stage = [], state.current.n_stages
+        for r in with_hits:  # each on stages of its own, after every replicate's
+            moves.append(
+                move_chains(
+                    r._replace(n_stages=stage), problem, context, s.n_moves, n_each
+                )
+            )
+            stage = moves[-1].n_stages
         rng = np.random.default_rng(
             np.random.SeedSequence([context.seed], spawn_key=(FIT_STREAM,))
         )

@@ -305,3 +305,19 @@ def test_a_plateau_nothing_leaves_gives_the_levels_bound():
     # two replicates of 250 particles, each of 2,000 draws, 1,750 counted
     assert est.p == 0.0 and est.n_evals == 4000
     assert est.ci == (0.0, pytest.approx(-np.expm1(np.log(0.025) / 1750)))
+
+
+def test_every_stage_of_the_replicates_and_their_moves_is_its_own():
+    # a stage's random numbers and its record are keyed by its number: the
+    # moves at gamma of the first replicate must not reuse the second's
+    seen = []
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    splitting_is(
+        lambda x: 3.0 - x[:, 0],
+        base,
+        0.0,
+        n_particles=200,
+        n_final=200,
+        on_batch=lambda batch: seen.append((batch.stage, batch.chunk)),
+    )
+    assert len(seen) == len(set(seen))
