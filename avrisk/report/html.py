@@ -4,7 +4,11 @@ The report reads only what runs leave behind (``summary.json``,
 ``samples.parquet``) plus images drawn next to it, so ``avrisk report DIR``
 can rebuild it at any time. It leads with one answer
 (:func:`avrisk.report.answer.headline`): the probability per rollout, its
-interval, the method and whether the estimator's own diagnostics trust it.
+interval, the method and whether the estimator's own diagnostics trust it;
+then the most likely failures with their animations; then how the estimate
+was made (each run's estimates, its estimator's diagnostics, the comparison
+with naive sampling, every run's settings), each table explained where it
+appears, for a reader who does not know the methods.
 """
 
 from __future__ import annotations
@@ -60,7 +64,7 @@ METHODS = {
     ),
     "splitting_is": (
         "Splitting + IS: subset simulation first finds the dangerous situations "
-        "in steps (levels, plots below), in two independent replicates; then "
+        "in steps (levels, plots below), in independent replicates; then "
         "importance sampling (IS) draws fresh rollouts from a distribution "
         "fitted to them and weights each by how much more often P0 than that "
         "distribution would draw it, so that the weighted share of dangerous "
@@ -239,9 +243,10 @@ def write_report(
         returns its path (or ``None``).
     spec : ScenarioSpec, optional
         The runs' scenario: gives the time base of ``p`` (its horizon [s]),
-        and each failure's vehicles at absolute positions with the percentile
-        of its ``log p0`` under P0. Without it the answer is per rollout and
-        failures list their parameters as recorded.
+        and each failure's vehicles at absolute positions with the
+        percentiles of its start and its drivers under P0, by which failures
+        are ranked. Without it the answer is per rollout and failures, ranked
+        by ``log p0``, list their parameters as recorded.
 
     Returns
     -------

@@ -289,7 +289,7 @@ def test_splitting_is_shows_its_levels_proposal_and_cross_check(tmp_path):
         assert (tmp_path / "report" / "plots" / f"diagnostics_0_{j}.png").is_file()
     assert text.count(html_escape(drawn[0].note)) == 1  # said once for both
     for table in (t for t in tables if not t.drawn):
-        title = f"<h3>{html_escape(table.title)}</h3>"
+        title = f"<h4>{html_escape(table.title)}</h4>"
         section = text.split(title, 1)[1].split("</table>")[0]
         assert re.findall(r"<th>([^<]*)</th>", section) == [
             html_escape(c) for c in table.columns
