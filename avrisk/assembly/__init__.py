@@ -11,7 +11,9 @@ simulator (:mod:`avrisk.sim`), the drivers and ego policies
 * :mod:`~avrisk.assembly.traces` -- rollouts as plain arrays, and the traces
   of a run's most likely failures, recorded while it runs;
 * :mod:`~avrisk.assembly.trace_camera` -- the ego camera's images of a
-  recorded rollout, rendered again from its trace.
+  recorded rollout, rendered again from its trace;
+* :mod:`~avrisk.assembly.typicality` -- how typical a rollout's start and
+  drivers are under ``P0``, as percentiles (the ranking of failures).
 """
 
 from avrisk.assembly.builder import (
@@ -37,6 +39,7 @@ from avrisk.assembly.traces import (
     resimulate,
     traces_from_rollout,
 )
+from avrisk.assembly.typicality import Typicality, scenario_typicality
 
 __all__ = [
     "CameraFrames",
@@ -49,6 +52,7 @@ __all__ = [
     "RolloutTrace",
     "ScenarioSimulator",
     "SimulationObjective",
+    "Typicality",
     "base_distribution",
     "camera_from_spec",
     "camera_frames",
@@ -56,5 +60,6 @@ __all__ = [
     "param_layout",
     "read_failure_traces",
     "resimulate",
+    "scenario_typicality",
     "traces_from_rollout",
 ]

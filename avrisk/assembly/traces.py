@@ -4,8 +4,9 @@
   :func:`traces_from_rollout` makes them from a batch simulated with
   ``record_trace=True``.
 * :class:`FailureRecorder` -- while a run goes on, keeps the traces of the
-  ``k`` most likely dangerous rollouts seen (``f <= gamma``, highest
-  ``log p0``) in ``failures.parquet`` of the run directory, so that a report
+  ``k`` most likely dangerous rollouts seen (``f <= gamma``, ranked as the
+  report ranks them: :meth:`avrisk.assembly.typicality.Typicality.rank`) in
+  ``failures.parquet`` of the run directory, so that a report
   shows them without simulating again: it needs neither the ego (an external
   AV need not be running, nor repeatable) nor any code a spec names.
   :func:`read_failure_traces` reads the file back, checked.
@@ -210,7 +211,7 @@ class FailureRecorder:
     """Keeps the traces of the ``k`` most likely dangerous rollouts of a run.
 
     A rollout is dangerous when ``f <= gamma``; "most likely" is the highest
-    ``log p0`` (the report's ranking of failures). Rollouts are identified by
+    key of ``rank`` (the report's ranking of failures). Rollouts are identified by
     their seed, which the engine derives from the run seed, the stage and the
     sample id. The file is rewritten (atomically) whenever the kept set
     changes, and read back when a run resumes, so an interruption loses
@@ -224,8 +225,9 @@ class FailureRecorder:
         Threshold of a dangerous rollout [s].
     k : int
         How many to keep.
-    log_p0 : callable
-        ``log_p0(x)``: log-density of ``P0`` at rows ``x`` (n, D), shape (n,).
+    rank : callable
+        ``rank(x)``: keys of rows ``x`` (n, D), shape (n, m), compared
+        lexicographically, the most likely highest.
     """
 
     def __init__(
@@ -233,13 +235,13 @@ class FailureRecorder:
         path: Path,
         gamma: float,
         k: int,
-        log_p0: Callable[[np.ndarray], np.ndarray],
+        rank: Callable[[np.ndarray], np.ndarray],
     ) -> None:
         self.path = Path(path)
         self.gamma = gamma
         self.k = k
-        self.log_p0 = log_p0
-        self.kept: dict[int, tuple[float, RolloutTrace]] = {}
+        self.rank = rank
+        self.kept: dict[int, tuple[tuple[float, ...], RolloutTrace]] = {}
         if self.path.is_file():
             self.kept = {
                 seed: (score, trace)
@@ -258,21 +260,23 @@ class FailureRecorder:
         hits = np.flatnonzero(f <= self.gamma)
         if hits.size == 0 or self.k == 0:
             return
-        scores = self.log_p0(x[hits])
-        better = scores > self._floor()
-        if not better.any():
+        scores = [tuple(map(float, key)) for key in self.rank(x[hits])]
+        floor = self._floor()
+        better = [j for j, score in enumerate(scores) if floor is None or score > floor]
+        if not better:
             return
         rows = hits[better].tolist()
         traces = traces_from_rollout(sim, x, result, rows=rows)
-        for i, score, trace in zip(rows, scores[better], traces, strict=True):
-            self.kept[int(seeds[i])] = (float(score), trace)
-        ranked = sorted(self.kept.items(), key=lambda kv: -kv[1][0])[: self.k]
-        self.kept = dict(ranked)
+        for i, j, trace in zip(rows, better, traces, strict=True):
+            self.kept[int(seeds[i])] = (scores[j], trace)
+        ranked = sorted(self.kept.items(), key=lambda kv: kv[1][0], reverse=True)
+        self.kept = dict(ranked[: self.k])
         self._write()
 
-    def _floor(self) -> float:
+    def _floor(self) -> tuple[float, ...] | None:
+        """The lowest key kept once ``k`` are (None: any failure is kept)."""
         if len(self.kept) < self.k:
-            return -np.inf
+            return None
         return min(score for score, _ in self.kept.values())
 
     def _write(self) -> None:
@@ -280,7 +284,9 @@ class FailureRecorder:
         traces = [self.kept[s][1] for s in seeds]
         columns: dict[str, Any] = {
             "seed": pa.array(seeds, pa.int64()),
-            "log_p0": pa.array([self.kept[s][0] for s in seeds], pa.float64()),
+            "rank": pa.array(
+                [list(self.kept[s][0]) for s in seeds], pa.list_(pa.float64())
+            ),
             "n_frames": pa.array([t.n_frames for t in traces], pa.int32()),
             "crashed": pa.array([t.crashed for t in traces], pa.bool_()),
             "n_vehicles": pa.array([t.x.shape[1] for t in traces], pa.int32()),
@@ -303,8 +309,14 @@ class FailureFileError(ValueError):
     """A failures file that is not what avrisk writes (refused, not trusted)."""
 
 
-def read_failure_traces(path: Path) -> dict[int, tuple[float, RolloutTrace]]:
-    """The recorded failures of a run: ``{seed: (log_p0, trace)}``.
+def read_failure_traces(
+    path: Path,
+) -> dict[int, tuple[tuple[float, ...], RolloutTrace]]:
+    """The recorded failures of a run: ``{seed: (rank key, trace)}``.
+
+    A file written before failures were ranked by their percentiles holds
+    ``log_p0`` instead of a key: its traces read with the empty key, the
+    lowest (a resumed run replaces them as it finds failures).
 
     Raises
     ------
@@ -339,7 +351,8 @@ def read_failure_traces(path: Path) -> dict[int, tuple[float, RolloutTrace]]:
             )
             if not 1 <= trace.n_frames <= len(ttc):
                 raise ValueError("n_frames out of range")
-            out[int(row["seed"])] = (float(row["log_p0"]), trace)
+            key = tuple(float(v) for v in row["rank"]) if "rank" in row else ()
+            out[int(row["seed"])] = (key, trace)
         except (KeyError, TypeError, ValueError) as err:
             raise FailureFileError(f"{path}: a malformed row ({err})") from None
     return out

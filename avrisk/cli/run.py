@@ -159,7 +159,15 @@ MaxTime = Annotated[
         "result then depends on the machine's speed).",
     ),
 ]
-Failures = Annotated[int, typer.Option(min=0, help="Most likely failures to animate.")]
+Failures = Annotated[
+    int,
+    typer.Option(
+        min=0,
+        help="Dangerous rollouts the report shows and animates, the most realistic "
+        "first: ranked by the lower of two percentiles under P0, their start's "
+        "and their learned drivers'.",
+    ),
+]
 Json = Annotated[
     bool,
     typer.Option(

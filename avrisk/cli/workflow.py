@@ -11,6 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from rich.markup import escape
 
 from avrisk.assembly import (
@@ -24,6 +25,7 @@ from avrisk.assembly import (
     camera_from_spec,
     param_layout,
     read_failure_traces,
+    scenario_typicality,
 )
 from avrisk.cli.backends import Backend, open_evaluator
 from avrisk.cli.common import CliError, err_console, write_failures
@@ -139,8 +141,13 @@ def execute(
     definition = objective.definition()
     plain = objective
     if failures and evaluator is None:
+        typical = scenario_typicality(objective.simulator.spec)
+
+        def rank(x: np.ndarray) -> np.ndarray:
+            return typical.rank(x[:, : typical.n_situation], base.log_prob(x))
+
         recorder = FailureRecorder(
-            out / FAILURES_FILE, run_settings.gamma, failures, base.log_prob
+            out / FAILURES_FILE, run_settings.gamma, failures, rank
         )
         objective = objective.recording(recorder)
     resume = (

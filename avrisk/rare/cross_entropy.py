@@ -359,8 +359,24 @@ def search_diagnostics(
             rows,
             lines=("rho-quantile of f", "gamma_k"),
             bars="samples with f <= gamma",
+            note=(
+                "Each iteration draws samples from the current proposal, takes "
+                "the rho-quantile of their f as its level gamma_k (never below "
+                "gamma) and refits the proposal to the samples at or below it "
+                "(the elite, with their importance weights); the search has "
+                "found the event once gamma_k reaches gamma. Elite ESS: how "
+                "many equally weighted samples the weighted elite is worth."
+            ),
         )
     ]
+
+
+def search_stage_label(stage: int, step: str = "iteration") -> str:
+    """A CE search's name of ``stage``: ``"iteration 3"`` (stage 4), or the final one.
+
+    ``step`` names the iterations as :func:`search_diagnostics` does.
+    """
+    return "the final stage" if stage == FINAL_STAGE else f"{step} {stage - 1}"
 
 
 def search_convergence(
@@ -499,6 +515,11 @@ class CrossEntropy:
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
         """The search trajectory: levels, quantiles, hits and ESS per iteration."""
         return search_diagnostics("Cross-entropy search", estimate, "CE iteration")
+
+    @staticmethod
+    def stage_label(estimate: dict[str, Any], stage: int) -> str:
+        """``"CE iteration 3"`` (stage 4), or ``"the final stage"``."""
+        return search_stage_label(stage, "CE iteration")
 
     #: Whether the search reached a threshold and held it.
     convergence = staticmethod(search_convergence)

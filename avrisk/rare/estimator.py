@@ -197,6 +197,9 @@ class DiagnosticTable:
         Columns drawn as lines on the top panel (in the unit of ``f``).
     bars : str or None
         A column drawn as bars on the bottom panel (counts).
+    note : str
+        What it shows, in plain words, for a reader who does not know the
+        method (a report prints it under the table or plot).
     """
 
     title: str
@@ -204,6 +207,7 @@ class DiagnosticTable:
     rows: list[tuple[Any, ...]]
     lines: tuple[str, ...] = ()
     bars: str | None = None
+    note: str = ""
 
     @property
     def drawn(self) -> bool:
@@ -216,11 +220,12 @@ class DiagnosticTable:
         return [row[j] for row in self.rows]
 
     def to_dict(self) -> dict[str, Any]:
-        """``title``, ``columns`` and ``rows`` (lists), for a JSON document."""
+        """``title``, ``columns``, ``rows`` (lists) and ``note``: for JSON."""
         return {
             "title": self.title,
             "columns": list(self.columns),
             "rows": [list(row) for row in self.rows],
+            "note": self.note,
         }
 
 
@@ -451,6 +456,16 @@ class Estimator(Protocol, Generic[State, Info]):
 
         None for an estimator whose steps do not search for the event (naive
         Monte Carlo) or always end at ``gamma`` (subset simulation).
+        """
+        ...
+
+    @staticmethod
+    def stage_label(estimate: dict[str, Any], stage: int) -> str:
+        """The step that drew the samples of ``stage``, in its diagnostics' words.
+
+        ``"CE iteration 3"``, ``"replicate 2, set 3"``, ``"the final stage"``: a
+        report labels a failure with the step its diagnostic plot shows, so
+        that the two can be read together.
         """
         ...
 

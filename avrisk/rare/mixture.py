@@ -96,6 +96,7 @@ from avrisk.rare.cross_entropy import (
     search_diagnostics,
     search_final_estimate,
     search_level,
+    search_stage_label,
     search_structure,
 )
 from avrisk.rare.estimator import (
@@ -667,6 +668,11 @@ class MixtureCrossEntropy:
             estimate,
             extra=(("live components", "n_components"),),
         )
+
+    @staticmethod
+    def stage_label(estimate: dict[str, Any], stage: int) -> str:
+        """``"iteration 3"`` (stage 4), or ``"the final stage"``."""
+        return search_stage_label(stage)
 
     #: Whether the search reached a threshold and held it.
     convergence = staticmethod(search_convergence)

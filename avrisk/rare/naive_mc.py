@@ -126,6 +126,11 @@ class NaiveMC:
         """None: nothing is searched."""
         return None
 
+    @staticmethod
+    def stage_label(estimate: dict[str, Any], stage: int) -> str:
+        """``"the draws of P0"``: its one stage."""
+        return "the draws of P0"
+
     doubts = staticmethod(no_doubts)
 
 

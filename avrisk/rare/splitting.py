@@ -304,6 +304,16 @@ class SplittingState(NamedTuple):
     rounds_without_move: int
 
 
+#: The levels' diagnostics in plain words (:meth:`SubsetSimulation.diagnostics`).
+LEVELS_NOTE = (
+    "Set 0 is samples drawn from P0. Its level is the f below which the share "
+    "p0 of them lies (the survivors); the next set grows from the survivors by "
+    "small random moves that stay below that level, and so on, each level "
+    "lower, until the level reaches gamma. p is the product of the shares of "
+    "survivors. Independent replicates each run their own levels."
+)
+
+
 class SplittingInfo(NamedTuple):
     """Diagnostics of one level (one particle set).
 
@@ -328,6 +338,10 @@ class SplittingInfo(NamedTuple):
         Evaluations of this set that failed.
     n_evals : int
         Calls of ``f`` so far, this set included.
+    last_stage : int
+        The last stage (evaluated batch) of this set: its samples are those of
+        the stages after the previous set's ``last_stage`` up to this one (a
+        samples-table row's ``stage`` names its set, :meth:`stage_label`).
     replicate : int, default=0
         Independent replicate of the levels the set belongs to (several in
         :mod:`avrisk.rare.splitting_importance`).
@@ -342,6 +356,7 @@ class SplittingInfo(NamedTuple):
     cov: float
     n_failed: int
     n_evals: int
+    last_stage: int
     replicate: int = 0
 
     def to_dict(self) -> dict[str, Any]:
@@ -458,6 +473,7 @@ class SubsetSimulation:
             cov=math.sqrt(level_cov_squared(sets[-1].counted, level)),
             n_failed=moved.n_failed,
             n_evals=n_evals,
+            last_stage=moved.n_stages,
         )
         return new_state, info
 
@@ -503,24 +519,46 @@ class SubsetSimulation:
 
     @staticmethod
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
-        """Levels of ``f``, survivors, acceptance and ``beta`` per set."""
+        """Levels of ``f``, survivors, acceptance and ``beta`` per set.
+
+        One table per independent replicate of the levels (each numbers its
+        sets from 0), titled with its number when there are several.
+        """
         history = estimate.get("history") or []
-        if not history:
-            return []
         columns = ("set", "level", "survivors", "acceptance", "beta")
-        rows = [
-            (h["index"], h["level"], h["n_survivors"], h["acceptance"], h["beta"])
-            for h in history
-        ]
+        keys = ("index", "level", "n_survivors", "acceptance", "beta")
+        replicates = sorted({h.get("replicate", 0) for h in history})
         return [
             DiagnosticTable(
-                "Subset simulation levels",
+                "Subset simulation levels"
+                + (f", replicate {r + 1}" if len(replicates) > 1 else ""),
                 columns,
-                rows,
+                [
+                    tuple(h[k] for k in keys)
+                    for h in history
+                    if h.get("replicate", 0) == r
+                ],
                 lines=("level",),
                 bars="survivors",
+                note=LEVELS_NOTE,
             )
+            for r in replicates
         ]
+
+    @staticmethod
+    def stage_label(estimate: dict[str, Any], stage: int) -> str:
+        """``"set 3"``, or ``"replicate 2, set 3"``: the set that drew ``stage``.
+
+        ``"the levels"`` where the summary does not say (one written before the
+        sets recorded their last stage).
+        """
+        history = estimate.get("history") or []
+        found = next((h for h in history if stage <= h.get("last_stage", -1)), None)
+        if found is None:
+            return "the levels"
+        several = any(h.get("replicate", 0) for h in history)
+        where = f"replicate {found['replicate'] + 1}, " if several else ""
+        return f"{where}set {found['index']}"
 
     @staticmethod
     def convergence(estimate: dict[str, Any], gamma: float) -> SearchConvergence | None:

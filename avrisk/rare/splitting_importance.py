@@ -740,6 +740,21 @@ class SplittingImportanceSampling(SubsetSimulation):
             "seeds, or raise n_particles)",
         )
 
+    @staticmethod
+    def stage_label(estimate: dict[str, Any], stage: int) -> str:
+        """A set of the levels (:meth:`SubsetSimulation.stage_label`), or after them.
+
+        After the last set: ``"the moves at gamma"``, the chains whose states
+        the proposal was fitted to; the final stage: ``"the
+        importance-sampling stage"``.
+        """
+        if stage == FINAL_STAGE:
+            return "the importance-sampling stage"
+        history = estimate.get("history") or [{}]
+        if stage > history[-1].get("last_stage", stage):
+            return "the moves at gamma"
+        return SubsetSimulation.stage_label(estimate, stage)
+
     def progress(self, info: SplittingInfo) -> str:
         """``"replicate 2/2, set 3: f <= 1.23, 212 survivors, ..."``."""
         text = super().progress(info)
@@ -804,7 +819,23 @@ class SplittingImportanceSampling(SubsetSimulation):
         own = [details["splitting"].get(str(g["gamma"]), {}) for g in by_gamma]
         return [
             *levels,
-            DiagnosticTable("Importance-sampling proposal", columns, [fit]),
+            DiagnosticTable(
+                "Importance-sampling proposal",
+                columns,
+                [fit],
+                note=(
+                    "The distribution the final samples were drawn from, fitted "
+                    "to the dangerous samples the levels found (moved once more, "
+                    "at gamma, after the last set: the moves at gamma): its components "
+                    "(regions), its shift (coords: coordinate by coordinate; "
+                    "slope: along f's average slope), how many of P0's "
+                    "coordinates it shifts (those the dangerous samples differ "
+                    "on by more than the threshold, in standard errors; the rest "
+                    "stay as in P0), and the share of moves accepted at gamma "
+                    "when those samples were made. Hits, ESS and Pareto k are "
+                    "its samples' at gamma."
+                ),
+            ),
             DiagnosticTable(
                 "Importance sampling vs subset simulation's own estimate",
                 ("gamma", "p", "95% CI", "p, subset simulation", "its 95% CI"),
@@ -812,6 +843,13 @@ class SplittingImportanceSampling(SubsetSimulation):
                     (g["gamma"], g["p"], g["ci"], s.get("p"), s.get("ci"))
                     for g, s in zip(by_gamma, own, strict=True)
                 ],
+                note=(
+                    "A cross-check from the same run: the answer (importance "
+                    "sampling) beside the product of the levels' shares. The two "
+                    "are not independent (the levels made the proposal) but err "
+                    "differently: intervals far apart say one of them missed part "
+                    "of the event."
+                ),
             ),
         ]
 

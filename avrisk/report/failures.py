@@ -3,8 +3,8 @@
 Each parameter with its unit; with the scenario at hand, the vehicles' start
 at absolute positions (``x`` [m] along the road, ``y`` [m] from its right
 edge, as the simulator places them: :func:`avrisk.assembly.initial_state`) and
-the rollout's ``log p0`` read as a percentile: the share of situations drawn
-from P0 that are less likely than this one.
+how typical its start and its drivers are under P0, as two percentiles
+(:mod:`avrisk.assembly.typicality`).
 """
 
 from __future__ import annotations
@@ -14,33 +14,10 @@ from typing import Any
 
 import numpy as np
 import torch
-from numpy.typing import NDArray
 
-from avrisk.assembly import MECHANISMS, base_distribution, initial_state
+from avrisk.assembly import MECHANISMS, Typicality, initial_state
 from avrisk.scenario import ScenarioSpec
 from avrisk.scenario.params import XI_PREFIX, ParamLayout, ScenarioParams
-
-#: Situations drawn from P0 to read a ``log p0`` as a percentile.
-P0_SAMPLE_SIZE = 10_000
-
-
-def p0_log_density_sample(
-    spec: ScenarioSpec, n: int = P0_SAMPLE_SIZE, seed: int = 0
-) -> NDArray[np.float64]:
-    """``log p0(X)`` of ``n`` situations ``X ~ P0``, sorted.
-
-    Returns
-    -------
-    ndarray of shape (n,)
-        Ascending log-densities (the reference for :func:`p0_percentile`).
-    """
-    base = base_distribution(spec)
-    return np.sort(base.log_prob(base.sample(n, np.random.default_rng(seed))))
-
-
-def p0_percentile(log_p0: float, sample: NDArray[np.float64]) -> float:
-    """Percent of ``sample`` (sorted ``log p0`` of P0 draws) below ``log_p0``."""
-    return 100.0 * np.searchsorted(sample, log_p0, side="left") / sample.size
 
 
 def vehicle_starts(row: Mapping[str, Any], spec: ScenarioSpec) -> list[dict[str, Any]]:
@@ -87,10 +64,11 @@ def _driver_name(spec: ScenarioSpec, slot: int) -> str:
 def failure_view(
     row: Mapping[str, Any],
     spec: ScenarioSpec | None,
-    p0_sample: NDArray[np.float64] | None,
+    typical: Typicality | None,
     *,
     names: Sequence[str],
     units: Mapping[str, str],
+    step: str,
     animation: str | None,
 ) -> dict[str, Any]:
     """What the report's card of one failure shows.
@@ -102,12 +80,15 @@ def failure_view(
     spec : ScenarioSpec or None
         Its scenario: vehicles listed at absolute positions (else ``names``
         as recorded, each with its unit from ``units``).
-    p0_sample : ndarray or None
-        From :func:`p0_log_density_sample`, to give ``log p0`` a percentile.
+    typical : Typicality or None
+        Its scenario's, to read the start and the drivers as percentiles.
     names : sequence of str
         The rollout's parameters, by column name.
     units : mapping of str to str
         Unit of each column, as the run directory records them.
+    step : str
+        The step of the run that drew it, as its diagnostics name it
+        (:meth:`~avrisk.rare.estimator.Estimator.stage_label`).
     animation : str or None
         Path of its animation, relative to the report.
 
@@ -115,10 +96,10 @@ def failure_view(
     -------
     dict
         ``f`` [s], ``crash``, ``what`` (mechanism and vehicle hit, or None),
-        ``log_p0``, ``percentile`` (or None), ``phase``, ``iteration``,
-        ``sample_id``, ``vehicles`` (:func:`vehicle_starts`, or empty),
-        ``params`` (text of the parameters not in ``vehicles``) and
-        ``animation``.
+        ``log_p0``, ``situation`` and ``drivers`` (percentiles in [0, 100],
+        or None), ``step``, ``sample_id``, ``vehicles``
+        (:func:`vehicle_starts`, or empty), ``params`` (text of the
+        parameters not in ``vehicles``) and ``animation``.
     """
     vehicles = vehicle_starts(row, spec) if spec is not None else []
     shown = [n for n in names if isinstance(row.get(n), float)]
@@ -139,16 +120,21 @@ def failure_view(
     what = [MECHANISMS[1].get(int(contact), "")] if contact is not None else []
     if hit is not None and hit > 0:
         what.append(f"vehicle {hit} hit")
+    situation = drivers = None
+    if typical is not None:
+        share = typical.percentiles(
+            np.array([[row[c] for c in typical.columns]]), np.array([row["log_p0"]])
+        )
+        situation = float(share.situation[0])
+        drivers = None if share.drivers is None else float(share.drivers[0])
     return {
         "f": row["f"],
         "crash": bool(row.get("crash", False)),
         "what": ", ".join(w for w in what if w) or None,
         "log_p0": row["log_p0"],
-        "percentile": None
-        if p0_sample is None
-        else p0_percentile(row["log_p0"], p0_sample),
-        "phase": row["phase"],
-        "iteration": row.get("iteration"),
+        "situation": situation,
+        "drivers": drivers,
+        "step": step,
         "sample_id": row["sample_id"],
         "vehicles": vehicles,
         "params": params,

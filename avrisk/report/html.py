@@ -4,7 +4,11 @@ The report reads only what runs leave behind (``summary.json``,
 ``samples.parquet``) plus images drawn next to it, so ``avrisk report DIR``
 can rebuild it at any time. It leads with one answer
 (:func:`avrisk.report.answer.headline`): the probability per rollout, its
-interval, the method and whether the estimator's own diagnostics trust it.
+interval, the method and whether the estimator's own diagnostics trust it;
+then the most likely failures with their animations; then how the estimate
+was made (each run's estimates, its estimator's diagnostics, the comparison
+with naive sampling, every run's settings), each table explained where it
+appears, for a reader who does not know the methods.
 """
 
 from __future__ import annotations
@@ -18,16 +22,19 @@ import jinja2
 import numpy as np
 import pyarrow.compute as pc
 
+from avrisk.assembly import Typicality, scenario_typicality
 from avrisk.pipeline.files import write_atomic
 from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
 from avrisk.rare.estimator import estimator_class
+from avrisk.rare.final_stage import MIN_RELIABLE_ESS
+from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 from avrisk.report.answer import (
     headline,
     run_trust,
     search_sentence,
     threshold_trust,
 )
-from avrisk.report.failures import failure_view, p0_log_density_sample
+from avrisk.report.failures import failure_view
 from avrisk.report.plots import (
     UNRELIABLE_MARK,
     UNRELIABLE_NOTE,
@@ -38,24 +45,68 @@ from avrisk.report.plots import (
 )
 from avrisk.scenario import ScenarioSpec
 
-#: Sections of the report, in order (a golden list for tests).
-SECTIONS = ("answer", "runs", "comparison", "failures", "settings")
+#: Sections of the report, in order (a golden list for tests): the answer and
+#: the failures first, how the estimate was made below them.
+SECTIONS = ("answer", "failures", "statistics", "runs", "comparison", "settings")
 
 
-def top_failures(run_dir: RunDirectory, gamma: float, k: int) -> list[dict[str, Any]]:
-    """The ``k`` rollouts with ``f <= gamma`` of highest ``log p0``, of all stages.
+#: Each method in plain words, as a report explains the run that used it.
+METHODS = {
+    "naive": (
+        "Naive Monte Carlo: rollouts from situations drawn from P0; p is the share "
+        "that are dangerous. Unbiased and simple, but a rare event needs many "
+        "rollouts to be seen at all."
+    ),
+    "splitting": (
+        "Subset simulation (splitting): reaches the rare event in steps (levels), "
+        "each keeping the rollouts closest to danger and growing new ones from "
+        "them; p is the product of the shares kept (plot below)."
+    ),
+    "splitting_is": (
+        "Splitting + IS: subset simulation first finds the dangerous situations "
+        "in steps (levels, plots below), in independent replicates; then "
+        "importance sampling (IS) draws fresh rollouts from a distribution "
+        "fitted to them and weights each by how much more often P0 than that "
+        "distribution would draw it, so that the weighted share of dangerous "
+        "rollouts is an unbiased estimate of p."
+    ),
+    "ce": (
+        "Cross-entropy: a search moves the distribution rollouts are drawn from "
+        "towards danger, iteration by iteration (plot below); the final stage "
+        "draws from it and weights each rollout by how much more often P0 than "
+        "that distribution would draw it (importance sampling)."
+    ),
+}
+METHODS["defensive"] = METHODS["mixture"] = METHODS["ce"]
+
+
+def top_failures(
+    run_dir: RunDirectory, gamma: float, k: int, typical: Typicality | None = None
+) -> list[dict[str, Any]]:
+    """The ``k`` most likely rollouts with ``f <= gamma``, of all stages.
+
+    Ranked by :meth:`Typicality.rank` (the lower of the start's and the
+    drivers' percentiles under P0, ties by ``log p0``) when ``typical`` is
+    given, else (a black box with no scenario) by ``log p0``.
 
     Returns
     -------
     list of dict
         Samples-table rows, most likely first.
     """
-    table = run_dir.samples(["f", "log_p0"])
+    start = list(typical.columns) if typical is not None else []
+    table = run_dir.samples(["f", "log_p0", *start])
     hits = np.flatnonzero(pc.less_equal(table["f"], gamma).to_numpy())
     if hits.size == 0:
         return []
     log_p0 = table["log_p0"].to_numpy()[hits]
-    order = hits[np.argsort(-log_p0, kind="stable")[:k]]
+    if typical is None:
+        key = log_p0[:, None]
+    else:
+        situation = np.stack([table[c].to_numpy()[hits] for c in start], axis=1)
+        key = typical.rank(situation, log_p0)
+    # highest key first; lexsort sorts by its last key first, ascending
+    order = hits[np.lexsort(-key.T[::-1])[:k]]
     return run_dir.samples(rows=order).to_pylist()  # only these rows drawn again
 
 
@@ -76,6 +127,7 @@ def _run_view(
     ]
     return {
         "label": label,
+        "method": METHODS.get(summary["method"], ""),
         "gamma": est["gamma"],
         "p": est["p"],
         "stderr": est["stderr"],
@@ -110,6 +162,46 @@ def _run_view(
             ),
             [],
         ),
+    }
+
+
+def percentile_text(value: float) -> str:
+    """A percentile as a failure card shows it: ``"47"``, ``"3.2"``, ``"< 0.01"``.
+
+    Examples
+    --------
+    >>> [percentile_text(v) for v in (99.7, 3.24, 0.123, 0.0)]
+    ['100', '3.2', '0.12', '< 0.01']
+    """
+    if value >= 10:
+        return f"{value:.0f}"
+    if value >= 1:
+        return f"{value:.1f}"
+    return f"{value:.2f}" if value >= 0.01 else "< 0.01"
+
+
+def settings_table(runs: Sequence[tuple[str, RunDirectory]]) -> dict[str, Any]:
+    """Every run's settings side by side: ``labels`` and ``rows`` of text.
+
+    One row per setting any run has (in the order they first appear), one
+    cell per run, ``"-"`` where a run's method has no such setting.
+    """
+    each = [d.config().get("settings", {}) for _, d in runs]
+    names = list(dict.fromkeys(name for settings in each for name in settings))
+
+    def text(value: Any) -> str:
+        if isinstance(value, list):
+            return ", ".join(text(v) for v in value)
+        if value is None:
+            return "-"
+        return f"{value:,}" if type(value) is int else str(value)
+
+    return {
+        "labels": [label for label, _ in runs],
+        "rows": [
+            (name, [text(s[name]) if name in s else "-" for s in each])
+            for name in names
+        ],
     }
 
 
@@ -151,9 +243,10 @@ def write_report(
         returns its path (or ``None``).
     spec : ScenarioSpec, optional
         The runs' scenario: gives the time base of ``p`` (its horizon [s]),
-        and each failure's vehicles at absolute positions with the percentile
-        of its ``log p0`` under P0. Without it the answer is per rollout and
-        failures list their parameters as recorded.
+        and each failure's vehicles at absolute positions with the
+        percentiles of its start and its drivers under P0, by which failures
+        are ranked. Without it the answer is per rollout and failures, ranked
+        by ``log p0``, list their parameters as recorded.
 
     Returns
     -------
@@ -174,12 +267,13 @@ def write_report(
                         "title": table.title,
                         "columns": table.columns,
                         "rows": table_cells(table),
+                        "note": table.note,
                     }
                 )
                 continue
             name = f"diagnostics_{i}_{j}.png"
             plot_diagnostic(table, summary["estimate"]["gamma"], plots / name)
-            images.append(f"plots/{name}")
+            images.append({"src": f"plots/{name}", "note": table.note})
         if estimator.weighted and weighted is None:
             weighted = (label, summary)
         views.append(_run_view(label, run_dir, images, tables))
@@ -198,10 +292,12 @@ def write_report(
             "note": UNRELIABLE_NOTE,
         }
     failures, gamma = [], None
+    typical = scenario_typicality(spec) if spec is not None else None
     if failures_from is not None:
-        gamma = failures_from.summary()["estimate"]["gamma"]
-        rows = top_failures(failures_from, gamma, n_failures)
-        p0_sample = p0_log_density_sample(spec) if spec is not None and rows else None
+        estimate = failures_from.summary()["estimate"]
+        estimator = estimator_class(failures_from.summary()["method"])
+        gamma = estimate["gamma"]
+        rows = top_failures(failures_from, gamma, n_failures, typical)
         for j, row in enumerate(rows):
             anim = (
                 animate(row, out_dir / "animations" / f"failure_{j + 1}.gif")
@@ -212,10 +308,11 @@ def write_report(
                 failure_view(
                     row,
                     spec,
-                    p0_sample,
+                    typical,
                     names=[n for n in param_names if n in row]
                     or [n for n in row if n not in BOOKKEEPING + DENSITIES],
                     units=failures_from.units,
+                    step=estimator.stage_label(estimate, row["stage"]),
                     animation=str(anim.relative_to(out_dir)) if anim else None,
                 )
             )
@@ -228,6 +325,7 @@ def write_report(
         loader=jinja2.PackageLoader("avrisk.report", "templates"),
         autoescape=jinja2.select_autoescape(["html", "j2"]),
     )
+    env.filters["pct"] = percentile_text
     html = env.get_template("report.html.j2").render(
         title=title,
         subtitle=subtitle,
@@ -235,10 +333,16 @@ def write_report(
         runs=views,
         comparison=comparison,
         mark=UNRELIABLE_MARK,
+        weighted=weighted is not None,
+        min_ess=MIN_RELIABLE_ESS,
+        max_k=MAX_RELIABLE_PARETO_K,
         failures=failures,
         failures_gamma=gamma,
+        failures_label=runs[0][0],
+        scenario=spec is not None,
+        has_drivers=bool(typical and typical.drivers_dim),
         camera=spec is not None and spec.camera is not None,
-        settings={**first.config().get("settings", {})},
+        settings=settings_table(runs),
         footer=f"avrisk {first.summary()['versions']['avrisk']} - "
         f"generated {dt.datetime.now().isoformat(timespec='seconds')}",
     )

@@ -257,9 +257,14 @@ def test_diagnostics_show_the_levels_the_proposal_and_the_cross_check():
         n_particles=400, n_final=2000,
     )  # fmt: skip
     summary = json.loads(json.dumps(est.to_dict()))  # as read from summary.json
-    levels, fit, check = SplittingImportanceSampling.diagnostics(summary)
-    assert levels == SubsetSimulation.diagnostics(summary)[0] and levels.drawn
-    assert len(levels.rows) == len(est.history)
+    *levels, fit, check = SplittingImportanceSampling.diagnostics(summary)
+    assert levels == SubsetSimulation.diagnostics(summary)
+    # one plot per replicate, each numbering its sets from 0
+    assert [t.title for t in levels] == [
+        f"Subset simulation levels, replicate {r}" for r in (1, 2)
+    ]
+    assert all(t.drawn and t.column("set")[0] == 0 for t in levels)
+    assert sum(len(t.rows) for t in levels) == len(est.history)
     assert not fit.drawn and not check.drawn  # shown as tables
     (row,) = fit.rows
     shown = dict(zip(fit.columns, row, strict=True))
@@ -280,7 +285,7 @@ def test_diagnostics_show_the_levels_the_proposal_and_the_cross_check():
     assert table_cells(check)[0][2] == "..".join(f"{c:.3g}" for c in est.ci)
     # a summary without the importance-sampling details: the levels alone
     without = {k: v for k, v in summary.items() if k != "details"}
-    assert SplittingImportanceSampling.diagnostics(without) == [levels]
+    assert SplittingImportanceSampling.diagnostics(without) == levels
 
 
 def test_each_estimators_advice_names_only_its_own_settings():

@@ -1,14 +1,9 @@
-"""A failure card: parameters with units, absolute positions, log p0 as a percentile."""
+"""A failure card: parameters with units, absolute positions, two percentiles."""
 
-import numpy as np
 import pytest
 
-from avrisk.report.failures import (
-    failure_view,
-    p0_log_density_sample,
-    p0_percentile,
-    vehicle_starts,
-)
+from avrisk.assembly import scenario_typicality
+from avrisk.report.failures import failure_view, vehicle_starts
 from avrisk.scenario import load_spec
 
 
@@ -22,7 +17,7 @@ def _row(spec, **extra):
     for j in range(spec.n_vehicles):
         row |= {f"veh{j}.s": 100.0 + j, f"veh{j}.t": 0.1 * j}
         row |= {f"veh{j}.heading": 1.5, f"veh{j}.speed": 12.0}
-    row |= {"f": 0.0, "log_p0": -40.0, "phase": "final", "iteration": 0}
+    row |= {"f": 0.0, "log_p0": -40.0, "phase": "final", "stage": 0}
     return row | {"sample_id": 7, "crash": True} | extra
 
 
@@ -37,32 +32,32 @@ def test_vehicles_start_at_absolute_positions(spec):
         assert v["lane"] == slot.lane and v["speed"] == 12.0
 
 
-def test_log_p0_reads_as_a_percentile_of_p0(spec):
-    sample = p0_log_density_sample(spec, n=2000)
-    assert np.all(np.diff(sample) >= 0)
-    assert p0_percentile(sample[0] - 1.0, sample) == 0.0
-    assert p0_percentile(sample[-1] + 1.0, sample) == 100.0
-    assert p0_percentile(float(np.median(sample)), sample) == pytest.approx(50, abs=1)
-
-
 def test_a_card_says_what_happened_with_units(spec):
-    sample = p0_log_density_sample(spec, n=500)
     row = _row(spec, contact=1, collision_with=1, weird=2.5)
     card = failure_view(
         row,
         spec,
-        sample,
+        scenario_typicality(spec),
         names=[*row],
         units={"weird": "m/s^2"},
+        step="the final stage",
         animation=None,
     )
     assert card["what"] == "rear-end: the ego hits the vehicle ahead, vehicle 1 hit"
-    assert 0.0 <= card["percentile"] <= 100.0
+    assert 0.0 <= card["situation"] <= 100.0
+    assert card["drivers"] is None  # highway_idm has no learned drivers
+    assert card["step"] == "the final stage"
     assert len(card["vehicles"]) == spec.n_vehicles
     assert "veh" not in card["params"]  # the vehicles are in their own table
     assert "weird = 2.5 m/s^2" in card["params"]
     # without a scenario (a black box), parameters as recorded, with units
     plain = failure_view(
-        row, None, None, names=["veh0.s"], units={"veh0.s": "m"}, animation=None
+        row,
+        None,
+        None,
+        names=["veh0.s"],
+        units={"veh0.s": "m"},
+        step="the final stage",
+        animation=None,
     )
-    assert plain["params"] == "veh0.s = 100 m" and plain["percentile"] is None
+    assert plain["params"] == "veh0.s = 100 m" and plain["situation"] is None
