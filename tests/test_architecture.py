@@ -49,6 +49,16 @@ ALLOWED = {
     # the run driver serves any black box: it knows nothing of the simulator
     "pipeline": {"rare", "registry", "fingerprint"},
     "report": {"pipeline", "rare", "assembly", "scenario"},
+    # the scenario-level calls the command line is a shell over
+    "api": {
+        "pipeline",
+        "rare",
+        "assembly",
+        "scenario",
+        "report",
+        "registry",
+        "extras",
+    },
     "testing": {"rare"},
     # the Gymnasium environment: a scenario built and stepped by hand
     "gym": {"assembly", "agents", "scenario", "sim", "extras"},

@@ -1,36 +1,16 @@
 """``--workers``, ``--backend`` and ``--address``: where the rollouts are simulated.
 
-By default in this process. ``--workers N`` spawns N local worker processes;
-``--backend ray`` sends the chunks to a Ray cluster (``--address``, or a
-local one). Every worker builds the simulator from the run's resolved
-scenario, sent as data (:class:`avrisk.assembly.ObjectiveFactory`); the
-estimate is the same bit for bit on every backend.
+The options of ``run`` and ``compare``; :mod:`avrisk.api.backends` opens
+what they name.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
-from enum import StrEnum
-from typing import TYPE_CHECKING, Annotated
+from typing import Annotated
 
 import typer
 
-from avrisk.cli.common import CliError
-from avrisk.rare.evaluation import Evaluator
-from avrisk.rare.parallel import ProcessPoolEvaluator
-from avrisk.rare.ray_evaluator import RayEvaluator
-
-if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
-    from avrisk.assembly import ObjectiveFactory, SimulationObjective
-
-
-class Backend(StrEnum):
-    """Where worker processes run."""
-
-    local = "local"
-    ray = "ray"
-
+from avrisk.api.backends import Backend
 
 Workers = Annotated[
     int | None,
@@ -54,48 +34,3 @@ Address = Annotated[
         "[default: start a local one].",
     ),
 ]
-
-
-@contextmanager
-def open_evaluator(
-    objective: SimulationObjective,
-    backend: Backend,
-    workers: int | None,
-    address: str | None,
-) -> Iterator[Evaluator | None]:
-    """The evaluator the options ask for (None: this process), closed after.
-
-    The workers rebuild ``objective`` (whose scenario came from the command
-    line, so they may import the components it names).
-    """
-    if address is not None and backend != Backend.ray:
-        raise CliError("--address joins a Ray cluster: add --backend ray")
-    if backend == Backend.local and workers is None:
-        yield None
-        return
-    from avrisk.assembly import ObjectiveFactory
-
-    factory = ObjectiveFactory.of(objective, allow_import=True)
-    evaluator: ProcessPoolEvaluator | RayEvaluator
-    if backend == Backend.local:
-        evaluator = ProcessPoolEvaluator(factory, workers or 1)
-    else:
-        evaluator = _ray_evaluator(factory, workers, address, objective.device)
-    with evaluator:
-        yield evaluator
-
-
-def _ray_evaluator(
-    factory: ObjectiveFactory, workers: int | None, address: str | None, device: str
-) -> RayEvaluator:
-    try:
-        return RayEvaluator(
-            factory,
-            workers,
-            address=address,
-            num_gpus=1 if device.startswith("cuda") else 0,
-        )
-    except ImportError as err:
-        raise CliError(str(err)) from None
-    except ConnectionError as err:
-        raise CliError(f"cannot join the Ray cluster at {address}: {err}") from None

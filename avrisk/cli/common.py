@@ -16,6 +16,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from avrisk.api.errors import UserError
 from avrisk.cli import INTERRUPTED
 from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
 
@@ -26,8 +27,8 @@ err_console = Console(stderr=True)
 out_console = Console()
 
 
-class CliError(Exception):
-    """A problem to report to the user in one sentence, without a traceback."""
+class CliError(UserError):
+    """A problem with the command line, reported in one sentence (no traceback)."""
 
 
 #: Warnings of an estimate's own diagnostics, raised at each run's main
@@ -77,7 +78,7 @@ def user_errors(*expected: type[Exception]) -> Iterator[None]:
         with warnings.catch_warnings():
             warnings.showwarning = _WarningPrinter()
             yield
-    except (CliError, *expected) as exc:
+    except (UserError, *expected) as exc:
         err_console.print(
             f"[bold red]error:[/] {escape(_clipped(str(exc)))}",
             highlight=False,
@@ -265,35 +266,3 @@ def _check_writable(folder: Path, problem: str) -> None:
             else exc.strerror or str(exc)
         )
         raise CliError(f"{problem}: {reason}") from None
-
-
-#: Error numbers of a write that failed for want of room, anywhere.
-_NO_ROOM = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS}
-#: Error numbers of a write refused, when the file is one of ours.
-_REFUSED = {errno.EACCES, errno.EPERM, errno.EIO}
-
-
-def is_write_failure(exc: OSError, where: Path) -> bool:
-    """Whether ``exc`` is a failed write under ``where`` (a full disk ...)."""
-    if exc.errno in _NO_ROOM or "No space left" in str(exc):
-        return True
-    if exc.errno in _REFUSED and exc.filename:
-        return Path(str(exc.filename)).resolve().is_relative_to(where.resolve())
-    return False
-
-
-@contextmanager
-def write_failures(where: Path, then: str) -> Iterator[None]:
-    """Turn a failed write under ``where`` into one CliError line ending ``then``.
-
-    Only write failures (:func:`is_write_failure`): a full disk, a read-only
-    file system, a permission or quota; other OSErrors propagate.
-    """
-    try:
-        yield
-    except OSError as exc:
-        if not is_write_failure(exc, where):
-            raise
-        reason = exc.strerror or str(exc).splitlines()[0]
-        file = f" ({exc.filename})" if exc.filename else ""
-        raise CliError(f"{where}: cannot write{file}: {reason}; {then}") from None

@@ -23,10 +23,11 @@ from rich.table import Table
 from avrisk.cli.common import (
     check_output_file,
     check_output_folder,
+    err_console,
     out_console,
     user_errors,
 )
-from avrisk.cli.progress import RichRunMonitor
+from avrisk.cli.progress import RichProgress, RichRunMonitor
 from avrisk.cli.tables import add_columns, compact_table
 from avrisk.rare import CrossEntropy, Estimate, cross_entropy, naive_mc
 from avrisk.rare.cross_entropy import CESettings
@@ -170,7 +171,8 @@ def _scenario_part(
     some.
     """
     # the simulator (torch) is loaded here, not for the command's --help
-    from avrisk.cli.workflow import EXPECTED, compare_runs, settings
+    from avrisk.api.runs import EXPECTED, compare_runs, settings
+    from avrisk.cli.run import show_outcome
 
     method = settings(
         "splitting_is",
@@ -183,11 +185,13 @@ def _scenario_part(
     )
     console.rule("bundled scenario highway_default: P(min TTC <= gamma)")
     with user_errors(*EXPECTED):
-        compare_runs(
+        result = compare_runs(
             "highway_default",
             out,
             method,
             reference_n=reference,
             failures=3,
             device="cpu",
+            progress=RichProgress(err_console),
         )
+        show_outcome(result, as_json=False)

@@ -15,7 +15,6 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 from rich.console import Console
 from rich.markup import escape
@@ -29,6 +28,19 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 from rich.table import Column
+
+from avrisk.api.events import (
+    Advanced,
+    DiskMeasured,
+    Event,
+    Note,
+    Plan,
+    PlannedRun,
+    RunClosed,
+    RunOpened,
+    RunStarted,
+    Status,
+)
 
 #: Width of the progress bar [characters].
 BAR_WIDTH = 12
@@ -68,32 +80,6 @@ def megabytes(n_bytes: float) -> str:
     if n_bytes >= 1e9:
         return f"{n_bytes / 1e9:.1f} GB"
     return f"{n_bytes / 1e6:.0f} MB" if n_bytes >= 1e6 else f"{n_bytes / 1e3:.0f} kB"
-
-
-class PlannedRun(NamedTuple):
-    """One run of a command's plan.
-
-    Attributes
-    ----------
-    label : str
-        The run, as its progress bar names it.
-    what : str
-        What it does (the estimator's ``describe()``).
-    rollouts : int
-        The rollouts it plans, or at most makes (``at_most``).
-    at_most : bool
-        Whether ``rollouts`` is an upper bound
-        (:attr:`~avrisk.rare.estimator.Estimator.budget_is_bound`).
-    stored_in_full : int
-        Those of ``rollouts`` whose every column is stored
-        (:meth:`~avrisk.rare.estimator.Estimator.budget_not_redrawn`).
-    """
-
-    label: str
-    what: str
-    rollouts: int
-    at_most: bool = False
-    stored_in_full: int = 0
 
 
 @dataclass
@@ -330,3 +316,58 @@ class RichRunMonitor:
         """Tell the cost meter the disk a rollout took in the first chunk [B]."""
         if self.cost is not None:
             self.cost.disk(row_bytes, full=full)
+
+
+class RichProgress:
+    """The API's progress events (:mod:`avrisk.api.events`) as Rich output.
+
+    A :class:`~avrisk.api.events.Plan` makes the command's
+    :class:`CostMeter`; each run is a :class:`RichRunMonitor` from its
+    :class:`~avrisk.api.events.RunOpened` to its
+    :class:`~avrisk.api.events.RunClosed`. A run that was complete already
+    (it never started) says it was read back; a note is one line.
+    """
+
+    def __init__(self, console: Console) -> None:
+        self.console = console
+        self.cost: CostMeter | None = None
+        self.monitor: RichRunMonitor | None = None
+
+    def __call__(self, event: Event) -> None:
+        """Show ``event``."""
+        match event:
+            case Plan(runs, bytes_per_rollout, full_bytes_per_rollout):
+                self.cost = CostMeter(
+                    self.console, runs, bytes_per_rollout, full_bytes_per_rollout
+                )
+            case RunOpened(label):
+                self.monitor = RichRunMonitor(self.console, label, self.cost)
+                self.monitor.__enter__()
+            case RunStarted(_, total, description):
+                self._run.start(total, description)
+            case Advanced(_, n, replayed):
+                self._run.advance(n, replayed=replayed)
+            case Status(_, text):
+                self._run.status(text)
+            case DiskMeasured(_, row_bytes, full):
+                self._run.disk(row_bytes, full=full)
+            case RunClosed(label, out, error):
+                monitor, self.monitor = self._run, None
+                if error is None:
+                    monitor.__exit__(None, None, None)
+                else:
+                    monitor.__exit__(type(error), error, error.__traceback__)
+                if error is None and not monitor.started:
+                    self.console.print(
+                        f"{escape(label)}: complete already in {escape(str(out))}: "
+                        "read back, nothing simulated",
+                        highlight=False,
+                    )
+            case Note(text):
+                self.console.print(f"note: {escape(text)}", highlight=False)
+
+    @property
+    def _run(self) -> RichRunMonitor:
+        """The monitor of the run under way."""
+        assert self.monitor is not None, "an event of a run that was not opened"
+        return self.monitor

@@ -3,7 +3,8 @@
 The terminal gets the one answer first (:func:`avrisk.report.answer.headline`,
 the same as the report's), then a table per run that fits 80 columns (Rich
 wraps the text cells of a narrower terminal). With ``--json``, stdout gets one
-JSON document instead (:func:`result_document`, schema ``avrisk.result/1``);
+JSON document instead (:func:`avrisk.api.document.result_document`, schema
+``avrisk.result/1``);
 progress, warnings and notes stay on stderr, so stdout parses.
 """
 
@@ -15,38 +16,14 @@ from typing import Any
 
 from rich.markup import escape
 
+from avrisk.api.document import Runs, answer, mechanisms, result_document
 from avrisk.cli.common import err_console, out_console
 from avrisk.cli.tables import add_columns, compact_table
-from avrisk.pipeline import RunDirectory
 from avrisk.pipeline.files import json_text
 from avrisk.rare.estimator import estimator_class
-from avrisk.rare.results import jsonable
-from avrisk.report.answer import (
-    Headline,
-    headline,
-    run_trust,
-    search_sentence,
-    threshold_trust,
-)
-from avrisk.report.plots import (
-    UNRELIABLE_MARK,
-    UNRELIABLE_NOTE,
-    comparison_rows,
-    table_cells,
-)
+from avrisk.report.answer import run_trust, search_sentence, threshold_trust
+from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, table_cells
 from avrisk.scenario import ScenarioSpec
-
-#: Schema of the ``--json`` document.
-RESULT_SCHEMA = "avrisk.result/1"
-
-Runs = list[tuple[str, RunDirectory]]
-
-
-def answer(runs: Runs, spec: ScenarioSpec) -> Headline:
-    """The answer of ``runs`` (the first one under test), as the report gives it."""
-    return headline(
-        [(label, d.summary()) for label, d in runs], spec.simulation.horizon
-    )
 
 
 def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
@@ -125,7 +102,7 @@ def _interval(est: dict[str, Any]) -> str | None:
 
 def print_mechanisms(label: str, summary: dict[str, Any]) -> None:
     """What the dangerous rollouts were, at the run's main threshold: p by mechanism."""
-    parts = _mechanisms(summary)
+    parts = mechanisms(summary)
     if not parts:
         return
     gamma = summary["estimate"]["gamma"]
@@ -145,19 +122,6 @@ def print_mechanisms(label: str, summary: dict[str, Any]) -> None:
     out_console.print(table)
 
 
-def _mechanisms(summary: dict[str, Any]) -> list[dict[str, Any]]:
-    """``p`` by mechanism at the main threshold (empty when not recorded)."""
-    gamma = summary["estimate"]["gamma"]
-    return next(
-        (
-            m["by_label"]
-            for m in (summary.get("mechanisms") or {}).get("by_gamma", [])
-            if m["gamma"] == gamma
-        ),
-        [],
-    )
-
-
 def print_failed(runs: Runs) -> None:
     """One warning line on stderr per run with rollouts that failed to evaluate."""
     for label, run_dir in runs:
@@ -170,22 +134,6 @@ def print_failed(runs: Runs) -> None:
                 "them dangerous (rerun the command to evaluate them again)",
                 highlight=False,
             )
-
-
-def ratio_rows(
-    tested: RunDirectory, naive: RunDirectory, reference: RunDirectory | None
-) -> list[dict[str, Any]]:
-    """The method against naive MC at its budget, per threshold, naive hits seen too.
-
-    :func:`avrisk.report.plots.comparison_rows` (the report's) with
-    ``naive_hits_seen``: the hits of the naive run at the same budget.
-    """
-    seen = {g["gamma"]: g["n_hits"] for g in naive.summary()["estimate"]["by_gamma"]}
-    rows = comparison_rows(
-        tested.summary()["estimate"],
-        reference.summary()["estimate"] if reference is not None else None,
-    )
-    return [{**row, "naive_hits_seen": seen.get(row["gamma"])} for row in rows]
 
 
 def print_ratios(
@@ -255,9 +203,9 @@ def show_results(
     spec : ScenarioSpec
         Their scenario.
     as_json : bool, default=False
-        Print :func:`result_document` instead of tables.
+        Print :func:`~avrisk.api.document.result_document` instead of tables.
     ratios : list of dict, optional
-        :func:`ratio_rows` of a comparison.
+        :func:`~avrisk.api.document.ratio_rows` of a comparison.
     has_reference : bool, default=False
         Whether the comparison has a naive reference run (for ``ratios``).
     report : Path, optional
@@ -275,101 +223,6 @@ def show_results(
         err_console.print(  # a path is never broken
             f"report: {escape(str(report))}", highlight=False, soft_wrap=True
         )
-
-
-def result_document(
-    command: str,
-    runs: Runs,
-    spec: ScenarioSpec,
-    *,
-    ratios: list[dict[str, Any]] | None = None,
-    report: Path | None = None,
-) -> dict[str, Any]:
-    """The ``--json`` document: the answer, every run, the comparison, the report.
-
-    Parameters
-    ----------
-    command : str
-        ``"run"``, ``"compare"`` or ``"report"``.
-    runs : list of (label, RunDirectory)
-        Complete runs, the one under test first.
-    spec : ScenarioSpec
-        Their scenario (its name and horizon [s]).
-    ratios : list of dict, optional
-        :func:`ratio_rows` of a comparison.
-    report : Path, optional
-        The HTML report written.
-
-    Returns
-    -------
-    dict
-        Schema :data:`RESULT_SCHEMA`; non-finite numbers are ``null``. Keys
-        ``answer`` (:meth:`Headline.to_dict`), ``runs`` (per run: ``label``,
-        ``path``, ``method``, ``n_rollouts``, ``rollouts_reused`` from an
-        earlier session, ``stopped_by``, ``search`` (whether the estimator's
-        search converged at the main threshold,
-        :meth:`~avrisk.rare.results.SearchConvergence.to_dict` and its
-        ``sentence``; null for a method without one), ``by_gamma`` with
-        ``trust`` and
-        ``reasons`` per threshold, ``mechanisms`` at the main threshold,
-        ``diagnostics``: the estimator's tables of the report, each
-        :meth:`~avrisk.rare.estimator.DiagnosticTable.to_dict`),
-        ``comparison`` (or null) and ``report`` (or null).
-    """
-    docs = []
-    for label, run_dir in runs:
-        summary = run_dir.summary()
-        est = summary["estimate"]
-        estimator = estimator_class(summary["method"])
-        search = estimator.convergence(est, est["gamma"])
-        by_gamma = []
-        for g in sorted(est["by_gamma"], key=lambda g: g["gamma"]):
-            trust = threshold_trust(summary, g)
-            by_gamma.append(
-                {
-                    key: g.get(key)
-                    for key in (
-                        "gamma",
-                        "p",
-                        "stderr",
-                        "ci",
-                        "n_hits",
-                        "ess",
-                        "pareto_k",
-                        "n_failed",
-                        "p_if_failed_dangerous",
-                        "interval",
-                    )
-                }
-                | {"trust": trust.word, "reasons": list(trust.reasons)}
-            )
-        docs.append(
-            {
-                "label": label,
-                "path": str(run_dir.path),
-                "method": summary["method"],
-                "n_rollouts": est["n_evals"],
-                "rollouts_reused": summary["timing"]["rollouts_replayed"],
-                "stopped_by": est.get("stopped_by", "budget"),
-                "search": None
-                if search is None
-                else search.to_dict() | {"sentence": search_sentence(search)},
-                "by_gamma": by_gamma,
-                "mechanisms": _mechanisms(summary),
-                "diagnostics": [t.to_dict() for t in estimator.diagnostics(est)],
-            }
-        )
-    doc = {
-        "schema": RESULT_SCHEMA,
-        "command": command,
-        "scenario": spec.name,
-        "horizon_s": spec.simulation.horizon,
-        "answer": answer(runs, spec).to_dict(),
-        "runs": docs,
-        "comparison": ratios,
-        "report": None if report is None else str(report),
-    }
-    return jsonable(doc)
 
 
 def print_json(doc: dict[str, Any]) -> None:

@@ -22,26 +22,30 @@ from __future__ import annotations
 import difflib
 import math
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 import yaml
 
-from avrisk.cli.backends import Address, Backend, BackendOption, Workers, open_evaluator
+from avrisk.api.backends import Backend
+from avrisk.cli.backends import Address, BackendOption, Workers
 from avrisk.cli.common import (
     CliError,
     Device,
     check_output_folder,
+    err_console,
     resumable,
     user_errors,
 )
-from avrisk.cli.readback import check_recorded, check_samples, read_config
-from avrisk.cli.results import ratio_rows, show_results
+from avrisk.cli.progress import RichProgress
+from avrisk.cli.results import show_results
 from avrisk.pipeline import RunSettings
-from avrisk.pipeline.store import SAMPLES_FILE
 from avrisk.rare import estimator_names
 from avrisk.rare.estimator import DEFAULT_METHOD, estimator_class
-from avrisk.scenario import load_spec, spec_from_dict
+from avrisk.scenario import load_spec
+
+if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
+    from avrisk.api.runs import EstimationResult
 
 DEFAULT_SCENARIO = "highway_default"
 #: Where the command line's defaults differ from an estimator's own.
@@ -309,7 +313,7 @@ def _run_settings(
     **stopping: Any,
 ) -> RunSettings:
     """Run settings from a command's options; ``flags``: the estimator flags."""
-    from avrisk.cli.workflow import settings
+    from avrisk.api.runs import settings
 
     return settings(
         method,
@@ -367,16 +371,7 @@ def run(
     back and its report rebuilt. The run ends at its planned size or at the
     first stopping rule given, and says which.
     """
-    from avrisk.assembly import SimulationObjective
-    from avrisk.cli.workflow import (
-        EXPECTED,
-        check_thresholds,
-        cost_meter,
-        execute,
-        method_label,
-        planned,
-        write_run_report,
-    )
+    from avrisk.api.runs import EXPECTED, estimate_spec
 
     with user_errors(*EXPECTED), resumable(ctx):
         check_output_folder(out)
@@ -401,29 +396,17 @@ def run(
             max_rollouts=max_rollouts,
             max_seconds=max_time,
         )
-        check_thresholds(spec, run_settings)
-        objective = SimulationObjective(spec, device=device, allow_import=True)
-        label = method_label(method)
-        cost = cost_meter(
-            spec, [planned(label, run_settings)], store_full=store_full_samples
+        result = estimate_spec(
+            spec,
+            run_settings,
+            out,
+            failures=failures,
+            store_full=store_full_samples,
+            device=device,
+            backend=(backend, workers, address),
+            progress=RichProgress(err_console),
         )
-        with open_evaluator(objective, backend, workers, address) as evaluator:
-            run_dir = execute(
-                label,
-                out,
-                objective,
-                spec.model_dump(mode="json"),
-                run_settings,
-                failures,
-                evaluator,
-                store_full=store_full_samples,
-                cost=cost,
-            )
-        runs = [(label, run_dir)]
-        report = write_run_report(
-            out, runs, spec, failures, simulator=objective.simulator
-        )
-        show_results("run", runs, spec, as_json=as_json, report=report)
+        show_results("run", result.runs, spec, as_json=as_json, report=result.report)
 
 
 def compare(
@@ -464,7 +447,7 @@ def compare(
     2,000 + 10,000; a reference of 50,000) take minutes; the plan's cost is
     printed before the first rollout.
     """
-    from avrisk.cli.workflow import EXPECTED, compare_runs
+    from avrisk.api.runs import EXPECTED, compare_runs
 
     with user_errors(*EXPECTED), resumable(ctx):
         check_output_folder(out)
@@ -486,7 +469,7 @@ def compare(
             ),
             COMPARE_DEFAULTS,
         )
-        compare_runs(
+        result = compare_runs(
             scenario,
             out,
             tested,
@@ -494,8 +477,9 @@ def compare(
             failures,
             device,
             (backend, workers, address),
-            as_json=as_json,
+            progress=RichProgress(err_console),
         )
+        show_outcome(result, as_json)
 
 
 def report(
@@ -520,61 +504,21 @@ def report(
     Failures are animated from the traces recorded during the run; the run
     directory alone suffices (it never makes avrisk import code).
     """
-    from avrisk.assembly import ScenarioSimulator, param_layout
-    from avrisk.cli.workflow import (
-        EXPECTED,
-        NAIVE_PART,
-        REFERENCE_PART,
-        comparison_parts,
-        method_label,
-        samples_directory,
-        write_run_report,
-    )
+    from avrisk.api.runs import EXPECTED, rebuild_report
 
     with user_errors(*EXPECTED):
-        single = (run_dir / "config.json").is_file()
-        parts = [] if single else comparison_parts(run_dir)
-        if not single and not parts:
-            raise CliError(f"{run_dir} holds no avrisk run (no config.json)")
-        dirs = [("run", run_dir)] if single else parts
-        for _, path in dirs:
-            check_recorded(path)
-        config = read_config(dirs[0][1])
-        spec = spec_from_dict(config["scenario"], source=f"{dirs[0][1]}/config.json")
-        simulator = None
-        if scenario is not None:
-            given = load_spec(scenario)
-            if given.model_dump(mode="json") != config["scenario"]:
-                raise CliError(
-                    f"{scenario} is not the scenario of {run_dir} (they differ); "
-                    "give the file the run was made with"
-                )
-            simulator = ScenarioSimulator(given, device=device, allow_import=True)
-        elif not spec.import_paths():
-            simulator = ScenarioSimulator(spec, device=device)
-        layout = param_layout(spec)
-        runs, by_name = [], {}
-        for name, path in dirs:
-            directory = samples_directory(path, spec)
-            if not directory.is_complete:
-                raise CliError(
-                    f"{path} is not finished; rerun its command to resume it"
-                )
-            check_samples(directory.path / SAMPLES_FILE, layout.columns)
-            label = method_label(directory.config()["settings"]["method"])
-            runs.append((label if single else f"{label} ({name})", directory))
-            by_name[name] = directory
-        ref_dir = by_name.get(REFERENCE_PART)
-        naive = by_name.get(NAIVE_PART)
-        path = write_run_report(
-            run_dir, runs, spec, failures, ref_dir, simulator=simulator
-        )
-        show_results(
-            "report",
-            runs,
-            spec,
-            as_json=as_json,
-            ratios=None if naive is None else ratio_rows(runs[0][1], naive, ref_dir),
-            has_reference=ref_dir is not None,
-            report=path,
-        )
+        result = rebuild_report(run_dir, failures, scenario, device)
+        show_outcome(result, as_json)
+
+
+def show_outcome(result: EstimationResult, as_json: bool) -> None:
+    """The results of a comparison or a rebuilt report: tables, or JSON."""
+    show_results(
+        result.command,
+        result.runs,
+        result.spec,
+        as_json=as_json,
+        ratios=result.ratios,
+        has_reference=result.has_reference,
+        report=result.report,
+    )

@@ -1,18 +1,11 @@
 """``avrisk simulate`` and ``avrisk replay``: naive rollouts from P0, and animations.
 
-``simulate`` draws ``X ~ P0`` (seeded, batch-size independent), simulates every
-rollout and writes one Parquet row per rollout, in the samples-table format of
-a run (:func:`avrisk.pipeline.store.samples_table`)::
-
-    phase, stage, iteration, chunk, sample_id, seed, veh0.s, ..., veh5.speed,
-    log_p0, log_p_proposal, log_weight, weight, f, crash, offroad, reversing,
-    steps, status, collision_with, contact
-
-The resolved scenario spec travels in the file's schema metadata, so
-``replay`` can re-simulate any row from the file alone; ``replay`` takes a
-run directory (or its ``samples.parquet``) too, whose spec is its
-``config.json``. A spec read back from a file never makes avrisk import code:
-one that names user code by import path must be given again (``--scenario``).
+``simulate`` draws ``X ~ P0`` and writes one Parquet row per rollout, in the
+samples-table format of a run, the scenario in its metadata; ``replay``
+simulates chosen rows of such a file, or of a run directory, again
+(:mod:`avrisk.api.rollouts` does both). A spec read back from a file never
+makes avrisk import code: one that names user code by import path must be
+given again (``--scenario``).
 
 The simulator (torch) is imported where it runs, not by this module: ``--help``
 starts without it.
@@ -20,10 +13,7 @@ starts without it.
 
 from __future__ import annotations
 
-import json
-import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Annotated
 
@@ -40,7 +30,6 @@ from rich.progress import (
 )
 from rich.table import Table
 
-import avrisk
 from avrisk.cli.common import (
     CliError,
     Device,
@@ -48,155 +37,18 @@ from avrisk.cli.common import (
     err_console,
     out_console,
     user_errors,
-    write_failures,
-)
-from avrisk.cli.readback import (
-    check_columns,
-    check_rows,
-    parse_json,
-    read_config,
-    read_schema,
-    read_table,
-    stored_params,
 )
 from avrisk.cli.tables import add_columns, compact_table
 from avrisk.extras import MissingExtraError
 from avrisk.pipeline.files import write_parquet_atomic
 from avrisk.pipeline.regenerate import RegenerationError
-from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE, RunDirectory, samples_table
-from avrisk.rare import RareEventProblem, StageBatch, run_stage
-from avrisk.rare.problem import FINAL_STAGE
+from avrisk.pipeline.store import SAMPLES_FILE
 from avrisk.registry import ComponentError
-from avrisk.scenario import (
-    ScenarioSpec,
-    ScenarioSpecError,
-    load_spec,
-    spec_from_dict,
-)
+from avrisk.scenario import ScenarioSpecError, load_spec
 
 #: Thresholds on the minimum TTC [s] counted in the summary.
 SUMMARY_GAMMAS: tuple[float, ...] = (0.1, 0.2, 0.3)
 
-#: Parquet schema-metadata keys.
-META_SCENARIO = b"avrisk.scenario"
-META_RUN = b"avrisk.run"
-
-_RESULT_COLUMNS = ("log_p0", "f", "crash", "offroad", "reversing", "steps")
-
-
-# ----------------------------------------------------------------------- core
-@dataclass(frozen=True)
-class SimulationRun:
-    """The rows of one ``simulate`` run, as a Parquet-ready Arrow table.
-
-    Attributes
-    ----------
-    table : pyarrow.Table
-        One row per rollout, ``n`` rows, ordered by ``sample_id``.
-    wall_s : float
-        Wall-clock time of the simulation [s].
-    """
-
-    table: pa.Table
-    wall_s: float
-
-
-def simulate_rollouts(
-    spec: ScenarioSpec,
-    n: int,
-    *,
-    seed: int = 0,
-    batch_size: int = 1024,
-    device: str = "cpu",
-    on_batch: Callable[[int], None] | None = None,
-) -> SimulationRun:
-    """Sample ``n`` scenarios from ``P0`` and simulate them.
-
-    The samples are the final stage of a naive Monte Carlo run with the same
-    seed (:func:`avrisk.rare.run_stage`): sample ``i`` and its rollout seed
-    depend only on ``seed`` and ``i``, never on ``batch_size``, and
-    ``avrisk run --method naive --seed S`` simulates exactly these rollouts.
-
-    Parameters
-    ----------
-    spec : ScenarioSpec
-    n : int
-        Number of rollouts, ``>= 1``.
-    seed : int, default=0
-        Run seed, ``>= 0``.
-    batch_size : int, default=1024
-        Rollouts simulated together (memory grows linearly with it).
-    device : str, default="cpu"
-        Torch device of the simulator.
-    on_batch : callable or None
-        Called with the number of rollouts finished after each chunk.
-
-    Returns
-    -------
-    SimulationRun
-    """
-    from avrisk.assembly import SimulationObjective, base_distribution
-
-    objective = SimulationObjective(spec, device=device)
-    p0 = base_distribution(spec)
-    problem = RareEventProblem(p0, objective, gamma=0.0, batch_size=batch_size)
-    batches: list[StageBatch] = []
-
-    def record(batch: StageBatch) -> None:
-        batches.append(batch)
-        if on_batch is not None:
-            on_batch(len(batch.values))
-
-    start_time = time.perf_counter()
-    run_stage(problem, p0, n, seed=seed, stage=FINAL_STAGE, on_batch=record)
-    wall_s = time.perf_counter() - start_time
-
-    run_meta = {
-        "avrisk_version": avrisk.__version__,
-        "command": "simulate",
-        "run_seed": seed,
-        "n": n,
-        "device": device,
-        "scenario": spec.name,
-    }
-    layout = objective.layout
-    units = {**layout.units(), "f": "s", "log_p0": "log density"}
-    table = pa.concat_tables(
-        samples_table(b, layout.columns, units)
-        for b in sorted(batches, key=lambda b: b.chunk)
-    )
-    table = table.replace_schema_metadata(
-        {
-            META_SCENARIO: json.dumps(spec.model_dump(mode="json")).encode(),
-            META_RUN: json.dumps(run_meta).encode(),
-        }
-    )
-    return SimulationRun(table=table, wall_s=wall_s)
-
-
-def spec_from_parquet(path: Path) -> ScenarioSpec:
-    """The scenario of a samples table: stored in it, or in its run's config.json.
-
-    Raises
-    ------
-    CliError
-        If neither holds a (valid) scenario.
-    """
-    meta = read_schema(path).metadata or {}
-    if META_SCENARIO in meta:
-        stored = parse_json(meta[META_SCENARIO], f"{path} (its stored scenario)")
-        return spec_from_dict(stored, source=f"{path} (stored)")
-    config = path.parent / CONFIG_FILE
-    if config.is_file():
-        stored = read_config(path.parent)["scenario"]
-        return spec_from_dict(stored, source=str(config))
-    raise CliError(
-        f"{path} carries no scenario (neither written by 'avrisk simulate' nor in "
-        "a run directory); pass --scenario to name it"
-    )
-
-
-# ------------------------------------------------------------------------ CLI
 #: Where ``simulate`` and ``replay`` write without ``--out`` (``runs/`` is made).
 DEFAULT_ROLLOUTS = Path("runs/rollouts.parquet")
 DEFAULT_GIF = Path("runs/replay.gif")
@@ -257,6 +109,8 @@ def simulate(
     ] = None,
 ) -> None:
     """Sample scenarios from P0, simulate them, write one Parquet row per rollout."""
+    from avrisk.api.rollouts import simulate_rollouts
+
     with user_errors(ScenarioSpecError, ComponentError, MissingExtraError):
         spec = load_spec(scenario)
         out = _out_path(out, DEFAULT_ROLLOUTS, (".parquet", ".pq"))
@@ -289,19 +143,6 @@ def simulate(
             raise CliError(f"--out {out}: cannot write: {exc}") from None
     out_console.print(_summary_table(run.table, run.wall_s))
     out_console.print(f"wrote {out}", highlight=False)
-
-
-def _parse_rows(rows: str, n_rows: int) -> list[int]:
-    try:
-        picked = [int(r) for r in rows.split(",") if r.strip()]
-    except ValueError:
-        raise CliError(f"--rows {rows!r}: expected row numbers like 0,5,12") from None
-    if not picked:
-        raise CliError("--rows: give at least one row number, like 0,5")
-    bad = [r for r in picked if not 0 <= r < n_rows]
-    if bad:
-        raise CliError(f"--rows: {bad} out of range; the file has rows 0..{n_rows - 1}")
-    return picked
 
 
 def replay(
@@ -340,13 +181,7 @@ def replay(
     ] = None,
 ) -> None:
     """Re-simulate chosen rows of a samples table and write a top-down GIF."""
-    from avrisk.assembly import (
-        ScenarioSimulator,
-        base_distribution,
-        param_layout,
-        resimulate,
-    )
-    from avrisk.report.animate import animate_rollouts, save_frame_png
+    from avrisk.api.rollouts import replay_rollouts
 
     with user_errors(
         ScenarioSpecError, ComponentError, MissingExtraError, RegenerationError
@@ -362,62 +197,23 @@ def replay(
         out = _out_path(out, DEFAULT_GIF, (".gif",))
         if frame_png is not None:
             check_output_file(frame_png, "--frame-png")
-        table = read_table(file)
-        spec = load_spec(scenario) if scenario else spec_from_parquet(file)
-        layout = param_layout(spec)
-        if (rows is None) == (worst is None):
-            raise CliError("give exactly one of --rows i,j,... or --worst K")
-        stored = stored_params(table.schema, layout.columns)
-        with_f = ("f",) if "f" in table.column_names or worst is not None else ()
-        check_columns(table.schema, file, (*stored, *with_f), ("seed",))
-        if rows is not None:
-            picked = _parse_rows(rows, table.num_rows)
-        else:
-            order = np.argsort(table.column("f").to_numpy(), kind="stable")
-            picked = [int(i) for i in order[:worst]]
-        sub = table.take(picked)
-        if len(stored) < len(layout.columns):  # a run's table, xi left out
-            base = base_distribution(spec)
-            run_dir = RunDirectory(file.parent, layout.columns, base=base)
-            sub = run_dir.samples(rows=picked)
-        missing = [c for c in (*layout.columns, "seed") if c not in sub.column_names]
-        if missing:
-            raise CliError(
-                f"{file}: lacks column(s) {missing[:4]} needed to replay scenario "
-                f"{spec.name!r}"
-            )
-        x = np.stack([sub.column(c).to_numpy() for c in layout.columns], axis=1)
-        check_rows(spec, layout.columns, x, picked, file)
-        seeds = sub.column("seed").to_numpy()
-        sim = ScenarioSimulator(spec, allow_import=scenario is not None)
-        result, traces = resimulate(sim, x, seeds, [f"row {r}" for r in picked])
-        if "f" in sub.column_names:
-            stored = sub.column("f").to_numpy()
-            again = result.f.cpu().numpy().astype(np.float64)
-            if not np.allclose(stored, again, rtol=1e-5, atol=1e-6, equal_nan=True):
-                err_console.print(
-                    "[yellow]warning:[/] re-simulated min TTC differs from the file "
-                    f"(stored {stored.tolist()}, now {again.tolist()}); was the "
-                    "simulator or scenario changed?"
-                )
-        with write_failures(out.parent, "free space and rerun the command"):
-            animate_rollouts(
-                traces,
-                spec.road,
-                spec.simulation.dt,
-                out,
-                fps=fps,
-                view_length=view_length,
-            )
-            if frame_png is not None:
-                save_frame_png(
-                    traces,
-                    spec.road,
-                    spec.simulation.dt,
-                    frame_png,
-                    view_length=view_length,
-                )
-    for r, tr in zip(picked, traces, strict=True):
+        replay = replay_rollouts(
+            file,
+            out,
+            rows=rows,
+            worst=worst,
+            scenario=scenario,
+            fps=fps,
+            view_length=view_length,
+            frame_png=frame_png,
+        )
+    if replay.stored_f is not None:
+        err_console.print(
+            "[yellow]warning:[/] re-simulated min TTC differs from the file "
+            f"(stored {replay.stored_f}, now {replay.again_f}); was the "
+            "simulator or scenario changed?"
+        )
+    for r, tr in zip(replay.rows, replay.traces, strict=True):
         out_console.print(
             f"row {r}: min TTC {tr.min_ttc:.3g} s"
             + (", crash" if tr.crashed else "")

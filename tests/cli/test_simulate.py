@@ -9,7 +9,7 @@ import yaml
 from PIL import Image
 from typer.testing import CliRunner
 
-import avrisk.cli.simulate as simulate_mod
+from avrisk.api.rollouts import META_RUN
 from avrisk.cli.app import app
 from avrisk.scenario import ParamLayout, load_spec
 
@@ -252,7 +252,7 @@ def test_device_auto_picks_cuda_when_present_and_is_recorded(short_scenario, tmp
         str(short_scenario), "--n", "2", "--device", "auto", "--out", str(out)
     )
     assert result.exit_code == 0, result.output
-    meta = json.loads(pq.read_schema(out).metadata[simulate_mod.META_RUN])
+    meta = json.loads(pq.read_schema(out).metadata[META_RUN])
     assert meta["device"] == ("cuda" if torch.cuda.is_available() else "cpu")
 
 

@@ -5,7 +5,7 @@ edited, truncated or swapped: a run's ``config.json`` and ``summary.json``, a
 samples table and the scenario stored in its metadata. Each is checked here
 for what the commands then rely on (valid JSON without NaN, the fields and
 types used, readable Parquet with numeric columns, rows inside the scenario's
-ranges), and refused with a :class:`~avrisk.cli.common.CliError` naming the
+ranges), and refused with a :class:`~avrisk.api.errors.UserError` naming the
 file and the problem; never a traceback, never used as if it were sound.
 """
 
@@ -23,7 +23,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from avrisk.cli.common import CliError
+from avrisk.api.errors import UserError
 from avrisk.pipeline.regenerate import META_KEY
 from avrisk.pipeline.store import CONFIG_FILE, SUMMARY_FILE
 from avrisk.scenario import ScenarioSpec
@@ -37,26 +37,26 @@ def _no_constant(name: str) -> float:
 
 
 def parse_json(text: str | bytes, source: str) -> Any:
-    """``text`` as JSON (``NaN`` and ``Infinity`` refused), or a CliError."""
+    """``text`` as JSON (``NaN`` and ``Infinity`` refused), or a UserError."""
     try:
         return json.loads(text, parse_constant=_no_constant)
     except json.JSONDecodeError as exc:
-        raise CliError(
+        raise UserError(
             f"{source}: not valid JSON ({exc.msg}, line {exc.lineno}); {_DAMAGED}"
         ) from None
     except (ValueError, UnicodeDecodeError, RecursionError) as exc:
-        raise CliError(f"{source}: not valid JSON ({exc}); {_DAMAGED}") from None
+        raise UserError(f"{source}: not valid JSON ({exc}); {_DAMAGED}") from None
 
 
 def read_json(path: Path) -> dict[str, Any]:
-    """The JSON object in ``path``, or a CliError naming the file."""
+    """The JSON object in ``path``, or a UserError naming the file."""
     try:
         text = path.read_bytes()
     except OSError as exc:
-        raise CliError(f"{path}: cannot be read: {exc.strerror or exc}") from None
+        raise UserError(f"{path}: cannot be read: {exc.strerror or exc}") from None
     data = parse_json(text, str(path))
     if not isinstance(data, dict):
-        raise CliError(
+        raise UserError(
             f"{path}: holds a JSON {type(data).__name__}, not an object; {_DAMAGED}"
         )
     return data
@@ -68,7 +68,7 @@ def read_config(run_dir: Path) -> dict[str, Any]:
     config = read_json(path)
     for key in ("scenario", "settings"):
         if not isinstance(config.get(key), dict):
-            raise CliError(
+            raise UserError(
                 f"{path}: holds no '{key}' section, so it is not the config of an "
                 f"avrisk run; {_DAMAGED}"
             )
@@ -116,12 +116,12 @@ def check_summary(run_dir: Path) -> None:
     except ValidationError as exc:
         err = exc.errors(include_url=False)[0]
         where = ".".join(str(p) for p in err["loc"]) or "(top level)"
-        raise CliError(
+        raise UserError(
             f"{path}: not an avrisk summary ({where}: {err['msg']}); {_DAMAGED}"
         ) from None
     est = checked.estimate
     if all(g.gamma != est.gamma for g in est.by_gamma):
-        raise CliError(
+        raise UserError(
             f"{path}: not an avrisk summary (no estimate at its own threshold "
             f"{est.gamma:g}); {_DAMAGED}"
         )
@@ -136,21 +136,21 @@ def check_recorded(run_dir: Path) -> None:
 
 
 def read_schema(path: Path) -> pa.Schema:
-    """The schema of Parquet file ``path``, or a CliError naming the file."""
+    """The schema of Parquet file ``path``, or a UserError naming the file."""
     try:
         return pq.read_schema(path)
     except (pa.ArrowException, OSError) as exc:
-        raise CliError(
+        raise UserError(
             f"{path}: not a readable Parquet file ({clip(str(exc), 120)})"
         ) from None
 
 
 def read_table(path: Path) -> pa.Table:
-    """The Parquet table in ``path``, or a CliError naming the file."""
+    """The Parquet table in ``path``, or a UserError naming the file."""
     try:
         return pq.read_table(path)
     except (pa.ArrowException, OSError) as exc:
-        raise CliError(
+        raise UserError(
             f"{path}: not a readable Parquet file ({clip(str(exc), 120)})"
         ) from None
 
@@ -164,7 +164,7 @@ def check_columns(
     """Refuse a table lacking a column, or with a non-numeric one."""
     missing = [c for c in (*numeric, *integer) if c not in schema.names]
     if missing:
-        raise CliError(
+        raise UserError(
             f"{path}: lacks column(s) {missing[:4]}"
             + (f" and {len(missing) - 4} more" if len(missing) > 4 else "")
             + f"; {_DAMAGED}"
@@ -172,11 +172,11 @@ def check_columns(
     for name in numeric:
         kind = schema.field(name).type
         if not (pa.types.is_floating(kind) or pa.types.is_integer(kind)):
-            raise CliError(f"{path}: column {name!r} holds {kind}, not numbers")
+            raise UserError(f"{path}: column {name!r} holds {kind}, not numbers")
     for name in integer:
         kind = schema.field(name).type
         if not pa.types.is_integer(kind):
-            raise CliError(f"{path}: column {name!r} holds {kind}, not integers")
+            raise UserError(f"{path}: column {name!r} holds {kind}, not integers")
 
 
 def stored_params(schema: pa.Schema, params: Sequence[str]) -> list[str]:
@@ -193,7 +193,7 @@ def stored_params(schema: pa.Schema, params: Sequence[str]) -> list[str]:
 def check_samples(path: Path, params: Sequence[str]) -> None:
     """Refuse a run's samples table that a report cannot read or trust."""
     if not path.is_file():
-        raise CliError(f"{path}: missing; {_DAMAGED}")
+        raise UserError(f"{path}: missing; {_DAMAGED}")
     schema = read_schema(path)
     required = (*stored_params(schema, params), "f", "weight", "log_p0")
     check_columns(schema, path, required, ("seed",))
@@ -219,7 +219,7 @@ def check_rows(
         for name, value in zip(columns, row, strict=True):
             value = float(value)
             if not math.isfinite(value):
-                raise CliError(f"{path}: row {i}: {name} is {value}, not a number")
+                raise UserError(f"{path}: row {i}: {name} is {value}, not a number")
             found = _VEHICLE_COLUMN.match(name)
             if found is None or int(found[1]) >= spec.n_vehicles:
                 continue
@@ -228,7 +228,7 @@ def check_rows(
                 continue
             slack = 1e-6 * marginal.scale
             if not marginal.lo - slack <= value <= marginal.hi + slack:
-                raise CliError(
+                raise UserError(
                     f"{path}: row {i}: {name} = {value:g} lies outside its range "
                     f"[{marginal.lo:g}, {marginal.hi:g}] in scenario "
                     f"{spec.name!r}; {_DAMAGED}"
