@@ -332,12 +332,6 @@ def test_the_samples_of_splitting_is_are_named_by_the_step_that_drew_them(
     assert any(n.startswith("replicate 2, set ") for n in names)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="splitting_is moves each replicate at gamma from that replicate's own "
-    "stage count, so the first replicate's moves reuse the stage numbers (and "
-    "random numbers) of the next replicate's levels; their records replace them",
-)
 def test_no_two_steps_of_splitting_is_share_a_stage(replicated):
     estimate = replicated.summary()["estimate"]
     assert replicated.samples(["stage"]).num_rows == estimate["n_evals"]
