@@ -649,7 +649,7 @@ def next_level(
     1.0
     >>> float(next_level(values, np.inf, -1.0, p0=0.2, p0_max=0.4))  # below the ties
     0.0
-    >>> print(next_level(np.full(10, 7.0), np.inf, -1.0, p0=0.2, p0_max=0.5))
+    >>> print(next_level(np.full(10, 7.0), 7.0, -1.0, p0=0.2, p0_max=0.5))
     None
     """
     quantile = float(np.quantile(values, p0, method="inverted_cdf"))
