@@ -6,20 +6,24 @@ help (most import torch, which takes seconds): ``avrisk --help`` lists the
 commands from their docstrings, read from the source.
 """
 
+from __future__ import annotations
+
 import ast
 import importlib.util
 from importlib import import_module
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
-import click
 import typer
-from typer.core import TyperGroup
+from typer.core import TyperCommand, TyperGroup
 from typer.main import get_command_from_info
 from typer.models import CommandInfo
 
 from avrisk.cli import loading
 from avrisk.tensors.allocator import keep_freed_memory
+
+if TYPE_CHECKING:  # Typer's own click: a dependency of it, or vendored in it
+    import click
 
 #: The commands in the order ``--help`` lists them, each as (module, function);
 #: ``scenarios`` follows (a group of its own).
@@ -67,7 +71,7 @@ class LazyGroup(TyperGroup):
             return super().get_command(ctx, name)
         module, function = self.lazy[name]
         if self._listing:
-            return click.Command(name, help=docstring(module, function))
+            return TyperCommand(name, help=docstring(module, function))
         with loading():
             callback = getattr(import_module(module), function)
         return get_command_from_info(
