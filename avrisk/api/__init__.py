@@ -118,8 +118,9 @@ def estimate(
     store_full : bool, default=False
         Store every column of the samples (else ``xi`` is drawn again when read).
     workers, backend, address
-        Simulate in worker processes (``backend="local"``) or on a Ray cluster
-        (``backend="ray"``, ``address``); default: in this process.
+        Simulate in worker processes (``backend="local"``), on a Ray cluster
+        (``backend="ray"``, ``address``) or with another registered backend
+        (:func:`avrisk.api.backends.register_backend`); default: in this process.
     progress : callable, optional
         Called with every :mod:`avrisk.api.events` event, in order.
     **options
@@ -138,7 +139,6 @@ def estimate(
     UserError
         For settings, a scenario or a run directory that cannot be used.
     """
-    from avrisk.api.backends import Backend
     from avrisk.api.runs import estimate_spec
 
     return estimate_spec(
@@ -148,7 +148,7 @@ def estimate(
         failures=failures,
         store_full=store_full,
         device=device,
-        backend=(Backend(backend), workers, address),
+        backend=(backend, workers, address),
         progress=progress,
     )
 
@@ -179,7 +179,6 @@ def compare_methods(
     rollouts (0: none) to ``out/reference``; the report compares them per
     threshold (``ratios``). The other parameters are :func:`estimate`'s.
     """
-    from avrisk.api.backends import Backend
     from avrisk.api.runs import compare_runs
 
     return compare_runs(
@@ -189,7 +188,7 @@ def compare_methods(
         reference_n,
         failures,
         device,
-        (Backend(backend), workers, address),
+        (backend, workers, address),
         progress=progress,
     )
 

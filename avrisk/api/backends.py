@@ -1,76 +1,127 @@
-"""Where the rollouts are simulated: this process, worker processes or Ray.
+"""Where the rollouts are simulated: backends registered by name.
 
-By default in this process. ``workers=N`` spawns N local worker processes;
-the ``ray`` backend sends the chunks to a Ray cluster (``address``, or a
-local one). Every worker builds the simulator from the run's resolved
-scenario, sent as data (:class:`avrisk.assembly.ObjectiveFactory`); the
-estimate is the same bit for bit on every backend.
+``local`` (the default) simulates in this process, or with ``workers=N`` in
+N local worker processes; ``ray`` sends the chunks to a Ray cluster
+(``address``, or a local one). Every worker builds the simulator from the
+run's resolved scenario, sent as data (:func:`worker_factory`); the estimate
+is the same bit for bit on every backend.
+
+A backend is an *opener*, registered with :func:`register_backend`: called
+with the objective and the command's ``workers`` and ``address``, it returns
+a context manager that yields the :class:`~avrisk.rare.evaluation.Evaluator`
+(None: this process) and closes it on exit. The command line's ``--backend``
+offers the registered names. Its errors name the command's options
+(``--backend``, ``--address``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
-from enum import StrEnum
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from typing import TYPE_CHECKING
 
 from avrisk.api.errors import UserError
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import ProcessPoolEvaluator
 from avrisk.rare.ray_evaluator import RayEvaluator
+from avrisk.registry import Registry
 
 if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
     from avrisk.assembly import ObjectiveFactory, SimulationObjective
 
+#: ``opener(objective, workers, address)``: yields the evaluator (None: this
+#: process) and closes it on exit.
+Opener = Callable[
+    ["SimulationObjective", int | None, str | None],
+    AbstractContextManager[Evaluator | None],
+]
 
-class Backend(StrEnum):
-    """Where worker processes run."""
+#: The backend of a run that names none.
+DEFAULT_BACKEND = "local"
 
-    local = "local"
-    ray = "ray"
+_BACKENDS = Registry("backend")
+_DESCRIPTIONS: dict[str, str] = {}
+
+
+def register_backend(name: str, opener: Opener, *, description: str) -> None:
+    """Make ``opener`` available as the backend ``name`` (``--backend NAME``).
+
+    ``description`` says where it simulates, for ``--help`` (``"this
+    machine"``).
+    """
+    _BACKENDS.register(name, opener)
+    _DESCRIPTIONS[name] = description
+
+
+def backend_descriptions() -> dict[str, str]:
+    """The registered backends' descriptions by name, sorted by name."""
+    return {name: _DESCRIPTIONS[name] for name in _BACKENDS.names()}
+
+
+def open_evaluator(
+    objective: SimulationObjective,
+    backend: str,
+    workers: int | None,
+    address: str | None,
+) -> AbstractContextManager[Evaluator | None]:
+    """The evaluator of the backend ``backend`` (None: this process), closed after.
+
+    Raises
+    ------
+    UnknownComponentError
+        If no backend is registered as ``backend``; the message lists them.
+    """
+    return _BACKENDS.get(backend)(objective, workers, address)
+
+
+def worker_factory(objective: SimulationObjective) -> ObjectiveFactory:
+    """What a worker builds ``objective`` from: its resolved scenario, as data.
+
+    The workers may import the components the scenario names: it was given by
+    the caller, not read back from a run directory.
+    """
+    from avrisk.assembly import ObjectiveFactory
+
+    return ObjectiveFactory.of(objective, allow_import=True)
 
 
 @contextmanager
-def open_evaluator(
-    objective: SimulationObjective,
-    backend: Backend,
-    workers: int | None,
-    address: str | None,
+def _local(
+    objective: SimulationObjective, workers: int | None, address: str | None
 ) -> Iterator[Evaluator | None]:
-    """The evaluator asked for (None: this process), closed after.
-
-    The workers rebuild ``objective`` (whose scenario was given by the caller,
-    so they may import the components it names). The messages name the
-    command's options (``--backend``, ``--address``).
-    """
-    if address is not None and backend != Backend.ray:
+    """In this process, or in ``workers`` worker processes on this machine."""
+    if address is not None:
         raise UserError("--address joins a Ray cluster: add --backend ray")
-    if backend == Backend.local and workers is None:
+    if workers is None:
         yield None
         return
-    from avrisk.assembly import ObjectiveFactory
-
-    factory = ObjectiveFactory.of(objective, allow_import=True)
-    evaluator: ProcessPoolEvaluator | RayEvaluator
-    if backend == Backend.local:
-        evaluator = ProcessPoolEvaluator(factory, workers or 1)
-    else:
-        evaluator = _ray_evaluator(factory, workers, address, objective.device)
-    with evaluator:
+    with ProcessPoolEvaluator(worker_factory(objective), workers or 1) as evaluator:
         yield evaluator
 
 
-def _ray_evaluator(
-    factory: ObjectiveFactory, workers: int | None, address: str | None, device: str
-) -> RayEvaluator:
+@contextmanager
+def _ray(
+    objective: SimulationObjective, workers: int | None, address: str | None
+) -> Iterator[Evaluator | None]:
+    """A Ray cluster: ``address``, else the one joined already or a new local one.
+
+    A worker takes a GPU where the objective simulates on one.
+    """
+    factory = worker_factory(objective)
     try:
-        return RayEvaluator(
+        evaluator = RayEvaluator(
             factory,
             workers,
             address=address,
-            num_gpus=1 if device.startswith("cuda") else 0,
+            num_gpus=1 if objective.device.startswith("cuda") else 0,
         )
     except ImportError as err:
         raise UserError(str(err)) from None
     except ConnectionError as err:
         raise UserError(f"cannot join the Ray cluster at {address}: {err}") from None
+    with evaluator:
+        yield evaluator
+
+
+register_backend(DEFAULT_BACKEND, _local, description="this machine")
+register_backend("ray", _ray, description="a Ray cluster; pip install 'avrisk[ray]'")

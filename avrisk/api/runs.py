@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from avrisk.api.backends import Backend, open_evaluator
+from avrisk.api.backends import DEFAULT_BACKEND, open_evaluator
 from avrisk.api.document import Runs, answer, ratio_rows, result_document
 from avrisk.api.errors import UserError, write_failures
 from avrisk.api.events import Note, Plan, PlannedRun, Progress, ignore, run_events
@@ -283,10 +283,11 @@ def write_run_report(
 
 
 Scenario = str | Path | ScenarioSpec | dict[str, Any]
-#: Where rollouts are simulated: a backend, its workers and its Ray address
+#: Where rollouts are simulated: a registered backend's name, its workers and
+#: its Ray address
 #: (:func:`avrisk.api.backends.open_evaluator`).
-BackendChoice = tuple[Backend, int | None, str | None]
-IN_PROCESS: BackendChoice = (Backend.local, None, None)
+BackendChoice = tuple[str, int | None, str | None]
+IN_PROCESS: BackendChoice = (DEFAULT_BACKEND, None, None)
 
 
 @dataclass(frozen=True)

@@ -1,16 +1,27 @@
 """``--workers``, ``--backend`` and ``--address``: where the rollouts are simulated.
 
 The options of ``run`` and ``compare``; :mod:`avrisk.api.backends` opens
-what they name.
+what they name, and registers the backends ``--backend`` offers.
 """
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Annotated
 
 import typer
 
-from avrisk.api.backends import Backend
+from avrisk.api.backends import backend_descriptions
+
+
+def _described(descriptions: dict[str, str]) -> str:
+    """``"local (this machine) or ray (a Ray cluster)"``: every backend, for help."""
+    *rest, last = [f"{name} ({what})" for name, what in descriptions.items()]
+    return f"{', '.join(rest)} or {last}" if rest else last
+
+
+#: The backends registered when the command line is loaded: ``--backend``'s choices.
+BackendName = StrEnum("BackendName", [(n, n) for n in backend_descriptions()])
 
 Workers = Annotated[
     int | None,
@@ -21,10 +32,9 @@ Workers = Annotated[
     ),
 ]
 BackendOption = Annotated[
-    Backend,
+    BackendName,
     typer.Option(
-        help="Where the workers run: local (this machine) or ray (a Ray cluster; "
-        "pip install 'avrisk[ray]').",
+        help=f"Where the workers run: {_described(backend_descriptions())}.",
     ),
 ]
 Address = Annotated[

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 import yaml
 
-from avrisk.api.backends import Backend
+from avrisk.api.backends import DEFAULT_BACKEND
 from avrisk.cli.backends import Address, BackendOption, Workers
 from avrisk.cli.common import (
     CliError,
@@ -356,7 +356,7 @@ def run(
     ] = False,
     device: Device = "cpu",
     workers: Workers = None,
-    backend: BackendOption = Backend.local,
+    backend: BackendOption = DEFAULT_BACKEND,
     address: Address = None,
     as_json: Json = False,
 ) -> None:
@@ -432,7 +432,7 @@ def compare(
     failures: Failures = 6,
     device: Device = "cpu",
     workers: Workers = None,
-    backend: BackendOption = Backend.local,
+    backend: BackendOption = DEFAULT_BACKEND,
     address: Address = None,
     as_json: Json = False,
 ) -> None:
