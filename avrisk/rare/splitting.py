@@ -292,6 +292,9 @@ class SplittingState(NamedTuple):
         Evaluations that failed so far.
     rounds_without_move : int
         Rounds in a row in which no chain accepted.
+    exhausted : bool, default=False
+        Whether ``max_levels`` sets ended above ``gamma`` (the steps are over,
+        without an estimate: :func:`exhausted_error`).
     """
 
     z: FloatArray
@@ -302,6 +305,7 @@ class SplittingState(NamedTuple):
     n_evals: int
     n_failed: int
     rounds_without_move: int
+    exhausted: bool = False
 
 
 #: The levels' diagnostics in plain words (:meth:`SubsetSimulation.diagnostics`).
@@ -407,8 +411,8 @@ class SubsetSimulation:
         return SplittingState(empty, (), self.settings.initial_beta, False, 0, 0, 0, 0)
 
     def done(self, state: SplittingState) -> bool:
-        """Once a set's level is ``gamma``."""
-        return state.reached
+        """Once a set's level is ``gamma``, or ``max_levels`` sets did not reach it."""
+        return state.reached or state.exhausted
 
     def step(
         self,
@@ -421,8 +425,7 @@ class SubsetSimulation:
         Raises
         ------
         SplittingError
-            If ``max_levels`` sets do not reach ``gamma``, or if the chains
-            stop moving.
+            If the chains stop moving.
         """
         s = self.settings
         current = state.sets[-1].level if state.sets else math.inf
@@ -443,15 +446,6 @@ class SubsetSimulation:
             level = problem.gamma  # nothing below a tie: a bound (*Plateaus*)
         sets = (*state.sets, ParticleSet(moved.values, level, counted_from))
         reached = level == problem.gamma
-        if not reached and len(sets) == s.max_levels:
-            p_so_far = math.prod(_factors(sets))
-            raise SplittingError(
-                f"after max_levels={s.max_levels} levels the level is f <= "
-                f"{level:g}, still above gamma = {problem.gamma:g} "
-                f"(P0(f <= {level:g}) is about {p_so_far:.2g}): the event may "
-                "be impossible, or rarer than that many levels reach; raise "
-                "max_levels (or p0)"
-            )
         n_evals = state.n_evals + moved.n_calls
         new_state = SplittingState(
             moved.z,
@@ -462,6 +456,7 @@ class SubsetSimulation:
             n_evals,
             state.n_failed + moved.n_failed,
             moved.rounds_without_move,
+            exhausted=not reached and len(sets) == s.max_levels,
         )
         info = SplittingInfo(
             index=len(state.sets),
@@ -483,7 +478,15 @@ class SubsetSimulation:
         problem: RareEventProblem,
         context: EstimationContext,
     ) -> Estimate:
-        """The product estimate and its Au & Beck error for every threshold."""
+        """The product estimate and its Au & Beck error for every threshold.
+
+        Raises
+        ------
+        SplittingError
+            If ``max_levels`` sets did not reach ``gamma``.
+        """
+        if state.exhausted:
+            raise exhausted_error(state, problem.gamma, self.settings.max_levels)
         if state.n_failed:
             warnings.warn(
                 f"{state.n_failed} evaluations of f failed; subset simulation counts "
@@ -580,6 +583,20 @@ class SubsetSimulation:
             f"a level of the search held only {min(few)} particles below it (f "
             "ties on a plateau?): its interval is likely too narrow",
         )
+
+
+def exhausted_error(
+    state: SplittingState, gamma: float, max_levels: int
+) -> SplittingError:
+    """The error of levels that ``max_levels`` sets did not bring to ``gamma``."""
+    level = state.sets[-1].level
+    p_so_far = math.prod(_factors(state.sets))
+    return SplittingError(
+        f"after max_levels={max_levels} levels the level is f <= {level:g}, still "
+        f"above gamma = {gamma:g} (P0(f <= {level:g}) is about {p_so_far:.2g}): the "
+        "event may be impossible, or rarer than that many levels reach; raise "
+        "max_levels (or p0)"
+    )
 
 
 def levels_estimate(

@@ -90,7 +90,10 @@ beyond their errors (:func:`replicates_disagree`, in
 ``details["replicates_disagree"]`` and the report) show a search that can
 miss a region; the run says caution only when its importance-sampling
 estimate is borne out by no replicate's (:meth:`doubts`). One run cannot see
-a region no replicate reached.
+a region no replicate reached. A replicate whose ``max_levels`` sets end above
+``gamma`` (its levels followed a mechanism that does not end in the event) is
+left out of the fit and the run says caution; only when none reaches
+``gamma`` is it subset simulation's error.
 
 The estimate is that of the importance-sampling stage alone: the proposal is
 fixed before its samples are drawn, so it is unbiased whatever the particles,
@@ -149,6 +152,7 @@ from avrisk.rare.splitting import (
     SplittingSettings,
     SplittingState,
     SubsetSimulation,
+    exhausted_error,
     levels_estimate,
     move_chains,
 )
@@ -685,7 +689,7 @@ class SplittingImportanceSampling(SubsetSimulation):
     def done(self, state: ReplicatesState) -> bool:  # type: ignore[override]
         """Once the last replicate's levels reach ``gamma``."""
         return len(state.finished) + 1 == self.settings.replicates and (
-            state.current.reached
+            self.levels.done(state.current)
         )
 
     def step(  # type: ignore[override]
@@ -700,7 +704,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         its own random numbers and a resumed run replays them in order.
         """
         levels = self.levels
-        if state.current.reached:
+        if levels.done(state.current):
             fresh = levels.init(problem)._replace(
                 n_stages=state.current.n_stages, n_evals=state.current.n_evals
             )
@@ -713,7 +717,7 @@ class SplittingImportanceSampling(SubsetSimulation):
 
     @staticmethod
     def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
-        """An importance-sampling estimate that no replicate's levels bear out.
+        """Replicates that ran out of levels, or an estimate no replicate bears out.
 
         Few particles at a level do not bias the importance-sampling stage
         (its weights' diagnostics speak for it), nor do replicates that ended
@@ -730,15 +734,24 @@ class SplittingImportanceSampling(SubsetSimulation):
         own = details.get("replicates") or []
         if gamma != estimate.get("gamma") or main is None or not own:
             return ()
-        if not all(estimates_disagree(main, r) for r in own):
-            return ()
-        levels = ", ".join(f"{r['p']:.2g}" for r in own)
-        return (
-            f"importance sampling found p = {main['p']:.2g} but the levels of the "
-            f"same run {levels}, further apart than their errors allow: the "
-            "proposal may miss part of the failure set (compare runs with other "
-            "seeds, or raise n_particles)",
-        )
+        reasons = []
+        exhausted = details.get("replicates_exhausted") or 0
+        if exhausted:
+            reasons.append(
+                f"{exhausted} of the {len(own) + exhausted} replicates of the search "
+                "did not reach gamma within max_levels levels (they followed a "
+                "mechanism that does not end in the event): the answer rests on "
+                "the others (compare runs with other seeds, or raise max_levels)"
+            )
+        if all(estimates_disagree(main, r) for r in own):
+            levels = ", ".join(f"{r['p']:.2g}" for r in own)
+            reasons.append(
+                f"importance sampling found p = {main['p']:.2g} but the levels of "
+                f"the same run {levels}, further apart than their errors allow: "
+                "the proposal may miss part of the failure set (compare runs with "
+                "other seeds, or raise n_particles)"
+            )
+        return tuple(reasons)
 
     @staticmethod
     def stage_label(estimate: dict[str, Any], stage: int) -> str:
@@ -869,7 +882,14 @@ class SplittingImportanceSampling(SubsetSimulation):
         recorded final stage.
         """
         s = self.settings
-        replicates = (*state.finished, state.current)
+        replicates = [r for r in (*state.finished, state.current) if not r.exhausted]
+        if not replicates:  # none reached gamma: the first one's error
+            raise exhausted_error(
+                state.finished[0] if state.finished else state.current,
+                problem.gamma,
+                s.max_levels,
+            )
+        n_exhausted = s.replicates - len(replicates)
         n_each = s.n_particles // s.replicates
         own = [levels_estimate(r, problem, n_each) for r in replicates]
         combined = combined_levels(own, problem, s.n_particles)
@@ -929,6 +949,7 @@ class SplittingImportanceSampling(SubsetSimulation):
                     {"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own
                 ],
                 "replicates_disagree": replicates_disagree(own),
+                "replicates_exhausted": n_exhausted,
             },
         )
 

@@ -5,16 +5,19 @@ import re
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
 from avrisk.rare import (
     FixedCovNormal,
     Product,
     ScaledBeta,
+    SplittingError,
     get_estimator,
     splitting_is,
 )
 from avrisk.rare.cross_entropy import SEARCH_ADVICE, CESettings
+from avrisk.rare.estimator import estimator_class
 from avrisk.rare.splitting import SubsetSimulation
 from avrisk.rare.splitting_importance import (
     ADVICE,
@@ -23,6 +26,7 @@ from avrisk.rare.splitting_importance import (
     particle_proposal,
     slope_direction,
 )
+from avrisk.rare.trust import estimate_trust
 from avrisk.report.plots import table_cells
 from avrisk.testing import (
     beta_sum_problem,
@@ -326,3 +330,22 @@ def test_every_stage_of_the_replicates_and_their_moves_is_its_own():
         on_batch=lambda batch: seen.append((batch.stage, batch.chunk)),
     )
     assert len(seen) == len(set(seen))
+
+
+def test_a_replicate_whose_levels_run_out_is_left_out_with_a_caution():
+    # p = 1e-6 takes about 7 sets at p0 = 0.1: with 6, one replicate of seed 0
+    # runs out above gamma, the other reaches it and the proposal is its own
+    base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
+    b = stats.norm.isf(1e-6)
+    f = lambda x: b - x.sum(axis=1) / np.sqrt(2)  # noqa: E731
+    est = splitting_is(f, base, 0.0, n_particles=400, n_final=2000, max_levels=6)
+    assert est.details["replicates_exhausted"] == 1
+    assert len(est.details["replicates"]) == 1
+    assert est.ci[0] < 1e-6 < est.ci[1]
+    trust = estimate_trust(
+        estimator_class("splitting_is"), est.to_dict(), est.to_dict()["by_gamma"][0]
+    )
+    assert "1 of the 2 replicates of the search did not reach gamma" in str(trust)
+    # with one level fewer neither does: the levels' error, as subset simulation's
+    with pytest.raises(SplittingError, match="after max_levels=5 levels"):
+        splitting_is(f, base, 0.0, n_particles=400, n_final=2000, max_levels=5)
