@@ -22,6 +22,7 @@ from avrisk.pipeline.repeatability import (
 from avrisk.rare.estimator import TooManyFailuresError
 from avrisk.rare.problem import SAMPLE_CHUNK
 from avrisk.testing import gaussian_linear_problem
+from tests.monitors import Counting
 
 PROBLEM = gaussian_linear_problem(2, p=1e-4)
 NAMES = ["x0", "x1"]
@@ -46,28 +47,6 @@ def changed_near_hits(x):
 
 def failing(x):
     return {"f": np.full(len(x), np.nan), "status": np.ones(len(x), dtype=np.int8)}
-
-
-class Counting:
-    """A monitor that adds up the rollouts it is told of, replayed and simulated."""
-
-    def __init__(self):
-        self.total, self.replayed, self.simulated = 0, 0, 0
-
-    def start(self, total, description):
-        self.total = total
-
-    def advance(self, n, *, replayed):
-        if replayed:
-            self.replayed += n
-        else:
-            self.simulated += n
-
-    def status(self, text):
-        pass
-
-    def disk(self, row_bytes, *, full):
-        pass
 
 
 def run(path, settings=CE, objective=f, check=None, monitor=None):

@@ -14,6 +14,7 @@ import pytest
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
 from avrisk.rare import FixedCovNormal, Product, StageBatch
 from avrisk.testing import gaussian_linear_problem
+from tests.monitors import Counting
 
 PROBLEM = gaussian_linear_problem(2, p=1e-4)
 NAMES = ["x0", "x1"]
@@ -313,28 +314,6 @@ def test_failed_rollouts_bracket_p_and_are_evaluated_again_on_rerun(tmp_path):
     assert 0 < sum(calls) == to_redo < 30_000  # only chunks holding failures
     assert again["estimate"]["by_gamma"][0]["n_failed"] == 0
     assert again["estimate"]["by_gamma"][0]["p"] == clean["p"]
-
-
-class Counting:
-    """A monitor that adds up the rollouts it is told of, replayed and simulated."""
-
-    def __init__(self):
-        self.total, self.replayed, self.simulated = 0, 0, 0
-
-    def start(self, total, description):
-        self.total = total
-
-    def advance(self, n, *, replayed):
-        if replayed:
-            self.replayed += n
-        else:
-            self.simulated += n
-
-    def status(self, text):
-        pass
-
-    def disk(self, row_bytes, *, full):
-        pass
 
 
 def test_a_rerun_counts_each_rollout_once_replayed_or_simulated_again(tmp_path):
