@@ -38,7 +38,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import subprocess
 import sys
 import time
 import warnings
@@ -89,16 +88,10 @@ def _done_seeds(out: Path, preset: str) -> set[int]:
 
 
 def _commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-            cwd=Path(__file__).parent,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
+    """The short git commit of the avrisk checkout the run imports, or "unknown"."""
+    from avrisk.pipeline.provenance import code_version
+
+    return (code_version()["git_commit"] or "unknown")[:7]
 
 
 def run(args: argparse.Namespace) -> None:

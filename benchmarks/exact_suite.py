@@ -54,7 +54,6 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 import time
 import traceback
@@ -264,16 +263,10 @@ def _read(path: Path) -> list[dict]:
 
 
 def _commit() -> str:
-    try:
-        return subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=True,
-            cwd=ROOT,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
+    """The short git commit of the avrisk checkout the run imports, or "unknown"."""
+    from avrisk.pipeline.provenance import code_version
+
+    return (code_version()["git_commit"] or "unknown")[:7]
 
 
 def run(args: argparse.Namespace) -> None:
