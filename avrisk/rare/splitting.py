@@ -156,6 +156,8 @@ TARGET_ACCEPTANCE = 0.3
 ADAPT_GAIN = 1.0
 #: Smallest pCN step.
 MIN_BETA = 1e-3
+#: Standard normal quantile of the intervals' confidence (1.96 for 95%).
+Z_CONFIDENCE = float(stats.norm.ppf(0.5 + CONFIDENCE / 2))
 #: Rounds in a row in which no chain accepts before the run stops.
 MAX_ROUNDS_WITHOUT_MOVE = 10
 
@@ -748,6 +750,15 @@ def _on_plateau(values: FloatArray, gamma: float, settings: SplittingSettings) -
     return level > gamma and (survivors < few or survivors == flat.size)
 
 
+def lognormal_interval(p: float, cov_squared: float) -> tuple[float, float]:
+    """``p``'s interval, normal on ``log p`` with ``Var(log p) = log(1 + cov^2)``.
+
+    The upper end is at most 1.
+    """
+    half = Z_CONFIDENCE * math.sqrt(math.log1p(cov_squared))
+    return (p * math.exp(-half), min(1.0, p * math.exp(half)))
+
+
 def _estimate_at(
     sets: Sequence[ParticleSet], g: float, bound: float = 1.0
 ) -> GammaEstimate:
@@ -768,13 +779,12 @@ def _estimate_at(
     cov_squared = sum(
         level_cov_squared(ps.counted, ps.level) for ps in above
     ) + level_cov_squared(counted, g)
-    z = stats.norm.ppf(0.5 + CONFIDENCE / 2)
     if n_hits:
-        half = z * math.sqrt(math.log1p(cov_squared))
-        ci = (p * math.exp(-half), min(1.0, p * math.exp(half)))
+        ci = lognormal_interval(p, cov_squared)
     else:  # the upper ends of the factors above and of a share of 0
         cov_above = cov_squared - level_cov_squared(counted, g)
-        upper_above = p_above * math.exp(z * math.sqrt(math.log1p(cov_above)))
+        half = Z_CONFIDENCE * math.sqrt(math.log1p(cov_above))
+        upper_above = p_above * math.exp(half)
         upper = -math.expm1(math.log((1 - CONFIDENCE) / 2) / n_last)
         ci = (0.0, min(bound, upper_above * upper))
     return GammaEstimate(

@@ -87,7 +87,8 @@ A failure region one replicate's levels never reach (a region that holds most
 of ``p`` but whose intermediate levels are rarer than another's) is then in
 the proposal if another reached it. Replicates whose own estimates differ
 beyond their errors (:func:`replicates_disagree`, in
-``details["replicates_disagree"]`` and the report) show a search that can
+``details["replicates_disagree"]``, each replicate's estimate in
+``details["replicates"]``) show a search that can
 miss a region; the run says caution only when its importance-sampling
 estimate is borne out by no replicate's (:meth:`doubts`). One run cannot see
 a region no replicate reached. A replicate whose ``max_levels`` sets end above
@@ -148,12 +149,14 @@ from avrisk.rare.mixture import (
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
 from avrisk.rare.results import Estimate
 from avrisk.rare.splitting import (
+    Z_CONFIDENCE,
     SplittingInfo,
     SplittingSettings,
     SplittingState,
     SubsetSimulation,
     exhausted_error,
     levels_estimate,
+    lognormal_interval,
     move_chains,
 )
 from avrisk.rare.stages import BatchCache, BatchRecorder
@@ -992,7 +995,7 @@ def estimates_disagree(sampled: dict[str, Any], levels: dict[str, Any]) -> bool:
             q > 0 and levels["ci"][0] > sampled["ci"][1]
         )
     var = np.log1p((sampled["stderr"] / p) ** 2)
-    var += (np.log(levels["ci"][1] / q) / stats.norm.isf(0.025)) ** 2
+    var += (np.log(levels["ci"][1] / q) / Z_CONFIDENCE) ** 2
     return bool(abs(np.log(p / q)) > DISAGREEMENT_Z * np.sqrt(var))
 
 
@@ -1055,8 +1058,7 @@ def combined_levels(
         p = float(np.mean([e.p for e in parts]))
         stderr = float(np.sqrt(sum(e.stderr**2 for e in parts))) / len(parts)
         if p > 0:
-            half = 1.959963984540054 * np.sqrt(np.log1p((stderr / p) ** 2))
-            ci = (p * float(np.exp(-half)), min(1.0, p * float(np.exp(half))))
+            ci = lognormal_interval(p, (stderr / p) ** 2)
         else:
             ci = (0.0, max(e.ci[1] for e in parts))
         by_gamma[g] = dataclasses.replace(
