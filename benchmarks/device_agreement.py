@@ -110,6 +110,10 @@ def simulate(args: argparse.Namespace) -> None:
     todo = [c for c in _parse_range(args.chunks) if c % int(k) == int(i)]
     args.out.mkdir(parents=True, exist_ok=True)
     todo = [c for c in todo if not _chunk_path(args.out, c).is_file()]
+    recorded = {  # the same for every chunk: hashed once
+        "defines_p": objective.definition(),
+        "computed_with": objective.computed_with(),
+    }
     for first in range(0, len(todo), args.group):
         group = todo[first : first + args.group]
         start = time.perf_counter()
@@ -127,8 +131,7 @@ def simulate(args: argparse.Namespace) -> None:
                 "chunk_size": args.chunk_size,
                 "sub_batch": args.sub_batch,
                 "near_threshold": args.near,
-                "defines_p": objective.definition(),
-                "computed_with": objective.computed_with(),
+                **recorded,
                 "seconds": seconds,
                 **chunk_record({k: v[mine] for k, v in rows.items()}, args.near),
             }
@@ -290,12 +293,12 @@ def fixture(args: argparse.Namespace) -> None:
     )
     spread = np.unique(np.linspace(0, len(near) - 1, args.rows).round().astype(int))
     picked = [near[i] for i in spread]
-    xs, seeds = [], []
-    for _, chunk, row in picked:
-        x, s = chunk_draws(spec, first["seed"], chunk, first["chunk_size"])
-        xs.append(x[row])
-        seeds.append(s[row])
-    x, seeds = np.array(xs), np.array(seeds, dtype=np.int64)
+    draws = {  # each chunk drawn once, however many of its rows are picked
+        c: chunk_draws(spec, first["seed"], c, first["chunk_size"])
+        for c in sorted({c for _, c, _ in picked})
+    }
+    x = np.array([draws[c][0][row] for _, c, row in picked])
+    seeds = np.array([draws[c][1][row] for _, c, row in picked], dtype=np.int64)
     rows = simulate_rows(objective.simulator, x, seeds, len(x))
     args.out.write_text(
         json.dumps(
