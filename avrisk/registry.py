@@ -190,6 +190,7 @@ class Registry:
         self.kind = kind
         # name -> (factory, params model or None)
         self._factories: dict[str, tuple[Callable[..., Any], Any]] = {}
+        self._descriptions: dict[str, str] = {}
 
     def register(
         self,
@@ -197,8 +198,13 @@ class Registry:
         factory: Callable[..., Any],
         *,
         params: type[BaseModel] | None = None,
+        description: str = "",
     ) -> None:
         """Make ``factory`` available as ``build(name, ...)``.
+
+        Each kind's ``register_...`` function (``register_policy``,
+        ``register_safety_measure``, ``register_driver_model``,
+        ``register_backend``) is this method of the kind's registry.
 
         Parameters
         ----------
@@ -210,6 +216,14 @@ class Registry:
         params : type of pydantic.BaseModel, optional
             The params model; default: ``factory.Params`` if it has one, else
             the component takes no params.
+        description : str, default=""
+            What the component is, in a few words, for a listing
+            (:meth:`descriptions`, a command's ``--help``).
+
+        Raises
+        ------
+        ValueError
+            If ``name`` is not of the form above or is registered already.
         """
         if not REGISTERED_NAME.fullmatch(name):
             raise ValueError(
@@ -219,10 +233,15 @@ class Registry:
         if name in self._factories:
             raise ValueError(f"{self.kind} {name!r} is already registered")
         self._factories[name] = (factory, params or _declared_params(factory))
+        self._descriptions[name] = description
 
     def names(self) -> list[str]:
         """The registered names, sorted."""
         return sorted(self._factories)
+
+    def descriptions(self) -> dict[str, str]:
+        """The registered names' descriptions, sorted by name."""
+        return {name: self._descriptions[name] for name in self.names()}
 
     def get(self, name: str) -> Callable[..., Any]:
         """The factory registered as ``name`` (for code that calls it itself).
@@ -258,6 +277,11 @@ class Registry:
         **context: Any,
     ) -> Any:
         """Build the component ``name`` from its ``params``.
+
+        Each kind's ``get_...`` function (``get_policy``,
+        ``get_safety_measure``, ``get_driver_model``) is this method of the
+        kind's registry; what ``context`` a kind offers is said where its
+        registry is defined.
 
         Parameters
         ----------

@@ -18,7 +18,7 @@ import warnings
 import numpy as np
 
 from avrisk.assembly import base_distribution
-from avrisk.rare.estimator import estimate_black_box, get_estimator
+from avrisk.rare import estimate
 from avrisk.scenario import load_spec
 
 GAMMAS = (0.5, 0.8, 1.0)
@@ -55,13 +55,14 @@ def main() -> None:
         for seed in range(10):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                est = estimate_black_box(
-                    get_estimator(method, **settings),
+                est = estimate(
+                    method,
                     ttc,
                     base,
                     GAMMAS[0],
                     seed=seed,
                     gamma_test=GAMMAS[1:],
+                    **settings,
                 )
             estimates.append([est.by_gamma[g].p for g in GAMMAS])
         p = np.array(estimates)

@@ -97,7 +97,7 @@ def _commit() -> str:
 def run(args: argparse.Namespace) -> None:
     """Run one preset for the seeds not yet in ``args.out``."""
     from avrisk.assembly import SimulationObjective, base_distribution
-    from avrisk.rare.estimator import estimate_black_box, get_estimator
+    from avrisk.rare import estimate as estimate_p
     from avrisk.scenario import load_spec
 
     torch.set_num_threads(args.threads)
@@ -118,14 +118,15 @@ def run(args: argparse.Namespace) -> None:
         start = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # low-hit runs warn; recorded below
-            estimate = estimate_black_box(
-                get_estimator(method, **settings),
+            estimate = estimate_p(
+                method,
                 objective,
                 base,
                 args.gamma,
                 seed=seed,
                 gamma_test=gamma_test,
                 batch_size=args.batch_size,
+                **settings,
             )
         seconds = time.perf_counter() - start
         record = {

@@ -12,40 +12,14 @@ and receives those its signature names, plus its validated ``params``.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-from typing import Any
-
-from pydantic import BaseModel
-
 from avrisk.registry import Registry
-from avrisk.sim.interfaces import Actor
 
-__all__ = ["get_driver_model", "register_driver_model"]
+__all__ = ["DRIVER_MODELS", "get_driver_model", "register_driver_model"]
 
-_DRIVER_MODELS = Registry("driver model")
-
-
-def register_driver_model(
-    name: str, factory: Callable[..., Any], *, params: type[BaseModel] | None = None
-) -> None:
-    """Make ``factory`` available as ``get_driver_model(name, ...)``."""
-    _DRIVER_MODELS.register(name, factory, params=params)
-
-
-def get_driver_model(
-    name: str,
-    params: Mapping[str, Any] | None = None,
-    /,
-    *,
-    allow_import: bool = False,
-    **context: Any,
-) -> Actor:
-    """Build a driver model by registered name or import path.
-
-    Raises
-    ------
-    avrisk.registry.ComponentError
-        If ``name`` is unknown, cannot be imported, or ``params`` do not
-        validate (see :meth:`avrisk.registry.Registry.build`).
-    """
-    return _DRIVER_MODELS.build(name, params, allow_import=allow_import, **context)
+#: The driver models by name, built by ``get_driver_model(name or
+#: "package.module:attribute", params, *, allow_import, **context)`` and
+#: extended by ``register_driver_model(name, factory, *, params)``
+#: (:class:`~avrisk.registry.Registry`; the context: the module docstring).
+DRIVER_MODELS = Registry("driver model")
+register_driver_model = DRIVER_MODELS.register
+get_driver_model = DRIVER_MODELS.build

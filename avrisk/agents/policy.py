@@ -31,7 +31,6 @@ object with ``init(obs) -> state`` and ``act(obs, state) -> (Action of shape
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import torch
@@ -44,6 +43,7 @@ from avrisk.sim.interfaces import Action, Actor, deterministic, reads_lidar
 from avrisk.sim.observation import Observation
 
 __all__ = [
+    "POLICIES",
     "ConstantPolicy",
     "EgoActor",
     "EgoPolicy",
@@ -187,49 +187,15 @@ class ConstantPolicy:
         ), None
 
 
-_POLICIES = Registry("ego policy")
-
-
-def register_policy(
-    name: str, factory: Callable[..., Any], *, params: type[BaseModel] | None = None
-) -> None:
-    """Make ``factory`` available as ``get_policy(name, ...)``.
-
-    ``params`` is its params model (default: ``factory.Params``, if any); see
-    :meth:`avrisk.registry.Registry.register`.
-    """
-    _POLICIES.register(name, factory, params=params)
-
-
-def get_policy(
-    name: str,
-    params: Mapping[str, Any] | None = None,
-    /,
-    *,
-    allow_import: bool = False,
-    **context: Any,
-) -> Actor:
-    """Build an ego policy by registered name or import path.
-
-    Parameters
-    ----------
-    name : str
-        E.g. ``"idm_mobil"``, ``"constant"``, or ``"mypkg.egos:MyEgo"``.
-    params : mapping, optional
-        The policy's ``params`` from a scenario, validated by its params model.
-    allow_import : bool, default=False
-        Whether an import path may be imported.
-    **context
-        The caller's arguments (``net``, ``road``, ...), passed as they are.
-
-    Raises
-    ------
-    avrisk.registry.ComponentError
-        If ``name`` is unknown (also a ``KeyError``; the message lists the
-        known names), cannot be imported, or ``params`` do not validate; see
-        :meth:`avrisk.registry.Registry.build`.
-    """
-    return _POLICIES.build(name, params, allow_import=allow_import, **context)
+#: The ego policies by name (``"idm_mobil"``, ``"constant"``), built by
+#: ``get_policy(name or "package.module:attribute", params, *, allow_import,
+#: **context)`` and extended by ``register_policy(name, factory, *, params)``
+#: (:class:`~avrisk.registry.Registry`). A factory is offered ``n_vehicles``,
+#: ``road``, ``device``, ``dtype`` and ``net`` (the driver network or None) and
+#: receives those its signature names, plus its validated params.
+POLICIES = Registry("ego policy")
+register_policy = POLICIES.register
+get_policy = POLICIES.build
 
 
 def _constant_factory(

@@ -39,23 +39,12 @@ Opener = Callable[
 #: The backend of a run that names none.
 DEFAULT_BACKEND = "local"
 
-_BACKENDS = Registry("backend")
-_DESCRIPTIONS: dict[str, str] = {}
-
-
-def register_backend(name: str, opener: Opener, *, description: str) -> None:
-    """Make ``opener`` available as the backend ``name`` (``--backend NAME``).
-
-    ``description`` says where it simulates, for ``--help`` (``"this
-    machine"``).
-    """
-    _BACKENDS.register(name, opener)
-    _DESCRIPTIONS[name] = description
-
-
-def backend_descriptions() -> dict[str, str]:
-    """The registered backends' descriptions by name, sorted by name."""
-    return {name: _DESCRIPTIONS[name] for name in _BACKENDS.names()}
+#: The backends by name, extended by ``register_backend(name, opener, *,
+#: description)`` (:class:`~avrisk.registry.Registry`; ``description`` says
+#: where it simulates, for ``--help``: ``"this machine"``).
+BACKENDS = Registry("backend")
+register_backend = BACKENDS.register
+backend_descriptions = BACKENDS.descriptions
 
 
 def open_evaluator(
@@ -71,7 +60,7 @@ def open_evaluator(
     UnknownComponentError
         If no backend is registered as ``backend``; the message lists them.
     """
-    return _BACKENDS.get(backend)(objective, workers, address)
+    return BACKENDS.get(backend)(objective, workers, address)
 
 
 def worker_factory(objective: SimulationObjective) -> ObjectiveFactory:

@@ -2,9 +2,11 @@
 
 It sees a base distribution ``P0`` (an exponential family, or a product of
 them) and a batched black-box function ``f``, and estimates ``P0(f(X) <=
-gamma)`` for thresholds where naive Monte Carlo is hopeless.
+gamma)`` for thresholds where naive Monte Carlo is hopeless. The one entry
+point is :func:`estimate`: ``estimate(method, f, base, gamma, **settings)``.
 """
 
+from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy import CEState, CrossEntropy, cross_entropy
 from avrisk.rare.estimator import (
     EstimationContext,
@@ -60,6 +62,7 @@ __all__ = [
     "UnreliableEstimateWarning",
     "ZeroHitsWarning",
     "cross_entropy",
+    "estimate",
     "estimator_names",
     "get_estimator",
     "mixture_ce",

@@ -37,16 +37,15 @@ from typing import Annotated, Any, Literal, NamedTuple
 import numpy as np
 from pydantic import Field
 
+from avrisk.rare.black_box import estimate
 from avrisk.rare.defensive import DefensiveMixture
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
     EstimatorSettings,
-    estimate_black_box,
     no_doubts,
     register_estimator,
 )
-from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
@@ -56,8 +55,7 @@ from avrisk.rare.problem import (
     RareEventProblem,
 )
 from avrisk.rare.results import CEInfo, Estimate, SearchConvergence
-from avrisk.rare.stages import BatchCache, BatchRecorder, StageResult
-from avrisk.rare.stopping import StoppingRule
+from avrisk.rare.stages import StageResult
 from avrisk.rare.weights import (
     kish_ess,
     normalized_weights,
@@ -536,87 +534,7 @@ class DefensiveCrossEntropy(CrossEntropy):
 
 
 def cross_entropy(
-    f: BatchFunction,
-    base: ExponentialFamily,
-    gamma: float,
-    *,
-    settings: CESettings | None = None,
-    seed: int = 0,
-    gamma_test: Sequence[float] | float = (),
-    batch_size: int | None = None,
-    callback: Callable[[CEInfo, CEState], None] | None = None,
-    on_batch: BatchRecorder | None = None,
-    cache: BatchCache | None = None,
-    evaluator: Evaluator | None = None,
-    stopping: StoppingRule | None = None,
-    **overrides: Any,
+    f: BatchFunction, base: ExponentialFamily, gamma: float, **options: Any
 ) -> Estimate:
-    """Estimate ``P0(f(X) <= gamma)`` by cross-entropy importance sampling.
-
-    Parameters
-    ----------
-    f : callable
-        Batched black box, ``(n, D)`` float64 array to ``(n,)`` values.
-    base : ExponentialFamily
-        ``P0``; its search box constrains the proposals.
-    gamma : float
-        Threshold of the event ``f <= gamma``.
-    settings : CESettings, optional
-        The method's settings (default: the defaults of :class:`CESettings`).
-    seed : int, default=0
-        Run seed; same seed, same result, whatever ``batch_size``.
-    gamma_test : float or sequence of float, default=()
-        Further thresholds estimated from the final samples.
-    batch_size : int or None, default=None
-        Largest number of rows per call of ``f``.
-    callback : callable, optional
-        Called after each iteration with its :class:`CEInfo` and the new
-        :class:`CEState` (progress display, checkpoints).
-    on_batch : callable, optional
-        Called with each evaluated :class:`~avrisk.rare.stages.StageBatch`, of
-        every stage (a samples table, a progress bar).
-    cache : callable, optional
-        ``cache(stage, chunk)`` returns a recorded batch of an interrupted run
-        with the same settings, or ``None``: resuming replays the record.
-    evaluator : Evaluator, optional
-        Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
-    stopping : StoppingRule, optional
-        Ends the final stage early (:mod:`avrisk.rare.stopping`); the result's
-        ``stopped_by`` says what ended it.
-    **overrides
-        Settings of :class:`CESettings` by name (``rho``, ``alpha``,
-        ``n_per_iter``, ``n_iter``, ``n_final``, ``select``, ``defensive``),
-        in place of those of ``settings``: another name is a TypeError, an
-        invalid value a ValueError naming it.
-
-    Returns
-    -------
-    Estimate
-        ``n_evals = n_iter * n_per_iter + n_final``.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from scipy.stats import norm
-    >>> from avrisk.rare import FixedCovNormal, cross_entropy
-    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    >>> f = lambda x: 5.0 - x.sum(axis=1) / np.sqrt(2)   # P(f <= 0) = Phi(-5)
-    >>> est = cross_entropy(f, base, 0.0, rho=0.1, n_per_iter=2000, n_iter=8,
-    ...                     n_final=10_000, seed=0)
-    >>> bool(abs(est.p / norm.sf(5.0) - 1) < 0.1)
-    True
-    """
-    return estimate_black_box(
-        CrossEntropy(CESettings.overridden(settings, "cross_entropy", **overrides)),
-        f,
-        base,
-        gamma,
-        seed=seed,
-        gamma_test=gamma_test,
-        batch_size=batch_size,
-        callback=callback,
-        on_batch=on_batch,
-        cache=cache,
-        evaluator=evaluator,
-        stopping=stopping,
-    )
+    """Cross-entropy: ``estimate("ce", f, base, gamma, **options)``."""
+    return estimate("ce", f, base, gamma, **options)

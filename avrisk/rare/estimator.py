@@ -40,7 +40,6 @@ from avrisk.rare.problem import (
     SAMPLE_CHUNK,
     RareEventProblem,
     sample_seeds,
-    threshold_list,
 )
 from avrisk.rare.results import Estimate, SearchConvergence
 from avrisk.rare.stages import (
@@ -60,8 +59,8 @@ __all__ = [
     "EstimationContext",
     "Estimator",
     "EstimatorSettings",
+    "ESTIMATORS",
     "TooManyFailuresError",
-    "estimate_black_box",
     "estimator_names",
     "get_estimator",
     "no_doubts",
@@ -127,9 +126,9 @@ class EstimatorSettings(BaseModel):
     ) -> Self:
         """``settings`` (default: the defaults) with ``overrides`` by name, validated.
 
-        How the top-level functions (:func:`~avrisk.rare.cross_entropy.cross_entropy`
-        ...) take their settings: a settings object, or any of its settings
-        as keyword arguments of ``caller``, or both.
+        How :func:`~avrisk.rare.black_box.estimate` takes a method's settings:
+        a settings object, or any of its settings as keyword arguments of
+        ``caller``, or both.
 
         Raises
         ------
@@ -486,23 +485,17 @@ def no_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
     return ()
 
 
-_ESTIMATORS = Registry("estimator")
+#: The estimators by name (:class:`~avrisk.registry.Registry`): registered by
+#: :func:`register_estimator`, built with their settings by :func:`get_estimator`.
+ESTIMATORS = Registry("estimator")
+estimator_names = ESTIMATORS.names
+estimator_class = ESTIMATORS.get
 
 
 def register_estimator(cls: type[Estimator[Any, Any]]) -> type[Estimator[Any, Any]]:
     """Make an estimator class available by its ``name`` (usable as decorator)."""
-    _ESTIMATORS.register(cls.name, cls)
+    ESTIMATORS.register(cls.name, cls, description=cls.label)
     return cls
-
-
-def estimator_names() -> list[str]:
-    """Registered estimator names, sorted."""
-    return _ESTIMATORS.names()
-
-
-def estimator_class(name: str) -> type[Estimator[Any, Any]]:
-    """The class registered as ``name`` (KeyError listing the known names)."""
-    return _ESTIMATORS.get(name)
 
 
 def get_estimator(name: str, **settings: Any) -> Estimator[Any, Any]:
@@ -556,29 +549,3 @@ def run_estimator(
     return replace(
         estimate, history=tuple(history), wall_time_s=time.perf_counter() - start
     )
-
-
-def estimate_black_box(
-    estimator: Estimator[Any, Info],
-    f: Callable[..., Any],
-    base: ExponentialFamily,
-    gamma: float,
-    *,
-    seed: int = 0,
-    gamma_test: Sequence[float] | float = (),
-    batch_size: int | None = None,
-    callback: Callable[[Info, Any], None] | None = None,
-    on_batch: BatchRecorder | None = None,
-    cache: BatchCache | None = None,
-    evaluator: Evaluator | None = None,
-    stopping: StoppingRule | None = None,
-) -> Estimate:
-    """Run ``estimator`` on a black box ``f`` under ``base`` (the top-level functions).
-
-    The arguments are those the top-level functions (:func:`cross_entropy`,
-    :func:`naive_mc` ...) share; see :class:`RareEventProblem` and
-    :class:`EstimationContext`.
-    """
-    problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
-    context = EstimationContext(seed, evaluator, on_batch, cache, stopping=stopping)
-    return run_estimator(estimator, problem, context, callback=callback)

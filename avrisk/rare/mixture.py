@@ -77,13 +77,14 @@ using Gaussian densities revisited." Structural Safety 76, 2019.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 from pydantic import Field
 from scipy.special import logsumexp
 
+from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy import (
     SELECTION_RULES,
     CESettings,
@@ -102,19 +103,15 @@ from avrisk.rare.cross_entropy import (
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
-    estimate_black_box,
     no_doubts,
     register_estimator,
 )
-from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.problem import (
     BatchFunction,
     RareEventProblem,
 )
 from avrisk.rare.results import Estimate, MixtureInfo
-from avrisk.rare.stages import BatchCache, BatchRecorder
-from avrisk.rare.stopping import StoppingRule
 
 #: EM stops once an iteration gains less than this in weighted mean log-likelihood.
 EM_TOLERANCE = 1e-6
@@ -680,93 +677,7 @@ class MixtureCrossEntropy:
 
 
 def mixture_ce(
-    f: BatchFunction,
-    base: ExponentialFamily,
-    gamma: float,
-    *,
-    settings: MixtureSettings | None = None,
-    seed: int = 0,
-    gamma_test: Sequence[float] | float = (),
-    batch_size: int | None = None,
-    callback: Callable[[MixtureInfo, CEState], None] | None = None,
-    on_batch: BatchRecorder | None = None,
-    cache: BatchCache | None = None,
-    evaluator: Evaluator | None = None,
-    stopping: StoppingRule | None = None,
-    **overrides: Any,
+    f: BatchFunction, base: ExponentialFamily, gamma: float, **options: Any
 ) -> Estimate:
-    """Estimate ``P0(f(X) <= gamma)`` by mixture cross-entropy importance sampling.
-
-    Parameters
-    ----------
-    f : callable
-        Batched black box, ``(n, D)`` float64 array to ``(n,)`` values.
-    base : ExponentialFamily
-        ``P0``; its structure and search box are the components'.
-    gamma : float
-        Threshold of the event ``f <= gamma``.
-    settings : MixtureSettings, optional
-        The method's settings (default: the defaults of :class:`MixtureSettings`).
-    seed : int, default=0
-        Run seed; same seed, same result, whatever ``batch_size``.
-    gamma_test : float or sequence of float, default=()
-        Further thresholds estimated from the final samples.
-    batch_size : int or None, default=None
-        Largest number of rows per call of ``f``.
-    callback : callable, optional
-        Called after each iteration with its :class:`MixtureInfo` and the new
-        :class:`CEState`.
-    on_batch : callable, optional
-        Called with each evaluated :class:`~avrisk.rare.stages.StageBatch`.
-    cache : callable, optional
-        ``cache(stage, chunk)`` returns a recorded batch of an interrupted run
-        with the same settings, or ``None``: resuming replays the record.
-    evaluator : Evaluator, optional
-        Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
-    stopping : StoppingRule, optional
-        Ends the final stage early (:mod:`avrisk.rare.stopping`).
-    **overrides
-        Settings of :class:`MixtureSettings` by name (``n_components``,
-        ``rho``, ``alpha``, ``n_per_iter``, ``n_iter``, ``n_final``,
-        ``select``, ``defensive``, ``min_weight``), in place of those of
-        ``settings``: another name is a TypeError, an invalid value a
-        ValueError naming it.
-
-    Returns
-    -------
-    Estimate
-        ``proposal`` is the chosen :class:`MixtureProposal`; ``n_evals =
-        n_iter * n_per_iter + n_final``.
-
-    Examples
-    --------
-    Two failure regions, ``|x1| >= 4``, one on each side:
-
-    >>> import numpy as np
-    >>> from scipy.stats import norm
-    >>> from avrisk.rare import FixedCovNormal, mixture_ce
-    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    >>> f = lambda x: 4.0 - np.abs(x[:, 0])   # P(f <= 0) = 2 Phi(-4)
-    >>> est = mixture_ce(f, base, 0.0, n_components=2, n_per_iter=2000, n_iter=6,
-    ...                  n_final=10_000, seed=0)
-    >>> sorted(round(float(c.mean[0])) for c in est.proposal.components)
-    [-4, 4]
-    >>> bool(abs(est.p / (2 * norm.sf(4.0)) - 1) < 0.1)
-    True
-    """
-    return estimate_black_box(
-        MixtureCrossEntropy(
-            MixtureSettings.overridden(settings, "mixture_ce", **overrides)
-        ),
-        f,
-        base,
-        gamma,
-        seed=seed,
-        gamma_test=gamma_test,
-        batch_size=batch_size,
-        callback=callback,
-        on_batch=on_batch,
-        cache=cache,
-        evaluator=evaluator,
-        stopping=stopping,
-    )
+    """Mixture cross-entropy: ``estimate("mixture", f, base, gamma, **options)``."""
+    return estimate("mixture", f, base, gamma, **options)

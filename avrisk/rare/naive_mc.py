@@ -15,15 +15,14 @@ from typing import Any, Literal, NamedTuple
 
 from pydantic import Field
 
+from avrisk.rare.black_box import estimate
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
     EstimatorSettings,
-    estimate_black_box,
     no_doubts,
     register_estimator,
 )
-from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily
 from avrisk.rare.final_stage import binomial_estimates, bracket_failures
 from avrisk.rare.problem import (
@@ -32,8 +31,6 @@ from avrisk.rare.problem import (
     RareEventProblem,
 )
 from avrisk.rare.results import Estimate, SearchConvergence
-from avrisk.rare.stages import BatchCache, BatchRecorder
-from avrisk.rare.stopping import StoppingRule
 
 
 class NaiveSettings(EstimatorSettings):
@@ -135,55 +132,11 @@ class NaiveMC:
 
 
 def naive_mc(
-    f: BatchFunction,
-    base: ExponentialFamily,
-    gamma: float,
-    n: int,
-    *,
-    seed: int = 0,
-    gamma_test: Sequence[float] | float = (),
-    batch_size: int | None = None,
-    interval: str = "clopper-pearson",
-    on_batch: BatchRecorder | None = None,
-    cache: BatchCache | None = None,
-    evaluator: Evaluator | None = None,
-    stopping: StoppingRule | None = None,
+    f: BatchFunction, base: ExponentialFamily, gamma: float, n: int, **options: Any
 ) -> Estimate:
-    """Estimate ``P0(f(X) <= gamma)`` by plain sampling from ``base``.
+    """Naive MC of ``n`` samples: ``estimate("naive", f, base, gamma, n_final=n, ...)``.
 
-    Parameters
-    ----------
-    f : callable
-        Batched black box, ``(n, D)`` float64 array to ``(n,)`` values.
-    base : ExponentialFamily
-        ``P0``.
-    gamma : float
-        Threshold.
-    n : int
-        Number of samples (= calls of ``f``).
-    seed : int, default=0
-        Run seed; the same seed gives the same result whatever ``batch_size``.
-    gamma_test : float or sequence of float, default=()
-        Further thresholds estimated from the same samples.
-    batch_size : int or None, default=None
-        Largest number of rows per call of ``f``.
-    interval : {"clopper-pearson", "wilson"}, default="clopper-pearson"
-        Binomial confidence interval (95%).
-    on_batch : callable, optional
-        Called with each evaluated :class:`~avrisk.rare.stages.StageBatch`
-        (a samples table, a progress bar).
-    cache : callable, optional
-        ``cache(stage, chunk)`` returns a recorded batch of an interrupted run
-        with the same settings, or ``None`` (see :mod:`avrisk.rare.stages`).
-    evaluator : Evaluator, optional
-        Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
-    stopping : StoppingRule, optional
-        Ends the final stage early (:mod:`avrisk.rare.stopping`); the result's
-        ``stopped_by`` says what ended it.
-
-    Returns
-    -------
-    Estimate
+    The keywords: :func:`~avrisk.rare.black_box.estimate`.
 
     Examples
     --------
@@ -194,17 +147,4 @@ def naive_mc(
     >>> bool(abs(est.p - 0.02275) < 4 * est.stderr)
     True
     """
-    settings = NaiveSettings.validated(n_final=n, interval=interval)
-    return estimate_black_box(
-        NaiveMC(settings),
-        f,
-        base,
-        gamma,
-        seed=seed,
-        gamma_test=gamma_test,
-        batch_size=batch_size,
-        on_batch=on_batch,
-        cache=cache,
-        evaluator=evaluator,
-        stopping=stopping,
-    )
+    return estimate("naive", f, base, gamma, n_final=n, **options)

@@ -125,21 +125,20 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
 from scipy import stats
 
+from avrisk.rare.black_box import estimate
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
     EstimatorSettings,
-    estimate_black_box,
     register_estimator,
 )
-from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.final_stage import CONFIDENCE, MIN_RELIABLE_ESS
 from avrisk.rare.problem import (
@@ -148,7 +147,6 @@ from avrisk.rare.problem import (
     RareEventProblem,
 )
 from avrisk.rare.results import Estimate, GammaEstimate, SearchConvergence
-from avrisk.rare.stages import BatchCache, BatchRecorder
 
 #: Acceptance rate the pCN step ``beta`` is adapted towards.
 TARGET_ACCEPTANCE = 0.3
@@ -944,91 +942,7 @@ def _evaluate(
 
 
 def subset_simulation(
-    f: BatchFunction,
-    base: ExponentialFamily,
-    gamma: float,
-    *,
-    settings: SplittingSettings | None = None,
-    seed: int = 0,
-    gamma_test: Sequence[float] | float = (),
-    batch_size: int | None = None,
-    callback: Callable[[SplittingInfo, SplittingState], None] | None = None,
-    on_batch: BatchRecorder | None = None,
-    cache: BatchCache | None = None,
-    evaluator: Evaluator | None = None,
-    **overrides: Any,
+    f: BatchFunction, base: ExponentialFamily, gamma: float, **options: Any
 ) -> Estimate:
-    """Estimate ``P0(f(X) <= gamma)`` by subset simulation with pCN moves.
-
-    Parameters
-    ----------
-    f : callable
-        Batched black box, ``(n, D)`` float64 array to ``(n,)`` values.
-    base : ExponentialFamily
-        ``P0``; it must map to standard normals (``to_standard_normal``).
-    gamma : float
-        Threshold of the event ``f <= gamma``.
-    settings : SplittingSettings, optional
-        The method's settings (default: the defaults of :class:`SplittingSettings`).
-    seed : int, default=0
-        Run seed; same seed, same result, whatever ``batch_size``.
-    gamma_test : float or sequence of float, default=()
-        Further thresholds estimated from the same particle sets.
-    batch_size : int or None, default=None
-        Largest number of rows per call of ``f``.
-    callback : callable, optional
-        Called after each level with its :class:`SplittingInfo` and the new
-        :class:`SplittingState`.
-    on_batch : callable, optional
-        Called with each evaluated :class:`~avrisk.rare.stages.StageBatch`.
-    cache : callable, optional
-        ``cache(stage, chunk)`` returns a recorded batch of an interrupted run
-        with the same settings, or ``None``: resuming replays the record.
-    evaluator : Evaluator, optional
-        Where ``f`` runs (:mod:`avrisk.rare.evaluation`); default this process.
-    **overrides
-        Settings of :class:`SplittingSettings` by name (``n_particles``,
-        ``p0``, ``p0_max``, ``max_levels``, ``n_moves``, ``initial_beta``), in
-        place of those of ``settings``: another name is a TypeError, an
-        invalid value a ValueError naming it.
-
-    Returns
-    -------
-    Estimate
-        ``details`` holds the levels, survivors per level, their c.o.v.s and
-        the number of failed evaluations; ``history`` one
-        :class:`SplittingInfo` per level.
-
-    Raises
-    ------
-    SplittingError
-        If the levels cannot reach ``gamma`` (module docstring, *Ties*).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from scipy.stats import norm
-    >>> from avrisk.rare import FixedCovNormal, subset_simulation
-    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    >>> f = lambda x: 4.0 - x.sum(axis=1) / np.sqrt(2)   # P(f <= 0) = Phi(-4)
-    >>> est = subset_simulation(f, base, 0.0, n_particles=1000, seed=0)
-    >>> len(est.details["levels"])                       # 3.2e-5 = 0.1^4 * 0.32
-    5
-    >>> bool(est.ci[0] < norm.sf(4.0) < est.ci[1])
-    True
-    """
-    return estimate_black_box(
-        SubsetSimulation(
-            SplittingSettings.overridden(settings, "subset_simulation", **overrides)
-        ),
-        f,
-        base,
-        gamma,
-        seed=seed,
-        gamma_test=gamma_test,
-        batch_size=batch_size,
-        callback=callback,
-        on_batch=on_batch,
-        cache=cache,
-        evaluator=evaluator,
-    )
+    """Subset simulation: ``estimate("splitting", f, base, gamma, **options)``."""
+    return estimate("splitting", f, base, gamma, **options)

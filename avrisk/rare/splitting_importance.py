@@ -128,14 +128,13 @@ from pydantic import Field, ValidationInfo, field_validator
 from scipy import stats
 from scipy.special import logsumexp
 
+from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy import ShareOfP0
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
-    estimate_black_box,
     register_estimator,
 )
-from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
@@ -159,8 +158,6 @@ from avrisk.rare.splitting import (
     lognormal_interval,
     move_chains,
 )
-from avrisk.rare.stages import BatchCache, BatchRecorder
-from avrisk.rare.stopping import StoppingRule
 
 __all__ = [
     "THRESHOLDS",
@@ -1086,78 +1083,7 @@ def combined_levels(
 
 
 def splitting_is(
-    f: BatchFunction,
-    base: ExponentialFamily,
-    gamma: float,
-    *,
-    settings: SplittingISSettings | None = None,
-    seed: int = 0,
-    gamma_test: Sequence[float] | float = (),
-    batch_size: int | None = None,
-    callback: Callable[[SplittingInfo, SplittingState], None] | None = None,
-    on_batch: BatchRecorder | None = None,
-    cache: BatchCache | None = None,
-    evaluator: Evaluator | None = None,
-    stopping: StoppingRule | None = None,
-    **overrides: Any,
+    f: BatchFunction, base: ExponentialFamily, gamma: float, **options: Any
 ) -> Estimate:
-    """Estimate ``P0(f(X) <= gamma)`` by importance sampling from splitting's particles.
-
-    Parameters
-    ----------
-    f : callable
-        Batched black box, ``(n, D)`` float64 array to ``(n,)`` values.
-    base : ExponentialFamily
-        ``P0``; it must map to standard normals (``to_standard_normal``).
-    gamma : float
-        Threshold of the event ``f <= gamma``.
-    settings : SplittingISSettings, optional
-        The method's settings (default: those of :class:`SplittingISSettings`).
-    seed : int, default=0
-        Run seed; same seed, same result, whatever ``batch_size``.
-    gamma_test, batch_size, callback, on_batch, cache, evaluator
-        As for :func:`~avrisk.rare.splitting.subset_simulation`.
-    stopping : StoppingRule, optional
-        May end the importance-sampling stage early.
-    **overrides
-        Settings of :class:`SplittingISSettings` by name.
-
-    Returns
-    -------
-    Estimate
-        The importance-sampling estimate; ``details`` holds the levels (as
-        subset simulation's), the acceptance of the moves at ``gamma``, the
-        number of components, the threshold chosen, the number of coordinates
-        shifted and the splitting estimate of every threshold (``splitting``).
-
-    Raises
-    ------
-    SplittingError
-        If the levels cannot reach ``gamma``.
-
-    Examples
-    --------
-    >>> from scipy.stats import norm
-    >>> from avrisk.rare import FixedCovNormal
-    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    >>> f = lambda x: 4.0 - x.sum(axis=1) / np.sqrt(2)   # P(f <= 0) = Phi(-4)
-    >>> est = splitting_is(f, base, 0.0, n_particles=1000, n_final=5000, seed=0)
-    >>> bool(abs(est.p / norm.sf(4.0) - 1) < 4 * est.stderr / est.p)
-    True
-    """
-    return estimate_black_box(
-        SplittingImportanceSampling(
-            SplittingISSettings.overridden(settings, "splitting_is", **overrides)
-        ),
-        f,
-        base,
-        gamma,
-        seed=seed,
-        gamma_test=gamma_test,
-        batch_size=batch_size,
-        callback=callback,
-        on_batch=on_batch,
-        cache=cache,
-        evaluator=evaluator,
-        stopping=stopping,
-    )
+    """Splitting + is: ``estimate("splitting_is", f, base, gamma, **options)``."""
+    return estimate("splitting_is", f, base, gamma, **options)

@@ -19,8 +19,10 @@ FAST = dict(method="naive", n_final=300, batch_size=300, seed=4, failures=0)
 @pytest.fixture
 def own_registry(monkeypatch):
     """Backends registered by the test are gone after it."""
-    monkeypatch.setattr(backends, "_BACKENDS", copy.deepcopy(backends._BACKENDS))
-    monkeypatch.setattr(backends, "_DESCRIPTIONS", dict(backends._DESCRIPTIONS))
+    for table in ("_factories", "_descriptions"):
+        monkeypatch.setattr(
+            backends.BACKENDS, table, copy.copy(getattr(backends.BACKENDS, table))
+        )
 
 
 def test_a_registered_backend_runs_the_estimate_of_this_process(tmp_path, own_registry):

@@ -15,12 +15,14 @@ from avrisk.rare import (
     UnreliableEstimateWarning,
     ZeroHitsWarning,
     cross_entropy,
+    estimate,
     mixture_ce,
     naive_mc,
-    subset_simulation,
 )
 from avrisk.rare.cross_entropy import CESettings
+from avrisk.rare.estimator import get_estimator
 from avrisk.rare.naive_mc import NaiveSettings
+from avrisk.registry import UnknownComponentError
 from avrisk.testing import (
     beta_sum_cdf,
     beta_sum_problem,
@@ -311,14 +313,29 @@ def test_a_settings_object_and_its_overrides_give_the_run_of_the_keywords():
     )
 
 
-@pytest.mark.parametrize("estimate", [cross_entropy, mixture_ce, subset_simulation])
-def test_a_keyword_that_is_no_setting_is_a_type_error_naming_it(estimate):
+@pytest.mark.parametrize("method", ["ce", "mixture", "splitting"])
+def test_a_keyword_that_is_no_setting_is_a_type_error_naming_it(method):
     base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
-    name = estimate.__name__
-    with pytest.raises(TypeError, match=rf"{name}\(\) got .* keyword .* 'n_iters'"):
-        estimate(lambda x: x[:, 0], base, 0.0, n_iters=3)
-    with pytest.raises(TypeError, match=rf"{name}\(\) takes settings of"):
-        estimate(lambda x: x[:, 0], base, 0.0, settings=NaiveSettings())
+    with pytest.raises(TypeError, match=r"estimate\(\) got .* keyword .* 'n_iters'"):
+        estimate(method, lambda x: x[:, 0], base, 0.0, n_iters=3)
+    with pytest.raises(TypeError, match=r"estimate\(\) takes settings of"):
+        estimate(method, lambda x: x[:, 0], base, 0.0, settings=NaiveSettings())
+
+
+def test_a_method_given_as_an_estimator_takes_no_settings_beside_it():
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    built = get_estimator("naive", n_final=500)
+    with pytest.raises(TypeError, match="not with an estimator built already"):
+        estimate(built, lambda x: x[:, 0], base, 0.0, n_final=600)
+    by_name = estimate("naive", lambda x: x[:, 0], base, -1.0, n_final=500, seed=2)
+    by_object = estimate(built, lambda x: x[:, 0], base, -1.0, seed=2)
+    assert by_object.by_gamma == by_name.by_gamma
+
+
+def test_an_unknown_method_lists_the_registered_ones():
+    base = FixedCovNormal(np.zeros(1), cov=np.eye(1))
+    with pytest.raises(UnknownComponentError, match="known: ce, defensive, mixture"):
+        estimate("cee", lambda x: x[:, 0], base, 0.0)
 
 
 @pytest.mark.filterwarnings("ignore::avrisk.rare.UnreliableEstimateWarning")

@@ -193,12 +193,10 @@ def test_only_the_main_threshold_is_warned_about_the_others_carry_it():
     ],
 )
 def test_every_estimate_names_the_interval_it_reports(method, settings, words):
-    from avrisk.rare.estimator import estimate_black_box, get_estimator
+    from avrisk.rare import estimate
     from avrisk.testing import gaussian_linear_problem
 
     problem = gaussian_linear_problem(2, p=1e-2)
-    est = estimate_black_box(
-        get_estimator(method, **settings), problem.f, problem.base, problem.gamma
-    )
+    est = estimate(method, problem.f, problem.base, problem.gamma, **settings)
     assert words in est.by_gamma[problem.gamma].interval
     assert est.to_dict()["by_gamma"][0]["interval"] == est.main.interval
