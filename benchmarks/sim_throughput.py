@@ -112,7 +112,7 @@ def worker_avrisk(
     import torch
 
     _set_threads(threads)
-    from avrisk.sim.simulator import compile_requested
+    from avrisk.sim.config import compile_requested
     from avrisk.tensors.allocator import keep_freed_memory
 
     keep_freed_memory()  # as avrisk's commands and workers do

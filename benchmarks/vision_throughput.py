@@ -57,7 +57,7 @@ from avrisk.assembly.builder import (
     param_layout,
 )
 from avrisk.scenario import ScenarioParams, load_spec
-from avrisk.sim.simulator import COMPILE_ENV
+from avrisk.sim.config import COMPILE_ENV
 
 
 def _sync(device: str) -> None:

@@ -55,9 +55,11 @@ from avrisk.scenario.components import IDM_MOBIL, LEARNED, DriverSpec
 from avrisk.scenario.sensors import CameraSpec
 from avrisk.scenario.spec import ScenarioSpec
 from avrisk.sim.camera import reads_camera
+from avrisk.sim.config import SimConfig
 from avrisk.sim.interfaces import Actor, SafetyMeasure, deterministic
 from avrisk.sim.road import Road
-from avrisk.sim.simulator import RolloutCarry, RolloutResult, SimConfig, Simulator
+from avrisk.sim.rollout import RolloutCarry, RolloutResult
+from avrisk.sim.simulator import Simulator
 from avrisk.sim.state import VehicleState
 
 #: ``step(carry, t) -> (carry, ttc)``, see :meth:`ScenarioSimulator.start`.
@@ -337,7 +339,7 @@ class ScenarioSimulator:
     layout : ParamLayout
         Column layout of ``X``.
     road : avrisk.sim.road.Road
-    config : avrisk.sim.simulator.SimConfig
+    config : avrisk.sim.config.SimConfig
     simulator : avrisk.sim.simulator.Simulator
     net : DriverNet or None
         The shipped driver network (on ``device``) when a learned driver or

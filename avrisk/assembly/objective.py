@@ -40,7 +40,7 @@ __all__ = [
 #: Per-rollout event flags and step counts recorded besides ``f``.
 EVENT_COLUMNS = ("crash", "offroad", "reversing", "steps")
 #: Per-rollout status and crash facts recorded besides ``f``, with their
-#: integer types (see :class:`avrisk.sim.simulator.RolloutResult`).
+#: integer types (see :class:`avrisk.sim.rollout.RolloutResult`).
 FACT_COLUMNS: dict[str, type[np.integer]] = {
     "status": np.int8,
     "collision_with": np.int16,

@@ -127,7 +127,7 @@ def traces_from_rollout(
         The simulator that produced ``result`` (for vehicle sizes).
     x : ndarray of shape (B, D)
         The flat scenario samples that were simulated.
-    result : avrisk.sim.simulator.RolloutResult
+    result : avrisk.sim.rollout.RolloutResult
         With ``trace`` recorded (``record_trace=True``).
     labels : sequence of str or None
         One label per rollout returned.
@@ -200,7 +200,7 @@ def resimulate(
 
     Returns
     -------
-    result : avrisk.sim.simulator.RolloutResult
+    result : avrisk.sim.rollout.RolloutResult
     traces : list of RolloutTrace
     """
     result = sim.rollout(x, seeds, record_trace=True)

@@ -8,14 +8,18 @@ ego's camera) and imports no implementation of them: :mod:`avrisk.agents`,
 :mod:`~avrisk.sim.road`, :mod:`~avrisk.sim.state`, :mod:`~avrisk.sim.geometry`,
 :mod:`~avrisk.sim.dynamics`, :mod:`~avrisk.sim.lidar`,
 :mod:`~avrisk.sim.collision`, :mod:`~avrisk.sim.observation`,
-:mod:`~avrisk.sim.interfaces` and :mod:`~avrisk.sim.simulator`.
+:mod:`~avrisk.sim.sensing`, :mod:`~avrisk.sim.interfaces`,
+:mod:`~avrisk.sim.config`, :mod:`~avrisk.sim.rollout` and
+:mod:`~avrisk.sim.simulator`.
 """
 
 from avrisk.sim.camera import Camera, CameraFrame, SemanticClass
 from avrisk.sim.collision import Contact
+from avrisk.sim.config import SimConfig
 from avrisk.sim.interfaces import Action, Actor, NoiseRequest, SafetyMeasure
 from avrisk.sim.road import Road
-from avrisk.sim.simulator import RolloutResult, SimConfig, Simulator, Status, Trace
+from avrisk.sim.rollout import RolloutResult, Status, Trace
+from avrisk.sim.simulator import Simulator
 from avrisk.sim.state import VehicleState
 
 __all__ = [

@@ -17,7 +17,7 @@ constant-speed turning (the centre moves along the chord of its circle,
 ``v dt sinc(dpsi / 2)`` in direction ``heading + beta + dpsi / 2``). The mean
 speed also sets the turn, so combined motion is second-order accurate.
 
-Physical limits (all in :class:`~avrisk.sim.simulator.SimConfig`): commanded
+Physical limits (all in :class:`~avrisk.sim.config.SimConfig`): commanded
 acceleration is clipped to ``[accel_min, accel_max]``, steering to
 ``[-max_steer, max_steer]``, speed to ``[min_speed, max_speed]`` (a negative
 speed is driving backwards).

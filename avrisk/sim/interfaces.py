@@ -36,7 +36,7 @@ Contracts:
 * every tensor of the actor state has the batch as its leading dimension or
   is the same for every rollout, so that some rollouts of a batch can be
   restarted while the others go on
-  (:meth:`~avrisk.sim.simulator.RolloutCarry.with_rows`); ``obs.step`` is then
+  (:meth:`~avrisk.sim.rollout.RolloutCarry.with_rows`); ``obs.step`` is then
   one index per rollout;
 * an actor that cannot act for a rollout returns a non-finite action (NaN)
   for its controlled vehicles of that rollout. The simulator then stops the

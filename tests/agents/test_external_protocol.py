@@ -111,7 +111,7 @@ def test_the_protocol_page_tables_the_params_and_the_action_limits():
 
     import yaml
 
-    from avrisk.sim.simulator import SimConfig
+    from avrisk.sim.config import SimConfig
 
     page = (Path(__file__).parents[2] / "docs" / "ego-protocol.md").read_text()
     section = page.split("## The scenario's params")[1].split("\n## ")[0]

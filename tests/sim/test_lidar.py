@@ -150,7 +150,7 @@ def test_the_simulators_eager_lidar_gives_the_same_scan_however_the_batch_is_cut
     # temporaries fit one slice, and one vehicle at a time in slices beyond.
     from avrisk.safety import MinBoxTTC
     from avrisk.sim import SimConfig, Simulator
-    from avrisk.sim import simulator as simulator_module
+    from avrisk.sim import sensing as sensing_module
 
     g = torch.Generator().manual_seed(3)
     batch, n = 9, 5
@@ -165,22 +165,22 @@ def test_the_simulators_eager_lidar_gives_the_same_scan_however_the_batch_is_cut
     )
     cos, sin = state.cos_sin
     sim = Simulator(ROAD, SimConfig(n_lidar_beams=N_BEAMS), measure=MinBoxTTC())
-    whole = sim._scan(state, cos, sin)
+    whole = sim.sensors.scan(state, cos, sin)
     all_at_once = n * (n - 1) * N_BEAMS
     calls = []
-    real = simulator_module.lidar_scan
+    real = sensing_module.lidar_scan
 
     def spy(state, *args):
         calls.append((state.n_vehicles, len(state.x), args[-1]))
         return real(state, *args)
 
-    monkeypatch.setattr(simulator_module, "lidar_scan", spy)
+    monkeypatch.setattr(sensing_module, "lidar_scan", spy)
     # a budget of 4 rollouts one vehicle at a time: slices of 4, 4 and 1
-    monkeypatch.setattr(simulator_module, "_EAGER_CHUNK_TESTS", 4 * n * N_BEAMS)
-    cut = sim._scan(state, cos, sin)
+    monkeypatch.setattr(sensing_module, "_EAGER_CHUNK_TESTS", 4 * n * N_BEAMS)
+    cut = sim.sensors.scan(state, cos, sin)
     # room for the whole batch all at once: one call, all at once (eager)
-    monkeypatch.setattr(simulator_module, "_EAGER_CHUNK_TESTS", batch * all_at_once)
-    at_once = sim._scan(state, cos, sin)
+    monkeypatch.setattr(sensing_module, "_EAGER_CHUNK_TESTS", batch * all_at_once)
+    at_once = sim.sensors.scan(state, cos, sin)
     assert calls == [(n, 4, True), (n, 4, True), (n, 1, True), (n, batch, None)]
     for field in ("range", "range_rate", "hit"):
         assert torch.equal(getattr(cut, field), getattr(whole, field))

@@ -424,7 +424,7 @@ def test_the_box_ttc_measure_compiles_to_bit_identical_results(batch_of_seven):
 
 
 def test_the_environment_switches_compilation_on_unless_told_otherwise(monkeypatch):
-    from avrisk.sim.simulator import COMPILE_ENV, compile_requested
+    from avrisk.sim.config import COMPILE_ENV, compile_requested
 
     monkeypatch.setenv(COMPILE_ENV, "1")
     assert compile_requested(None) and not compile_requested(False)
