@@ -19,8 +19,7 @@ The package is split the way the data flows (see ``DESIGN.md``):
 * :mod:`avrisk.cli` -- the ``avrisk`` command, a shell over :mod:`avrisk.api`.
 """
 
-__version__ = "0.1.0"
-
-from avrisk.api import compare_methods, estimate, simulate, write_report  # noqa: E402
+from avrisk.api import compare_methods, estimate, simulate, write_report
+from avrisk.version import __version__ as __version__
 
 __all__ = ["compare_methods", "estimate", "simulate", "write_report"]

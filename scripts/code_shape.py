@@ -108,7 +108,7 @@ def main() -> None:
     args = parser.parse_args()
     root = args.package.resolve().parent
     files = sorted(args.package.resolve().rglob("*.py"))
-    modules = sorted(((module_lines(p), str(p.relative_to(root))) for p in files))
+    modules = sorted((module_lines(p), str(p.relative_to(root))) for p in files)
     long_modules = [(n, m) for n, m in modules if n > args.lines]
     print(f"{len(files)} modules, {sum(n for n, _ in modules)} lines;", end=" ")
     print(f"{len(long_modules)} over {args.lines} lines:")

@@ -47,7 +47,7 @@ ALLOWED = {
         "fingerprint",
     },
     # the run driver serves any black box: it knows nothing of the simulator
-    "pipeline": {"rare", "registry", "fingerprint"},
+    "pipeline": {"rare", "registry", "fingerprint", "version"},
     "report": {"pipeline", "rare", "assembly", "scenario"},
     # the scenario-level calls the command line is a shell over
     "api": {
@@ -58,6 +58,7 @@ ALLOWED = {
         "report",
         "registry",
         "extras",
+        "version",
     },
     "testing": {"rare"},
     # the Gymnasium environment: a scenario built and stepped by hand

@@ -55,9 +55,7 @@ def test_the_layout_lists_every_package():
 
 def test_the_run_directory_table_lists_every_file_a_run_may_leave():
     from avrisk.assembly import FAILURES_FILE
-    from avrisk.pipeline.manifest import MANIFEST_FILE
-    from avrisk.pipeline.regenerate import PROPOSALS_FILE
-    from avrisk.pipeline.store import (
+    from avrisk.pipeline.layout import (
         CHECKPOINT_FILE,
         CHUNKS_DIR,
         CONFIG_FILE,
@@ -65,6 +63,8 @@ def test_the_run_directory_table_lists_every_file_a_run_may_leave():
         SAMPLES_FILE,
         SUMMARY_FILE,
     )
+    from avrisk.pipeline.manifest import MANIFEST_FILE
+    from avrisk.pipeline.regenerate import PROPOSALS_FILE
 
     text = README.read_text()
     table = text[text.index("| file | what |") :].split("\n\n", 1)[0]
@@ -94,7 +94,7 @@ def test_the_readme_user_policy_is_tested_with_avrisk_run(tmp_path, monkeypatch)
     from typer.testing import CliRunner
 
     from avrisk.cli.app import app
-    from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE
+    from avrisk.pipeline.layout import CONFIG_FILE, SAMPLES_FILE
     from tests.scenario_files import shortened_scenario
 
     (policy,) = [b for b in python_blocks() if "class HoldSpeed" in b]

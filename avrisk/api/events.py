@@ -52,7 +52,7 @@ class Plan:
 
     ``bytes_per_rollout`` [B]: the disk a rollout will take in
     ``samples.parquet``, estimated from the scenario's parameters
-    (:func:`~avrisk.pipeline.store.estimated_row_bytes`);
+    (:func:`~avrisk.pipeline.sizing.estimated_row_bytes`);
     ``full_bytes_per_rollout`` [B]: the same for one stored in full.
     """
 

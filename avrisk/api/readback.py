@@ -24,8 +24,8 @@ import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from avrisk.api.errors import UserError
+from avrisk.pipeline.layout import CONFIG_FILE, SUMMARY_FILE
 from avrisk.pipeline.regenerate import META_KEY
-from avrisk.pipeline.store import CONFIG_FILE, SUMMARY_FILE
 from avrisk.scenario import ScenarioSpec
 from avrisk.scenario.errors import clip
 

@@ -2,7 +2,7 @@
 
 :func:`simulate_rollouts` draws ``X ~ P0`` (seeded, batch-size independent),
 simulates every rollout and returns one row per rollout, in the samples-table
-format of a run (:func:`avrisk.pipeline.store.samples_table`)::
+format of a run (:func:`avrisk.pipeline.samples.samples_table`)::
 
     phase, stage, iteration, chunk, sample_id, seed, veh0.s, ..., veh5.speed,
     log_p0, log_p_proposal, log_weight, weight, f, crash, offroad, reversing,
@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-import avrisk
 from avrisk.api.errors import UserError, write_failures
 from avrisk.api.readback import (
     check_columns,
@@ -45,11 +44,14 @@ from avrisk.assembly import (
     param_layout,
     resimulate,
 )
-from avrisk.pipeline.store import CONFIG_FILE, RunDirectory, samples_table
+from avrisk.pipeline.layout import CONFIG_FILE
+from avrisk.pipeline.samples import samples_table
+from avrisk.pipeline.store import RunDirectory
 from avrisk.rare import RareEventProblem, StageBatch, run_stage
 from avrisk.rare.problem import FINAL_STAGE
 from avrisk.report.animate import animate_rollouts, save_frame_png
 from avrisk.scenario import ScenarioSpec, load_spec, spec_from_dict
+from avrisk.version import __version__
 
 #: Parquet schema-metadata keys.
 META_SCENARIO = b"avrisk.scenario"
@@ -121,7 +123,7 @@ def simulate_rollouts(
     wall_s = time.perf_counter() - start_time
 
     run_meta = {
-        "avrisk_version": avrisk.__version__,
+        "avrisk_version": __version__,
         "command": "simulate",
         "run_seed": seed,
         "n": n,

@@ -36,6 +36,7 @@ from avrisk.assembly import (
 )
 from avrisk.extras import MissingExtraError
 from avrisk.pipeline import RunDirectory, RunDirectoryError, RunSettings, run_estimation
+from avrisk.pipeline.layout import SAMPLES_FILE
 from avrisk.pipeline.provenance import (
     ProvenanceMismatchError,
     check_same_definition,
@@ -43,7 +44,7 @@ from avrisk.pipeline.provenance import (
 )
 from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.pipeline.repeatability import NotRepeatableError, ReplayCheck
-from avrisk.pipeline.store import SAMPLES_FILE, estimated_row_bytes
+from avrisk.pipeline.sizing import estimated_row_bytes
 from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.rare.evaluation import Evaluator

@@ -19,7 +19,7 @@ from typer.core import TyperCommand, TyperGroup
 from typer.main import get_command_from_info
 from typer.models import CommandInfo
 
-from avrisk.cli import loading
+from avrisk.cli.interrupt import loading
 from avrisk.tensors.allocator import keep_freed_memory
 
 if TYPE_CHECKING:  # Typer's own click: a dependency of it, or vendored in it

@@ -17,7 +17,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from avrisk.api.errors import UserError
-from avrisk.cli import INTERRUPTED
+from avrisk.cli.interrupt import INTERRUPTED
 from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
 
 #: Diagnostics and progress go to stderr; results to stdout (so that a

@@ -95,7 +95,7 @@ class CostMeter:
     bytes_per_rollout : float
         Disk a rollout will take in ``samples.parquet`` [B], as estimated
         before any is written
-        (:func:`~avrisk.pipeline.store.estimated_row_bytes`); the chunk files
+        (:func:`~avrisk.pipeline.sizing.estimated_row_bytes`); the chunk files
         hold as much again until they are gathered at the end of a run.
     full_bytes_per_rollout : float
         The same for a rollout stored in full (each run's

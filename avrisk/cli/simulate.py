@@ -41,8 +41,8 @@ from avrisk.cli.common import (
 from avrisk.cli.tables import add_columns, compact_table
 from avrisk.extras import MissingExtraError
 from avrisk.pipeline.files import write_parquet_atomic
+from avrisk.pipeline.layout import SAMPLES_FILE
 from avrisk.pipeline.regenerate import RegenerationError
-from avrisk.pipeline.store import SAMPLES_FILE
 from avrisk.registry import ComponentError
 from avrisk.scenario import ScenarioSpecError, load_spec
 

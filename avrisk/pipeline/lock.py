@@ -15,7 +15,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from avrisk.pipeline.store import LOCK_FILE, RunDirectoryError
+from avrisk.pipeline.layout import LOCK_FILE, RunDirectoryError
 
 
 @contextmanager

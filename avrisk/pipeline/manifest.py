@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from avrisk.pipeline.files import write_json
+from avrisk.pipeline.layout import RunDirectoryError
 
 MANIFEST_FILE = "manifest.json"
 MANIFEST_SCHEMA = "avrisk.manifest/1"
@@ -139,8 +140,6 @@ class Manifest:
         return stat.st_size, stat.st_mtime_ns
 
     def _error(self, what: str) -> Exception:
-        from avrisk.pipeline.store import RunDirectoryError
-
         return RunDirectoryError(
             f"{self.file}: {what}; its records cannot be verified: delete the run "
             "directory and run again"

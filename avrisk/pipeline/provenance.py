@@ -19,7 +19,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-import avrisk
+import avrisk.version
 from avrisk.fingerprint import sha256_file, sha256_json
 
 __all__ = [
@@ -49,7 +49,7 @@ def code_version() -> dict[str, Any]:
         installed in a virtual environment inside a user's repository is not
         stamped with the user's commit.
     """
-    root = Path(avrisk.__file__).resolve().parents[1]
+    root = Path(avrisk.version.__file__).resolve().parents[1]
     top = _git(root, "rev-parse", "--show-toplevel")
     checkout = top is not None and Path(top).resolve() == root and _names_avrisk(root)
     commit = _git(root, "rev-parse", "HEAD") if checkout else None
@@ -57,7 +57,7 @@ def code_version() -> dict[str, Any]:
         _git(root, "status", "--porcelain", "--untracked-files=no") if commit else None
     )
     return {
-        "avrisk": avrisk.__version__,
+        "avrisk": avrisk.version.__version__,
         "git_commit": commit,
         "git_dirty": None if commit is None or dirty is None else bool(dirty),
     }

@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-import avrisk
 from avrisk.pipeline.files import write_json
 from avrisk.rare import ExponentialFamily, Product, StageBatch
 from avrisk.rare.problem import SAMPLE_CHUNK
 from avrisk.rare.proposals import Sampler, proposal_from_record, proposal_record
 from avrisk.rare.stages import chunk_task
+from avrisk.version import __version__
 
 #: Blocks of the base distribution with at least this many coordinates are
 #: drawn again on reading rather than stored (the 24 one-dimensional
@@ -314,4 +314,4 @@ def _read_proposals(path: Path) -> dict[str, Any]:
 
 
 def _versions() -> dict[str, str]:
-    return {"avrisk": avrisk.__version__, "numpy": np.__version__}
+    return {"avrisk": __version__, "numpy": np.__version__}

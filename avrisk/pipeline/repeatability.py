@@ -146,7 +146,7 @@ def replayed_rows(run_dir: RunDirectory) -> list[tuple[StageBatch, int]]:
     does not verify is removed (the run evaluates it again) and the rows are
     picked again from the others.
     """
-    outcomes = run_dir.recorded_outcomes()
+    outcomes = run_dir.chunks.recorded_outcomes()
     if not outcomes:
         return []
     ok = np.concatenate([~failed for *_, failed in outcomes])
@@ -166,7 +166,7 @@ def replayed_rows(run_dir: RunDirectory) -> list[tuple[StageBatch, int]]:
         ]
     )
     keys = [outcomes[w][:2] for w in which[picked]]
-    read = {key: run_dir.cached(*key) for key in sorted(set(keys))}
+    read = {key: run_dir.chunks.cached(*key) for key in sorted(set(keys))}
     chunks = {key: batch for key, batch in read.items() if batch is not None}
     if len(chunks) < len(read):  # cached removed one that did not verify
         return replayed_rows(run_dir)

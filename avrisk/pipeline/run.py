@@ -17,13 +17,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
-import avrisk
 from avrisk.pipeline.lock import run_lock
 from avrisk.pipeline.manifest import RecordIntegrityWarning
 from avrisk.pipeline.mechanisms import decompose
 from avrisk.pipeline.regenerate import chunk_meta
 from avrisk.pipeline.repeatability import ReplayCheck, check_repeatable
-from avrisk.pipeline.store import RunDirectory, marginal_row_bytes
+from avrisk.pipeline.sizing import marginal_row_bytes
+from avrisk.pipeline.store import RunDirectory
 from avrisk.rare import (
     Estimate,
     EstimationContext,
@@ -39,6 +39,7 @@ from avrisk.rare.estimator import DEFAULT_METHOD
 from avrisk.rare.evaluation import EvalResult, EvalTask, Evaluator, LocalEvaluator
 from avrisk.rare.problem import threshold_list
 from avrisk.rare.stopping import StoppingRule
+from avrisk.version import __version__
 
 
 class RunSettings:
@@ -159,7 +160,7 @@ class RunMonitor(Protocol):
         """Disk a rollout takes in the samples [B], measured once per session.
 
         On the first chunk of two or more rows that this session writes
-        (:func:`~avrisk.pipeline.store.marginal_row_bytes`), before its
+        (:func:`~avrisk.pipeline.sizing.marginal_row_bytes`), before its
         :meth:`advance`; ``full``: whether that chunk stored every column
         (its points are not drawn again from a recorded proposal).
         """
@@ -315,7 +316,7 @@ def _estimate(
 
     def on_batch(batch: StageBatch) -> None:
         nonlocal measured
-        table = run_dir.record(batch)
+        table = run_dir.chunks.record(batch)
         if not measured:
             row_bytes = marginal_row_bytes(table)
             if row_bytes is not None:
@@ -329,7 +330,7 @@ def _estimate(
         Such a chunk is evaluated again (:func:`~avrisk.rare.stages.run_stage`):
         it is counted once, as simulated, not also as replayed.
         """
-        batch = run_dir.cached(stage, chunk)
+        batch = run_dir.chunks.cached(stage, chunk)
         if batch is None or batch.failed.any():
             return None
         monitor.advance(len(batch.values), replayed=True)
@@ -357,7 +358,7 @@ def _mechanisms(
     names: Mapping[int, str],
 ) -> dict[str, Any]:
     """``p`` by the codes of ``column``, from the final stage's chunks."""
-    table = run_dir.final_stage(["f", "weight", "status", column])
+    table = run_dir.chunks.final_stage(["f", "weight", "status", column])
 
     def floats(name: str) -> np.ndarray:  # nulls (older chunks) become NaN
         return np.asarray(table[name].to_numpy(zero_copy_only=False), dtype=float)
@@ -428,7 +429,7 @@ def _summary(
             else None,
         },
         "versions": {
-            "avrisk": avrisk.__version__,
+            "avrisk": __version__,
             "python": platform.python_version(),
             "numpy": np.__version__,
             "scipy": scipy.__version__,

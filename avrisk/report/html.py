@@ -24,7 +24,8 @@ import pyarrow.compute as pc
 
 from avrisk.assembly import Typicality, scenario_typicality
 from avrisk.pipeline.files import write_atomic
-from avrisk.pipeline.store import BOOKKEEPING, DENSITIES, RunDirectory
+from avrisk.pipeline.samples import BOOKKEEPING, DENSITIES
+from avrisk.pipeline.store import RunDirectory
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K

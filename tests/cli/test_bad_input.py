@@ -24,8 +24,8 @@ from typer.testing import CliRunner
 import avrisk
 from avrisk.cli.app import app
 from avrisk.pipeline import RunDirectoryError, RunSettings
+from avrisk.pipeline.layout import LOCK_FILE
 from avrisk.pipeline.lock import run_lock
-from avrisk.pipeline.store import LOCK_FILE
 from tests.scenario_files import shortened_scenario
 
 ROOT = os.geteuid() == 0
@@ -316,12 +316,12 @@ def test_a_disk_full_while_gathering_the_samples_leaves_a_resumable_run(
 ):
     out = tmp_path / "run"
 
-    import avrisk.pipeline.store as store
+    import avrisk.pipeline.samples as samples
 
     def fills_up(table, schema):  # the temporary samples file is open by then
         raise _full_disk(out / "samples.parquet")
 
-    monkeypatch.setattr(store, "_conformed", fills_up)
+    monkeypatch.setattr(samples, "conformed", fills_up)
     one_error(
         invoke("run", short_scenario, "--out", out, *SMALL),
         "No space left on device",

@@ -8,7 +8,7 @@ from typer.testing import CliRunner
 
 from avrisk.assembly import FAILURES_FILE, read_failure_traces
 from avrisk.cli.app import app
-from avrisk.pipeline.store import CONFIG_FILE, SAMPLES_FILE, SUMMARY_FILE
+from avrisk.pipeline.layout import CONFIG_FILE, SAMPLES_FILE, SUMMARY_FILE
 from avrisk.report.animate import animate_rollouts
 from avrisk.scenario import load_spec
 from tests.scenario_files import shortened_scenario

@@ -8,7 +8,7 @@ from scipy import sparse
 from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
 from avrisk.pipeline.files import parquet_bytes
 from avrisk.pipeline.regenerate import MIN_REGENERATED_DIM
-from avrisk.pipeline.store import (
+from avrisk.pipeline.sizing import (
     FLOAT32_PARAM_ROW_BYTES,
     OTHER_ROW_BYTES,
     PARAM_ROW_BYTES,

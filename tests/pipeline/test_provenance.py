@@ -6,6 +6,7 @@ import subprocess
 import pytest
 
 import avrisk
+import avrisk.version
 from avrisk.fingerprint import sha256_json
 from avrisk.pipeline.provenance import (
     ProvenanceMismatchError,
@@ -56,7 +57,7 @@ def _repository(folder, pyproject):
 def _installed_at(monkeypatch, package):
     package.mkdir(parents=True, exist_ok=True)
     (package / "__init__.py").write_text("")
-    monkeypatch.setattr(avrisk, "__file__", str(package / "__init__.py"))
+    monkeypatch.setattr(avrisk.version, "__file__", str(package / "version.py"))
 
 
 @pytest.mark.skipif(shutil.which("git") is None, reason="needs git")

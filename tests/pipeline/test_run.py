@@ -232,7 +232,7 @@ def test_a_column_float32_exact_in_one_chunk_only_is_gathered_as_float64(tmp_pat
     exact = np.array([[0.5, 1.0], [0.25, 2.0]])
     inexact = np.array([[0.1, 1.0], [0.2, 2.0]])
     for chunk, x in enumerate((exact, inexact)):
-        directory.record(
+        directory.chunks.record(
             StageBatch(
                 stage=1,
                 chunk=chunk,
@@ -245,8 +245,8 @@ def test_a_column_float32_exact_in_one_chunk_only_is_gathered_as_float64(tmp_pat
                 seeds=np.arange(2),
             )
         )
-    assert str(pq.read_schema(directory._chunk_path(1, 0)).field("x0").type) == "float"
-    np.testing.assert_array_equal(directory.cached(1, 1).x, inexact)
+    assert str(pq.read_schema(directory.chunks.path(1, 0)).field("x0").type) == "float"
+    np.testing.assert_array_equal(directory.chunks.cached(1, 1).x, inexact)
     directory.finish({})
     table = directory.samples()
     assert str(table.schema.field("x0").type) == "double"
