@@ -1,17 +1,20 @@
-"""Print the import graph between avrisk's subpackages, and any cycles in it.
+"""Print the import graph between avrisk's subpackages or modules, and its cycles.
 
 Command (from the repository root)::
 
-    python scripts/import_graph.py [PACKAGE_DIR]
+    python scripts/import_graph.py [PACKAGE_DIR] [--modules]
 
 ``PACKAGE_DIR`` defaults to this checkout's ``avrisk/``. The source is parsed
 (:mod:`ast`), never imported, so any checkout can be inspected. A node is a
 subpackage (``avrisk/sim/``) or a top-level module (``avrisk/registry.py``);
 an edge ``a -> b  (n)`` says that ``n`` import statements in ``a`` name
 ``avrisk.b``, wherever they stand (top level, inside a function, under
-``TYPE_CHECKING``). Cycles are listed one per strongly connected component,
-as one closed path through it; ``tests/test_architecture.py`` asserts there
-are none.
+``TYPE_CHECKING``). With ``--modules`` a node is a module (``avrisk.sim.road``;
+a package's ``__init__.py`` is the package, ``avrisk.sim``) and an import
+names the module it imports from, or the submodule it imports
+(:func:`module_edges`). Cycles are listed one per strongly connected
+component, as one closed path through it; ``tests/test_architecture.py``
+asserts there are none at either level.
 """
 
 from __future__ import annotations
@@ -22,7 +25,13 @@ from collections import Counter
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
-__all__ = ["cycles", "imported_subpackages", "strong_components", "subpackage_edges"]
+__all__ = [
+    "cycles",
+    "imported_subpackages",
+    "module_edges",
+    "strong_components",
+    "subpackage_edges",
+]
 
 ROOT = "avrisk"
 
@@ -57,6 +66,54 @@ def subpackage_edges(package: Path) -> Counter[tuple[str, str]]:
             continue
         node = rel.parts[0].removesuffix(".py")
         edges.update((node, dst) for dst in imported_subpackages(path) if dst != node)
+    return edges
+
+
+def module_name(package: Path, path: Path) -> str:
+    """The dotted name of the module at ``path`` (a package for ``__init__.py``)."""
+    parts = list(path.relative_to(package.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def module_edges(package: Path) -> Counter[tuple[str, str]]:
+    """``(importer, imported) -> import statements`` between modules, no self-edges.
+
+    ``from a.b import c`` names the module ``a.b.c`` where that is a module of
+    the package, else ``a.b``; a name outside the package is left out.
+    Importing a module runs its packages' ``__init__`` first: those implicit
+    edges are not counted (every submodule would otherwise sit in a circle
+    with a package that imports it).
+
+    Parameters
+    ----------
+    package : Path
+        The ``avrisk/`` folder.
+    """
+    files = {module_name(package, p): p for p in sorted(package.rglob("*.py"))}
+    edges: Counter[tuple[str, str]] = Counter()
+    for name, path in files.items():
+        here = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for node in ast.walk(tree):
+            targets: list[str] = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:  # relative: from the importer's package upwards
+                    up = here[: len(here) - node.level + 1]
+                    base = ".".join([*up, *([node.module] if node.module else [])])
+                targets = [
+                    f"{base}.{a.name}" if f"{base}.{a.name}" in files else base
+                    for a in node.names
+                ]
+            for target in targets:
+                while target and target not in files:
+                    target = target.rpartition(".")[0]
+                if target and target != name:
+                    edges[(name, target)] += 1
     return edges
 
 
@@ -136,9 +193,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     default = Path(__file__).resolve().parents[1] / ROOT
     parser.add_argument("package", nargs="?", type=Path, default=default)
-    package = parser.parse_args().package
-    edges = subpackage_edges(package)
-    print(f"subpackage imports in {package} (importer -> imported, statements):")
+    parser.add_argument(
+        "--modules", action="store_true", help="modules as nodes, not subpackages"
+    )
+    args = parser.parse_args()
+    package = args.package.resolve()
+    edges = module_edges(package) if args.modules else subpackage_edges(package)
+    level = "module" if args.modules else "subpackage"
+    nodes = {n for edge in edges for n in edge}
+    print(f"{level} imports in {package}: {len(nodes)} nodes, {len(edges)} edges")
+    print("(importer -> imported, statements):")
     for (a, b), n in sorted(edges.items()):
         print(f"  {a} -> {b}  ({n})")
     components = strong_components(edges)

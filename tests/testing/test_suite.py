@@ -16,19 +16,17 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from avrisk.testing.suite import (
-    CONDITIONAL_MC,
+from avrisk.testing.generated import (
     PLATEAU_CAP,
-    RELIABILITY_PROBLEMS,
-    SUITE,
-    _directions,
     beta_pair_product_problem,
     beta_product_problem,
-    conditional_mc_reference,
+    directions,
     k_region_problem,
     plateau_problem,
-    suite_problem,
 )
+from avrisk.testing.limit_states import CONDITIONAL_MC
+from avrisk.testing.reliability import RELIABILITY_PROBLEMS, conditional_mc_reference
+from avrisk.testing.suite import SUITE, suite_problem
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -103,7 +101,7 @@ def test_k_regions_have_unequal_masses_and_orthogonal_normals():
     betas = [float(b) for b in problem.reference.split("beta = ")[1].split(", ")]
     masses = stats.norm.sf(betas)
     assert np.allclose(masses[1:] / masses[:-1], 0.5, rtol=1e-2)  # betas rounded
-    normals = _directions(50, 5)
+    normals = directions(50, 5)
     assert np.allclose(normals @ normals.T, np.eye(5), atol=1e-12)
     # on each region's own normal f crosses 0 at that region's beta
     for beta, a in zip(betas, normals, strict=True):
