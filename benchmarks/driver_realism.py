@@ -182,12 +182,8 @@ def part_b(net, fam, n_scenes: int, seed: int, horizon: float) -> str:
 def part_c(net, fam, n: int, seed: int) -> str:
     """The bundled scenario with learned environment drivers (ego: IDM+MOBIL)."""
     from avrisk.agents.idm import IDMPolicy
-    from avrisk.assembly.builder import (
-        ScenarioSimulator,
-        base_distribution,
-        driver_params,
-        initial_state,
-    )
+    from avrisk.assembly.builder import ScenarioSimulator
+    from avrisk.assembly.parts import base_distribution, driver_params, initial_state
     from avrisk.scenario import load_spec
     from avrisk.scenario.params import ScenarioParams
 

@@ -101,7 +101,7 @@ def suite_settings(method: str) -> dict[str, Any]:
     """The suite's one setting of ``method`` (see the module docstring)."""
     if method in OT_METHODS:
         return {"per_step": OT_PER_STEP, "block": OT_BLOCK, "max_calls": SUITE_BUDGET}
-    from avrisk.cli.run import CLI_DEFAULTS
+    from avrisk.cli.estimator_options import CLI_DEFAULTS
     from avrisk.rare.estimator import estimator_class, get_estimator
 
     fields = estimator_class(method).Settings.model_fields

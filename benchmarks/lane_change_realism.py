@@ -149,7 +149,8 @@ def _progress(model: str, done: int, total: int) -> None:
 
 def bundled(n: int, seed: int) -> str:
     """``highway_default`` against ``highway_lane_changes``: same draws of X, seeds."""
-    from avrisk.assembly.builder import ScenarioSimulator, base_distribution
+    from avrisk.assembly.builder import ScenarioSimulator
+    from avrisk.assembly.parts import base_distribution
     from avrisk.rare.problem import chunk_rng, sample_seeds
     from avrisk.scenario import load_spec
 

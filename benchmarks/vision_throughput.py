@@ -49,8 +49,8 @@ import numpy as np
 import torch
 
 from avrisk.agents.vision import PilotNet, inner_batch, load_pilotnet
-from avrisk.assembly.builder import (
-    ScenarioSimulator,
+from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.parts import (
     base_distribution,
     camera_from_spec,
     initial_state,

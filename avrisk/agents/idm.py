@@ -53,11 +53,12 @@ from typing import Any
 import torch
 from torch import Tensor
 
+from avrisk.agents.neighbours import Neighbours, gather, lane_neighbours, own
 from avrisk.agents.policy import ego_only, register_policy
-from avrisk.sim.geometry import min_argmin
 from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 from avrisk.sim.road import Road
+from avrisk.sim.state import VehicleState
 from avrisk.tensors.mathops import asin, atan, sqrt, wrap_angle
 from avrisk.tensors.tensors import TensorDataclass
 
@@ -295,9 +296,49 @@ def lateral_control(
     return atan(2.0 * tan_beta)
 
 
-def _gather(t: Tensor, index: Tensor) -> Tensor:
-    """``t[b, index[b, a, q]]`` for ``t`` (B, A) and ``index`` (B, A, Q)."""
-    return t.gather(1, index.flatten(1)).view(index.shape)
+def _lane_accelerations(
+    s: VehicleState, p: IDMParams, near: Neighbours
+) -> tuple[Tensor, Tensor, Tensor]:
+    """IDM accelerations in each queried lane, each (B, A, 4) [m/s^2].
+
+    The vehicle's own behind that lane's leader; that lane's follower behind
+    the vehicle; and the follower behind the leader, as if the vehicle were
+    not there (0 without a follower).
+    """
+    lead_dx, lead, fol_dx, fol, has_lead, has_fol = near
+
+    def idm(v: Tensor, gap: Tensor, v_lead: Tensor, who: Tensor | None) -> Tensor:
+        def par(t: Tensor) -> Tensor:
+            return own(t) if who is None else gather(t, who)
+
+        return idm_acceleration(
+            v,
+            gap,
+            v_lead,
+            par(p.desired_speed),
+            par(p.time_headway),
+            par(p.min_gap),
+            par(p.max_accel),
+            par(p.comfort_decel),
+        )
+
+    v_a, len_a = own(s.speed), own(s.length)
+    len_lead, len_fol = gather(s.length, lead), gather(s.length, fol)
+    v_lead = torch.where(has_lead, gather(s.speed, lead), v_a)
+    v_fol = gather(s.speed, fol)
+
+    lead_gap = torch.where(has_lead, lead_dx - 0.5 * (len_a + len_lead), math.inf)
+    # (B, A, 4): a behind the leader of each queried lane.
+    acc_self = idm(v_a, lead_gap, v_lead, None)
+    fol_gap_self = -fol_dx - 0.5 * (len_a + len_fol)
+    fol_gap_lead = torch.where(
+        has_lead, (lead_dx - fol_dx) - 0.5 * (len_lead + len_fol), math.inf
+    )
+    acc_fol_behind_self = torch.where(has_fol, idm(v_fol, fol_gap_self, v_a, fol), 0.0)
+    acc_fol_behind_lead = torch.where(
+        has_fol, idm(v_fol, fol_gap_lead, v_lead, fol), 0.0
+    )
+    return acc_self, acc_fol_behind_self, acc_fol_behind_lead
 
 
 class IDMDriver:
@@ -360,68 +401,13 @@ class IDMDriver:
     ) -> tuple[Action, IDMState]:
         """Accelerations and steering of all vehicles, shape (B, A), and new memory."""
         s, p, road = obs.state, self.params, self.road
-        n = s.n_vehicles
         lane = self.road.lane_index(s.y)
         # Other actors' vehicles occupy only their lane (see __init__).
         target = torch.where(self.controlled, state.target_lane, lane)
-        # Queries per vehicle: own lane, target lane, left lane, right lane.
-        query = torch.stack([lane, target, lane + 1, lane - 1], dim=-1)  # (B, A, 4)
-
-        # Pairwise, (B, A, 1, A): how far vehicle j is ahead of vehicle a.
-        dx = (s.x.unsqueeze(-2) - s.x.unsqueeze(-1)).unsqueeze(-2)
-        # (B, A, 4, A): j occupies (drives in, or changes into) a's query lane.
-        occupied = (lane[:, None, None, :] == query.unsqueeze(-1)) | (
-            target[:, None, None, :] == query.unsqueeze(-1)
+        near = lane_neighbours(s, lane, target)
+        acc_self, acc_fol_behind_self, acc_fol_behind_lead = _lane_accelerations(
+            s, p, near
         )
-        other = ~torch.eye(n, dtype=torch.bool, device=s.x.device).unsqueeze(-2)
-        candidates = occupied & other
-        # Nearest vehicle ahead and behind in each queried lane (lowest index on
-        # a tie); min_argmin avoids the slow CPU path of Tensor.min(dim).
-        lead_dx, lead = min_argmin(
-            torch.where(candidates & (dx >= 0), dx, math.inf), -1
-        )
-        fol_gap, fol = min_argmin(torch.where(candidates & (dx < 0), -dx, math.inf), -1)
-        fol_dx = -fol_gap
-        has_lead = lead_dx < math.inf
-        has_fol = fol_dx > -math.inf
-
-        def own(t: Tensor) -> Tensor:
-            return t.unsqueeze(-1)  # (B, A, 1) against (B, A, 4)
-
-        def idm(v: Tensor, gap: Tensor, v_lead: Tensor, who: Tensor | None) -> Tensor:
-            def par(t: Tensor) -> Tensor:
-                return own(t) if who is None else _gather(t, who)
-
-            return idm_acceleration(
-                v,
-                gap,
-                v_lead,
-                par(p.desired_speed),
-                par(p.time_headway),
-                par(p.min_gap),
-                par(p.max_accel),
-                par(p.comfort_decel),
-            )
-
-        v_a, len_a = own(s.speed), own(s.length)
-        len_lead, len_fol = _gather(s.length, lead), _gather(s.length, fol)
-        v_lead = torch.where(has_lead, _gather(s.speed, lead), v_a)
-        v_fol = _gather(s.speed, fol)
-
-        lead_gap = torch.where(has_lead, lead_dx - 0.5 * (len_a + len_lead), math.inf)
-        # (B, A, 4): a behind the leader of each queried lane.
-        acc_self = idm(v_a, lead_gap, v_lead, None)
-        fol_gap_self = -fol_dx - 0.5 * (len_a + len_fol)
-        fol_gap_lead = torch.where(
-            has_lead, (lead_dx - fol_dx) - 0.5 * (len_lead + len_fol), math.inf
-        )
-        acc_fol_behind_self = torch.where(
-            has_fol, idm(v_fol, fol_gap_self, v_a, fol), 0.0
-        )
-        acc_fol_behind_lead = torch.where(
-            has_fol, idm(v_fol, fol_gap_lead, v_lead, fol), 0.0
-        )
-
         # MOBIL for the left (2) and right (3) lanes.
         acc_now = acc_self[..., 0]
         gain_self = acc_self[..., 2:] - acc_now.unsqueeze(-1)

@@ -23,8 +23,8 @@ from avrisk.api.errors import UserError
 from avrisk.api.events import Progress, ignore
 
 if TYPE_CHECKING:
+    from avrisk.api.result import EstimationResult, Scenario
     from avrisk.api.rollouts import SimulationRun
-    from avrisk.api.runs import EstimationResult, Scenario
     from avrisk.scenario import ScenarioSpec
 
 __all__ = [
@@ -38,7 +38,7 @@ __all__ = [
 
 def _spec(scenario: Scenario, ego: str | Mapping[str, Any] | None) -> ScenarioSpec:
     """The scenario, its ego replaced by ``ego`` (a policy name or its spec)."""
-    from avrisk.api.runs import scenario_spec
+    from avrisk.api.result import scenario_spec
     from avrisk.scenario import spec_from_dict
 
     spec = scenario_spec(scenario)
@@ -234,7 +234,7 @@ def write_report(
     scenario that names user code must be given again (``scenario``) only to
     animate failures without recorded traces.
     """
-    from avrisk.api.runs import rebuild_report
+    from avrisk.api.reports import rebuild_report
 
     path = rebuild_report(Path(run_dir), failures, scenario, device).report
     assert path is not None

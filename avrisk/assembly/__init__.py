@@ -5,7 +5,9 @@ simulator (:mod:`avrisk.sim`), the drivers and ego policies
 (:mod:`avrisk.agents`) and the safety measures (:mod:`avrisk.safety`):
 
 * :mod:`~avrisk.assembly.builder` -- :class:`ScenarioSimulator` (flat ``X``
-  and seeds in, rollouts out), the scenario's ``X`` layout and ``P0``;
+  and seeds in, rollouts out);
+* :mod:`~avrisk.assembly.parts` -- what it is built of: the scenario's ``X``
+  layout and ``P0``, the road, the measure, the camera, the actors;
 * :mod:`~avrisk.assembly.objective` -- :class:`SimulationObjective`, the
   simulator as the estimation engine's black box;
 * :mod:`~avrisk.assembly.traces` -- rollouts as plain arrays, and the traces
@@ -16,19 +18,19 @@ simulator (:mod:`avrisk.sim`), the drivers and ego policies
   drivers are under ``P0``, as percentiles (the ranking of failures).
 """
 
-from avrisk.assembly.builder import (
-    ScenarioSimulator,
-    base_distribution,
-    camera_from_spec,
-    initial_state,
-    param_layout,
-)
+from avrisk.assembly.builder import ScenarioSimulator
 from avrisk.assembly.objective import (
     EVENT_COLUMNS,
     FACT_COLUMNS,
     MECHANISMS,
     ObjectiveFactory,
     SimulationObjective,
+)
+from avrisk.assembly.parts import (
+    base_distribution,
+    camera_from_spec,
+    initial_state,
+    param_layout,
 )
 from avrisk.assembly.trace_camera import CameraFrames, camera_frames
 from avrisk.assembly.traces import (

@@ -53,7 +53,7 @@ def camera_frames(trace: RolloutTrace, camera: Camera) -> CameraFrames:
     trace : RolloutTrace
         ``n_frames`` recorded steps of ``A`` vehicles (vehicle 0 the ego).
     camera : Camera
-        The scenario's camera (:func:`avrisk.assembly.builder.camera_from_spec`),
+        The scenario's camera (:func:`avrisk.assembly.parts.camera_from_spec`),
         on the CPU.
 
     Returns

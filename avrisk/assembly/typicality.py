@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from avrisk.assembly.builder import base_distribution
+from avrisk.assembly.parts import base_distribution
 from avrisk.rare import FixedCovNormal, Product
 from avrisk.scenario import ScenarioSpec
 from avrisk.scenario.params import ParamLayout

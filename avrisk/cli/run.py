@@ -19,13 +19,11 @@ The simulator (torch) is imported by the commands' bodies, not by this module:
 
 from __future__ import annotations
 
-import difflib
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
-import yaml
 
 from avrisk.api.backends import DEFAULT_BACKEND
 from avrisk.cli.backends import Address, BackendOption, Workers
@@ -37,19 +35,22 @@ from avrisk.cli.common import (
     resumable,
     user_errors,
 )
+from avrisk.cli.estimator_options import (
+    CLI_DEFAULTS,
+    estimator_options,
+    setting_option,
+)
 from avrisk.cli.progress import RichProgress
 from avrisk.cli.results import show_results
 from avrisk.pipeline import RunSettings
 from avrisk.rare import estimator_names
-from avrisk.rare.estimator import DEFAULT_METHOD, estimator_class
+from avrisk.rare.estimator import DEFAULT_METHOD
 from avrisk.scenario import load_spec
 
 if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
-    from avrisk.api.runs import EstimationResult
+    from avrisk.api.result import EstimationResult
 
 DEFAULT_SCENARIO = "highway_default"
-#: Where the command line's defaults differ from an estimator's own.
-CLI_DEFAULTS = {"n_iter": 20}
 #: ``compare``'s: a budget that finishes in minutes on a laptop. splitting_is
 #: keeps its own 2,000 particles per level and takes a final stage of 10,000:
 #: about 19,000 rollouts on highway_default (at most 50,000 if its levels
@@ -57,44 +58,6 @@ CLI_DEFAULTS = {"n_iter": 20}
 #: 50,000, about 90,000 rollouts; CE 5 x 2,000 + 10,000 rollouts, 90,000 too.
 COMPARE_DEFAULTS = {"n_iter": 5, "n_per_iter": 2000, "n_final": 10_000}
 COMPARE_REFERENCE = 50_000
-
-
-def methods_with(name: str) -> list[str]:
-    """The registered estimators that have the setting ``name``."""
-    return [
-        m for m in estimator_names() if name in estimator_class(m).Settings.model_fields
-    ]
-
-
-def _defaults(name: str, cli_defaults: dict[str, Any]) -> str:
-    """``"10000 for splitting_is; 100000 for ce, defensive, mixture, naive"``.
-
-    The default of setting ``name`` per estimator that has it (the command's
-    ``cli_defaults`` over the estimator's own), the default method first.
-    """
-    by_value: dict[str, list[str]] = {}
-    owners = methods_with(name)
-    for m in sorted(owners, key=lambda m: m != DEFAULT_METHOD):
-        value = cli_defaults.get(
-            name, estimator_class(m).Settings.model_fields[name].default
-        )
-        by_value.setdefault(str(value), []).append(m)
-    if len(by_value) == 1 and len(owners) == len(estimator_names()):
-        return next(iter(by_value))
-    return "; ".join(f"{v} for {', '.join(ms)}" for v, ms in by_value.items())
-
-
-def _setting(
-    kind: type, name: str, text: str, cli_defaults: dict[str, Any] = CLI_DEFAULTS
-) -> Any:
-    """An estimator-setting option (``kind | None``): its help gives each default.
-
-    ``text`` says what it is; the help adds, per method that has the setting,
-    its default, so a flag of another method's (``--rho`` with splitting_is)
-    shows as such.
-    """
-    option = typer.Option(help=f"{text} [default: {_defaults(name, cli_defaults)}].")
-    return Annotated[kind | None, option]
 
 
 Scenario = Annotated[
@@ -113,23 +76,23 @@ Gamma = Annotated[float, typer.Option(help="Threshold on the minimum TTC [s].")]
 GammaTest = Annotated[
     str, typer.Option(help="Further thresholds [s], comma-separated, e.g. 0.1,0.2,0.3.")
 ]
-Rho = _setting(float, "rho", "CE search: elite quantile level, in (0, 1)")
-Alpha = _setting(float, "alpha", "CE search: smoothing of the update, in (0, 1]")
+Rho = setting_option(float, "rho", "CE search: elite quantile level, in (0, 1)")
+Alpha = setting_option(float, "alpha", "CE search: smoothing of the update, in (0, 1]")
 PER_ITER, ITERS, FINAL = (
     "CE search: samples per iteration",
     "CE search: iterations",
     "Rollouts of the final stage (naive: all)",
 )
-NPerIter = _setting(int, "n_per_iter", PER_ITER)
-NIter = _setting(int, "n_iter", ITERS)
-NFinal = _setting(int, "n_final", FINAL)
-CompareNPerIter = _setting(int, "n_per_iter", PER_ITER, COMPARE_DEFAULTS)
-CompareNIter = _setting(int, "n_iter", ITERS, COMPARE_DEFAULTS)
-CompareNFinal = _setting(int, "n_final", FINAL, COMPARE_DEFAULTS)
+NPerIter = setting_option(int, "n_per_iter", PER_ITER)
+NIter = setting_option(int, "n_iter", ITERS)
+NFinal = setting_option(int, "n_final", FINAL)
+CompareNPerIter = setting_option(int, "n_per_iter", PER_ITER, COMPARE_DEFAULTS)
+CompareNIter = setting_option(int, "n_iter", ITERS, COMPARE_DEFAULTS)
+CompareNFinal = setting_option(int, "n_final", FINAL, COMPARE_DEFAULTS)
 Seed = Annotated[int, typer.Option(min=0, help="Run seed.")]
 BatchSize = Annotated[int, typer.Option(min=1, help="Rollouts simulated together.")]
-Select = _setting(str, "select", "CE proposal selection: quantile or variance")
-Defensive = _setting(
+Select = setting_option(str, "select", "CE proposal selection: quantile or variance")
+Defensive = setting_option(
     float,
     "defensive",
     "Share of P0 in the final stage's proposal, in [0, 1): bounds every weight "
@@ -199,106 +162,6 @@ def _threshold(gamma: float) -> float:
     if not math.isfinite(gamma):
         raise CliError(f"--gamma must be a finite number [s]; got {gamma}")
     return gamma
-
-
-def estimator_options(
-    method: str,
-    flags: dict[str, Any],
-    assignments: list[str] | None,
-    cli_defaults: dict[str, Any] = CLI_DEFAULTS,
-) -> dict[str, Any]:
-    """The estimator's settings from its flags and ``--set NAME=VALUE``.
-
-    Flags left unset take the command's defaults (``cli_defaults``, those of
-    the estimator's settings that it has) or else the estimator's own; a
-    flag or name the estimator does not have is a CliError (:func:`foreign`).
-    """
-    try:
-        known = estimator_class(method).Settings.model_fields
-    except KeyError as err:
-        raise CliError(
-            f"method must be one of {estimator_names()}; got {method!r}"
-        ) from err
-    given = {k: v for k, v in flags.items() if v is not None}
-    flagged = set(given)
-    for text in assignments or []:
-        name, sep, value = text.partition("=")
-        if not sep or not name.strip():
-            raise CliError(f"--set takes NAME=VALUE; got {text!r}")
-        given[name.strip()] = yaml.safe_load(value)
-        flagged.discard(name.strip())
-    unknown = sorted(set(given) - set(known))
-    if unknown:
-        raise CliError(foreign(method, unknown, flagged))
-    defaults = {k: v for k, v in cli_defaults.items() if k in known}
-    return {**defaults, **given}
-
-
-def foreign(method: str, names: list[str], flag_names: set[str]) -> str:
-    """The one-line error for settings ``names`` that ``method`` does not have.
-
-    Each is named as given (a flag of ``flag_names`` as ``--n-iter``) with
-    the methods that have it, then the method's own settings: ``--rho: not a
-    setting of method 'splitting_is', the default (--rho belongs to ce,
-    defensive, mixture: choose one with --method); its settings: ...``. A
-    name no method has is answered with the closest setting, the method's own
-    first: ``n_particle: ... (did you mean n_particles?)``.
-    """
-    shown = {n: f"--{n.replace('_', '-')}" if n in flag_names else n for n in names}
-    known = estimator_class(method).Settings.model_fields
-    owners: dict[str, list[str]] = {}
-    misspelt = []
-    for name in names:
-        methods = methods_with(name)
-        if methods:
-            owners.setdefault(", ".join(methods), []).append(shown[name])
-        else:
-            misspelt.append(_closest_setting(name, list(known)))
-    whose = "; ".join(
-        f"{', '.join(given)} {'belongs' if len(given) == 1 else 'belong'} to {methods}"
-        for methods, given in owners.items()
-    )
-    reasons = [f"{whose}: choose one with --method"] if owners else []
-    default = ", the default" if method == DEFAULT_METHOD else ""
-    return (
-        f"{', '.join(shown.values())}: not "
-        f"{'a setting' if len(names) == 1 else 'settings'} of method "
-        f"{method!r}{default} ({'; '.join(reasons + misspelt)}); its settings: "
-        f"{', '.join(known)}"
-    )
-
-
-def _closest_setting(name: str, own: list[str]) -> str:
-    """``"did you mean n_particles?"`` for a ``name`` no estimator has.
-
-    The closest of the method's ``own`` settings, else of every estimator's
-    (saying whose), else that no method has it.
-    """
-    close = difflib.get_close_matches(name, own, n=1)
-    if close:
-        return f"did you mean {close[0]}?"
-    every = {
-        s for m in estimator_names() for s in estimator_class(m).Settings.model_fields
-    }
-    close = difflib.get_close_matches(name, sorted(every), n=1)
-    if close:
-        return (
-            f"did you mean {close[0]}, a setting of "
-            f"{', '.join(methods_with(close[0]))}? choose one with --method"
-        )
-    return f"{name} is no method's setting"
-
-
-#: The options of ``run`` and ``compare`` that are estimator settings by name.
-ESTIMATOR_FLAGS = (
-    "rho",
-    "alpha",
-    "n_per_iter",
-    "n_iter",
-    "n_final",
-    "select",
-    "defensive",
-)
 
 
 def _run_settings(
@@ -504,7 +367,8 @@ def report(
     Failures are animated from the traces recorded during the run; the run
     directory alone suffices (it never makes avrisk import code).
     """
-    from avrisk.api.runs import EXPECTED, rebuild_report
+    from avrisk.api.reports import rebuild_report
+    from avrisk.api.runs import EXPECTED
 
     with user_errors(*EXPECTED):
         result = rebuild_report(run_dir, failures, scenario, device)

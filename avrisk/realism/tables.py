@@ -63,6 +63,16 @@ def part_a_table(summary: dict[str, Any]) -> str:
         "| metric | human (held out) | " + " | ".join(models) + " |",
         "|---|---|" + "---|" * len(models),
     ]
+    lines += _distribution_rows(human, models)
+    lines += _rate_rows(summary, human, models)
+    return "\n".join(lines)
+
+
+def _distribution_rows(
+    human: dict[str, Any], models: dict[str, dict[str, Any]]
+) -> list[str]:
+    """Each quantity's percentiles, then its KS / W1 distance to the humans."""
+    lines = []
     for key, unit in QUANTITIES.items():
         label = LABELS.get(key, key)
         lines.append(
@@ -79,11 +89,19 @@ def part_a_table(summary: dict[str, Any]) -> str:
                 [_distance_cell(m[key]) for m in models.values()],
             )
         )
+    return lines
+
+
+def _rate_rows(
+    summary: dict[str, Any], human: dict[str, Any], models: dict[str, dict[str, Any]]
+) -> list[str]:
+    """Hard brakes, lane changes, collisions, departures per hour; the gap's RMSE."""
 
     def rate(key: str) -> list[str]:
         return [f"{m[key]['per_hour']:.1f}" for m in models.values()]
 
-    lines += [
+    collisions = [m["collisions"] for m in models.values()]
+    return [
         _row(
             "hard brakes (< -3 m/s^2) [1/veh-h]",
             f"{human['hard_brakes']['per_hour']:.1f}",
@@ -100,7 +118,7 @@ def part_a_table(summary: dict[str, Any]) -> str:
             [
                 f"{c['per_hour']:.2f} [{c['ci95'][0]:.2f}, {c['ci95'][1]:.2f}] "
                 f"({c['count']})"
-                for c in (m["collisions"] for m in models.values())
+                for c in collisions
             ],
         ),
         _row(
@@ -109,7 +127,7 @@ def part_a_table(summary: dict[str, Any]) -> str:
             [
                 f"[{c['ci95_windows'][0]:.2f}, {c['ci95_windows'][1]:.2f}] "
                 f"({c['windows_with_events']} of {c['windows']})"
-                for c in (m["collisions"] for m in models.values())
+                for c in collisions
             ],
         ),
         _row(
@@ -123,7 +141,6 @@ def part_a_table(summary: dict[str, Any]) -> str:
             [f"{m['gap_rmse_m']:.2f}" for m in models.values()],
         ),
     ]
-    return "\n".join(lines)
 
 
 def targets_table(targets: dict[str, list[TargetResult]]) -> str:

@@ -256,67 +256,15 @@ def write_report(
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     plots = out_dir / "plots"
-    views, weighted = [], None
-    for i, (label, run_dir) in enumerate(runs):
-        summary = run_dir.summary()
-        estimator = estimator_class(summary["method"])
-        images, tables = [], []
-        for j, table in enumerate(estimator.diagnostics(summary["estimate"])):
-            if not table.drawn:
-                tables.append(
-                    {
-                        "title": table.title,
-                        "columns": table.columns,
-                        "rows": table_cells(table),
-                        "note": table.note,
-                    }
-                )
-                continue
-            name = f"diagnostics_{i}_{j}.png"
-            plot_diagnostic(table, summary["estimate"]["gamma"], plots / name)
-            images.append({"src": f"plots/{name}", "note": table.note})
-        if estimator.weighted and weighted is None:
-            weighted = (label, summary)
-        views.append(_run_view(label, run_dir, images, tables))
-    comparison = None
-    if weighted is not None:
-        ref = reference.summary()["estimate"] if reference is not None else None
-        plot_comparison(
-            weighted[1]["estimate"], weighted[0], plots / "comparison.png", ref
-        )
-        comparison = {
-            "label": weighted[0],
-            "n_evals": weighted[1]["estimate"]["n_evals"],
-            "plot": "plots/comparison.png",
-            "rows": comparison_rows(weighted[1]["estimate"], ref),
-            "has_reference": ref is not None,
-            "note": UNRELIABLE_NOTE,
-        }
-    failures, gamma = [], None
+    views, weighted = _run_views(runs, plots)
+    comparison = _comparison(weighted, reference, plots)
     typical = scenario_typicality(spec) if spec is not None else None
+    failures, gamma = [], None
     if failures_from is not None:
-        estimate = failures_from.summary()["estimate"]
-        estimator = estimator_class(failures_from.summary()["method"])
-        gamma = estimate["gamma"]
-        rows = top_failures(failures_from, gamma, n_failures, typical)
-        for j, row in enumerate(rows):
-            anim = (
-                animate(row, out_dir / "animations" / f"failure_{j + 1}.gif")
-                if animate
-                else None
-            )
-            failures.append(
-                failure_view(
-                    row,
-                    spec,
-                    typical,
-                    names=[n for n in param_names if n in row]
-                    or [n for n in row if n not in BOOKKEEPING + DENSITIES],
-                    units=failures_from.units,
-                    step=estimator.stage_label(estimate, row["stage"]),
-                    animation=str(anim.relative_to(out_dir)) if anim else None,
-                )
-            )
+        gamma = failures_from.summary()["estimate"]["gamma"]
+        failures = _failure_views(
+            failures_from, n_failures, typical, spec, param_names, animate, out_dir
+        )
     first = runs[0][1]
     answer = headline(
         [(label, d.summary()) for label, d in runs],
@@ -350,3 +298,90 @@ def write_report(
     path = out_dir / "report.html"
     write_atomic(path, html)  # a full disk leaves no half-written report
     return path
+
+
+def _run_views(
+    runs: Sequence[tuple[str, RunDirectory]], plots: Path
+) -> tuple[list[dict[str, Any]], tuple[str, dict[str, Any]] | None]:
+    """Each run's view with its diagnostics drawn into ``plots``.
+
+    Also the first importance-weighted run, ``(label, summary)``, or None.
+    """
+    views, weighted = [], None
+    for i, (label, run_dir) in enumerate(runs):
+        summary = run_dir.summary()
+        estimator = estimator_class(summary["method"])
+        images, tables = [], []
+        for j, table in enumerate(estimator.diagnostics(summary["estimate"])):
+            if not table.drawn:
+                tables.append(
+                    {
+                        "title": table.title,
+                        "columns": table.columns,
+                        "rows": table_cells(table),
+                        "note": table.note,
+                    }
+                )
+                continue
+            name = f"diagnostics_{i}_{j}.png"
+            plot_diagnostic(table, summary["estimate"]["gamma"], plots / name)
+            images.append({"src": f"plots/{name}", "note": table.note})
+        if estimator.weighted and weighted is None:
+            weighted = (label, summary)
+        views.append(_run_view(label, run_dir, images, tables))
+    return views, weighted
+
+
+def _comparison(
+    weighted: tuple[str, dict[str, Any]] | None,
+    reference: RunDirectory | None,
+    plots: Path,
+) -> dict[str, Any] | None:
+    """The weighted run against naive sampling (and ``reference``), drawn."""
+    if weighted is None:
+        return None
+    ref = reference.summary()["estimate"] if reference is not None else None
+    plot_comparison(weighted[1]["estimate"], weighted[0], plots / "comparison.png", ref)
+    return {
+        "label": weighted[0],
+        "n_evals": weighted[1]["estimate"]["n_evals"],
+        "plot": "plots/comparison.png",
+        "rows": comparison_rows(weighted[1]["estimate"], ref),
+        "has_reference": ref is not None,
+        "note": UNRELIABLE_NOTE,
+    }
+
+
+def _failure_views(
+    run_dir: RunDirectory,
+    n_failures: int,
+    typical: Typicality | None,
+    spec: ScenarioSpec | None,
+    param_names: Sequence[str],
+    animate: Callable[[dict[str, Any], Path], Path | None] | None,
+    out_dir: Path,
+) -> list[dict[str, Any]]:
+    """The ``n_failures`` most likely failures of ``run_dir``, animated if asked."""
+    estimate = run_dir.summary()["estimate"]
+    estimator = estimator_class(run_dir.summary()["method"])
+    rows = top_failures(run_dir, estimate["gamma"], n_failures, typical)
+    failures = []
+    for j, row in enumerate(rows):
+        anim = (
+            animate(row, out_dir / "animations" / f"failure_{j + 1}.gif")
+            if animate
+            else None
+        )
+        failures.append(
+            failure_view(
+                row,
+                spec,
+                typical,
+                names=[n for n in param_names if n in row]
+                or [n for n in row if n not in BOOKKEEPING + DENSITIES],
+                units=run_dir.units,
+                step=estimator.stage_label(estimate, row["stage"]),
+                animation=str(anim.relative_to(out_dir)) if anim else None,
+            )
+        )
+    return failures

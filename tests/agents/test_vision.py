@@ -4,7 +4,7 @@ import torch
 
 from avrisk.agents.drivers import DriverNet, LearnedEgoPolicy
 from avrisk.agents.vision import IMAGE_SHAPE, PilotNet, PilotNetEgo
-from avrisk.assembly.builder import full_float32_on_gpus
+from avrisk.assembly.parts import full_float32_on_gpus
 from avrisk.render import CameraModel, RayCastCamera
 from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState

@@ -5,8 +5,9 @@ import pytest
 import torch
 
 from avrisk.agents.drivers import XI_DIM, LearnedDriver, load_driver_net
-from avrisk.agents.drivers.driver import DRIVER_NOISE_STREAM, innovations_at
-from avrisk.assembly.builder import ScenarioSimulator, base_distribution, param_layout
+from avrisk.agents.drivers.sampling import DRIVER_NOISE_STREAM, innovations_at
+from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.parts import base_distribution, param_layout
 from avrisk.rare import FixedCovNormal
 from avrisk.rare.problem import chunk_rng, sample_seeds
 from avrisk.scenario import ScenarioParams, load_spec

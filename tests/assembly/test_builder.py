@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from avrisk.assembly.builder import (
-    ScenarioSimulator,
+from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.parts import (
     base_distribution,
     driver_params,
     initial_state,

@@ -6,7 +6,8 @@ import torch
 
 from avrisk.agents.drivers import XI_DIM, LearnedDriver, LearnedEgoPolicy, load_xi_prior
 from avrisk.agents.drivers.lane_change import LaneChangeParams, LaneChangingDriver
-from avrisk.assembly.builder import ScenarioSimulator, base_distribution, param_layout
+from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.parts import base_distribution, param_layout
 from avrisk.rare import FixedCovNormal, ScaledBeta
 from avrisk.rare.problem import chunk_rng, sample_seeds
 from avrisk.scenario import (

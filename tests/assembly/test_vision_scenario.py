@@ -4,7 +4,8 @@ import numpy as np
 import torch
 
 from avrisk.agents.vision import PilotNetEgo
-from avrisk.assembly.builder import ScenarioSimulator, base_distribution
+from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.parts import base_distribution
 from avrisk.render import RayCastCamera
 from avrisk.scenario import load_spec
 from tests.scenario_files import shortened_scenario

@@ -13,7 +13,8 @@ from typer.testing import CliRunner
 
 from avrisk.cli.app import COMMANDS, app, docstring
 from avrisk.cli.demo import analytic_table
-from avrisk.cli.run import COMPARE_DEFAULTS, compare, estimator_options
+from avrisk.cli.estimator_options import estimator_options
+from avrisk.cli.run import COMPARE_DEFAULTS, compare
 from avrisk.pipeline.store import RunDirectory
 from avrisk.rare import cross_entropy, get_estimator, naive_mc
 from avrisk.testing import beta_sum_problem, gaussian_linear_problem

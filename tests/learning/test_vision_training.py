@@ -10,7 +10,8 @@ from typer.testing import CliRunner
 
 import avrisk.learning.vision as vision
 from avrisk.agents.vision import PilotNet
-from avrisk.assembly.builder import ScenarioSimulator, base_distribution
+from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.parts import base_distribution
 from avrisk.cli.app import app
 from avrisk.learning.vision import VisionTrainConfig, collect_frames, train_vision
 from avrisk.scenario import load_spec

@@ -1,6 +1,6 @@
 import pytest
 
-from avrisk.assembly.builder import camera_from_spec
+from avrisk.assembly.parts import camera_from_spec
 from avrisk.render import DEFAULT_VEHICLE_HEIGHT, CameraModel
 from avrisk.scenario import ScenarioSpecError, load_spec, spec_from_dict
 from avrisk.scenario.sensors import CameraSpec

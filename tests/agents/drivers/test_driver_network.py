@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 import torch
 
-from avrisk.agents.drivers.driver import reproducible_exp
 from avrisk.agents.drivers.features import N_FEATURES
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import (
@@ -13,6 +12,7 @@ from avrisk.agents.drivers.network import (
     DriverNet,
     row_linear,
 )
+from avrisk.agents.drivers.sampling import reproducible_exp
 from avrisk.agents.drivers.xi import XI_DIM
 
 

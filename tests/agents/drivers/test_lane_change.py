@@ -3,13 +3,14 @@ import math
 import pytest
 import torch
 
-from avrisk.agents.drivers.driver import DRIVER_NOISE_STREAM, LearnedDriver
+from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.lane_change import (
     LANE_CHANGE_NOISE_STREAM,
     LaneChangeParams,
     LaneChangingDriver,
     target_lane_gaps,
 )
+from avrisk.agents.drivers.sampling import DRIVER_NOISE_STREAM
 from avrisk.agents.drivers.store import load_driver_net
 from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState

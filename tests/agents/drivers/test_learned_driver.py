@@ -1,16 +1,15 @@
 import pytest
 import torch
 
-from avrisk.agents.drivers.driver import (
+from avrisk.agents.drivers.driver import LearnedDriver, LearnedEgoPolicy
+from avrisk.agents.drivers.guard import BrakeGuard
+from avrisk.agents.drivers.network import DriverNet
+from avrisk.agents.drivers.sampling import (
     DRIVER_NOISE_STREAM,
     EGO_NOISE_STREAM,
-    LearnedDriver,
-    LearnedEgoPolicy,
     ar1_noise,
     sample_actions,
 )
-from avrisk.agents.drivers.guard import BrakeGuard
-from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import XI_DIM
 from avrisk.agents.policy import get_policy
 from avrisk.safety import MinTTC
