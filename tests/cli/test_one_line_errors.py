@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from avrisk.pipeline import RunDirectory
+from avrisk.pipeline.chunks import ChunkFiles
 from tests.cli.test_bad_input import SMALL, invoke, one_error
 from tests.scenario_files import shortened_scenario
 
@@ -103,7 +103,7 @@ def test_a_folder_of_the_users_given_as_out_is_refused_and_left_as_found(tmp_pat
 def test_an_unfinished_run_whose_chunks_were_deleted_is_one_line(tmp_path, monkeypatch):
     scenario, out = _with_ego(tmp_path, {"policy": "idm_mobil"}), tmp_path / "run"
     args = ("run", scenario, "--out", out, *SMALL)  # three chunks
-    record = RunDirectory.record
+    record = ChunkFiles.record
     calls = []
 
     def interrupted(self, batch):
@@ -112,8 +112,8 @@ def test_an_unfinished_run_whose_chunks_were_deleted_is_one_line(tmp_path, monke
             raise KeyboardInterrupt
         return record(self, batch)
 
-    monkeypatch.setattr(RunDirectory, "record", interrupted)
+    monkeypatch.setattr(ChunkFiles, "record", interrupted)
     assert invoke(*args).exit_code == 130
-    monkeypatch.setattr(RunDirectory, "record", record)
+    monkeypatch.setattr(ChunkFiles, "record", record)
     shutil.rmtree(out / "chunks")
     one_error(invoke(*args), "unfinished run whose chunks/ folder", f"delete {out}")

@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
-from avrisk.pipeline.store import RunDirectory
+from avrisk.pipeline.chunks import ChunkFiles
 from tests.scenario_files import shortened_scenario
 
 pytest.importorskip("zmq")  # tests.cli.ego_servers needs the external extra
@@ -39,7 +39,7 @@ def in_process(tmp_path_factory):
 
 def interrupted(monkeypatch, *args):
     """``avrisk run ARGS`` stopped by Ctrl-C once its first chunk is recorded."""
-    record = RunDirectory.record
+    record = ChunkFiles.record
     calls = []
 
     def stopped(self, batch):
@@ -48,9 +48,9 @@ def interrupted(monkeypatch, *args):
             raise KeyboardInterrupt
         return record(self, batch)
 
-    monkeypatch.setattr(RunDirectory, "record", stopped)
+    monkeypatch.setattr(ChunkFiles, "record", stopped)
     assert invoke("run", *args).exit_code == 130
-    monkeypatch.setattr(RunDirectory, "record", record)
+    monkeypatch.setattr(ChunkFiles, "record", record)
 
 
 def test_a_python_ego_edited_between_sessions_is_refused(
