@@ -35,10 +35,14 @@ and estimates ``p`` by importance sampling from it:
    coordinate and relies on the shrinkage alone: the fit for a failure set
    that depends a little on each of many coordinates (a linear limit state in
    ``D = 1000``), where no single coordinate stands out. The threshold ``t``
-   (from ``THRESHOLDS``, with one component), then the number of components
-   (from 1 to ``n_components``), is the one whose fits to the particles of one
-   half of the chains give the other half's particles the highest mean
-   log-likelihood, summed over both ways round (ties to the sparser fit); the
+   (from ``THRESHOLDS``) and the number of components, chosen together, are
+   those whose fits to the particles of one half of the chains give the other
+   half's particles the highest mean log-likelihood, summed over both ways
+   round (ties to the sparser fit); at each threshold components are added
+   while the score rises (up to ``n_components``), so several failure regions
+   get as many components, each shifted on the coordinates they all need
+   (chosen with one component, the threshold would see only the regions'
+   average, where their shifts cancel); the
    proposal is then fitted to all particles with those choices, unless one
    more candidate scores higher by more than two standard errors of the
    paired difference (from blocks of chains; a close call goes to the
@@ -96,14 +100,23 @@ a region no replicate reached. A replicate whose ``max_levels`` sets end above
 left out of the fit and the run says caution; only when none reaches
 ``gamma`` is it subset simulation's error.
 
-The estimate is that of the importance-sampling stage alone: the proposal is
-fixed before its samples are drawn, so it is unbiased whatever the particles,
-and its standard error is the weighted mean's (the usual CLT interval, trusted
-while the hits' weights have Pareto ``k <= 0.7``). The splitting estimate of
-the same run is kept beside it in ``details`` (``splitting``) as a cross-check
-from the same budget (the replicates' mean, and each replicate's in
-``details["replicates"]``); the two are not independent (the run's particles
-made the proposal) but have different errors.
+The answer
+----------
+The importance-sampling estimate: the proposal is fixed before its samples
+are drawn, so it is unbiased whatever the particles, and its standard error
+is the weighted mean's (the usual CLT interval, trusted while the hits'
+weights have Pareto ``k <= 0.7``). Unless the particles say beforehand that
+the levels' own product (the replicates' mean) will be more precise
+(:func:`levels_more_precise`): the particles' mean weight under fits to the
+other half of the chains predicts the importance sample's variance, and a
+proposal that cannot hold what they found (many regions with few particles
+each in many dimensions; a set that narrows ``P0``'s spread rather than
+shifting it) predicts a large one. ``details["answer"]`` says which
+(``"importance_sampling"`` or ``"splitting"``); both estimates are kept in
+``details`` (``importance_sampling``, ``splitting``, each replicate's in
+``details["replicates"]``) as a cross-check from the same budget: the two
+are not independent (the run's particles made the proposal) but have
+different errors.
 
 :class:`SplittingImportanceSampling` is registered as ``"splitting_is"``;
 :func:`splitting_is` is the top-level function.
@@ -120,6 +133,8 @@ using Gaussian densities revisited." Structural Safety 76, 2019.
 from __future__ import annotations
 
 import dataclasses
+import math
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, Literal, NamedTuple
 
@@ -138,7 +153,7 @@ from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
 from avrisk.rare.particle_fit import particle_proposal, slope_direction
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
-from avrisk.rare.results import Estimate
+from avrisk.rare.results import Estimate, GammaEstimate
 from avrisk.rare.splitting import (
     Z_CONFIDENCE,
     SplittingInfo,
@@ -174,6 +189,10 @@ ADVICE = Advice(
 #: simulation's own errors are somewhat optimistic.
 DISAGREEMENT_Z = 3.0
 
+#: What ``details["importance_sampling"]`` keeps of the sample's estimate at
+#: each threshold (the answer's may be the levels').
+SAMPLED_KEYS = ("p", "ci", "n_hits", "ess", "pareto_k")
+
 #: Extra key of the fit's generator (k-means++ seeding), so that it draws no
 #: chunk's stream.
 FIT_STREAM = 0x736973
@@ -189,8 +208,9 @@ class SplittingISSettings(SplittingSettings):
     ----------
     n_final : int, default=10000
         Samples of the fitted proposal.
-    n_components : int, default=4
-        Mean shifts seeded from the particles (fewer survive merging on one
+    n_components : int, default=12
+        Most mean shifts fitted to the particles: fits with more components
+        are tried while the held-out score rises (fewer survive merging on one
         failure region).
     defensive : float, default=0.1
         Weight ``lam`` of ``P0`` in the proposal, in [0, 1): every weight is
@@ -208,7 +228,7 @@ class SplittingISSettings(SplittingSettings):
 
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
     n_components: int = Field(
-        4, ge=1, description="Mean shifts seeded from the particles."
+        12, ge=1, description="Most mean shifts fitted to the particles."
     )
     defensive: ShareOfP0 = Field(
         0.1, description="Weight of P0 in the proposal (weights <= 1/defensive)."
@@ -321,6 +341,8 @@ class SplittingImportanceSampling(SubsetSimulation):
         if gamma != estimate.get("gamma") or main is None or not own:
             return ()
         reasons = []
+        if details.get("answer") == "splitting":  # the levels' own doubts
+            reasons.extend(SubsetSimulation.doubts(estimate, gamma))
         exhausted = details.get("replicates_exhausted") or 0
         if exhausted:
             reasons.append(
@@ -382,7 +404,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         s = self.settings
         return (
             f"{super().describe()}, then IS {s.n_final:,} "
-            f"({s.n_components} components, defensive {s.defensive:g})"
+            f"(up to {s.n_components} components, defensive {s.defensive:g})"
         )
 
     @staticmethod
@@ -402,6 +424,9 @@ class SplittingImportanceSampling(SubsetSimulation):
         if "splitting" not in details:
             return levels
         by_gamma = sorted(estimate["by_gamma"], key=lambda g: g["gamma"])
+        sampled = details.get("importance_sampling")
+        if sampled:  # the sample's own estimates, whichever is the answer
+            by_gamma = [{**g, **sampled[str(g["gamma"])]} for g in by_gamma]
         main = next(g for g in by_gamma if g["gamma"] == estimate["gamma"])
         fit = (
             details["n_components"],
@@ -443,11 +468,19 @@ class SplittingImportanceSampling(SubsetSimulation):
                     for g, s in zip(by_gamma, own, strict=True)
                 ],
                 note=(
-                    "A cross-check from the same run: the answer (importance "
-                    "sampling) beside the product of the levels' shares. The two "
-                    "are not independent (the levels made the proposal) but err "
+                    "A cross-check from the same run: importance sampling beside "
+                    "the product of the levels' shares. The two are not "
+                    "independent (the levels made the proposal) but err "
                     "differently: intervals far apart say one of them missed part "
-                    "of the event."
+                    "of the event. "
+                    + (
+                        "The answer is the levels' product: before the final "
+                        "samples were drawn, the particles predicted a larger "
+                        "variance for them (the proposal cannot hold everything "
+                        "the levels found)."
+                        if details.get("answer") == "splitting"
+                        else "The answer is importance sampling's."
+                    )
                 ),
             ),
         ]
@@ -505,11 +538,24 @@ class SplittingImportanceSampling(SubsetSimulation):
         stage = context.stage(
             problem, proposal, s.n_final, FINAL_STAGE, final_after=n_evals
         )
-        by_gamma = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            sampled = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
+        from_levels = levels_more_precise(
+            fitted.held_out_weight, combined.by_gamma[problem.gamma], s.n_final
+        )
+        if not from_levels:  # the sample's doubts are the answer's
+            for caught_warning in caught:
+                warnings.warn_explicit(
+                    caught_warning.message,
+                    caught_warning.category,
+                    caught_warning.filename,
+                    caught_warning.lineno,
+                )
         return Estimate(
             method="splitting_is",
             gamma=problem.gamma,
-            by_gamma=by_gamma,
+            by_gamma=dict(combined.by_gamma) if from_levels else sampled,
             n_evals=n_evals + stage.values.size,
             proposal=proposal,
             stopped_by=stage.stopped_by or "budget",
@@ -531,6 +577,12 @@ class SplittingImportanceSampling(SubsetSimulation):
                     str(g): {"p": e.p, "ci": list(e.ci)}
                     for g, e in combined.by_gamma.items()
                 },
+                "importance_sampling": {
+                    str(g): {k: e.to_dict()[k] for k in SAMPLED_KEYS}
+                    for g, e in sampled.items()
+                },
+                "answer": "splitting" if from_levels else "importance_sampling",
+                "held_out_weight": fitted.held_out_weight,
                 "replicates": [
                     {"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own
                 ],
@@ -538,6 +590,33 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "replicates_exhausted": n_exhausted,
             },
         )
+
+
+def levels_more_precise(
+    held_out_weight: float, levels: GammaEstimate, n_final: int
+) -> bool:
+    """Whether the levels' estimate is expected to be more precise than the IS stage's.
+
+    Decided before the importance sample is drawn, from the particles: one
+    draw's ``w 1{f <= gamma}`` has relative variance ``E[w | f <= gamma] / p -
+    1``, with ``E[w | f <= gamma]`` the particles' held-out mean weight
+    (:meth:`~avrisk.rare.particle_fit.HeldOut.mean_weight`) and ``p`` the
+    levels' estimate, so ``n_final`` draws have that over ``n_final``; the
+    levels' own relative variance is ``(stderr / p)^2``. Where the proposal
+    cannot hold what the particles found (many regions, each with few
+    particles, in many dimensions; a failure set that narrows ``P0``'s spread
+    rather than shifting it), its weights' variance is large and the levels'
+    product is the better answer; where it can (the bundled scenarios), the
+    importance sample's. The decision uses the particles only, never the
+    importance sample, so it selects no draw of it. It does use the levels'
+    ``p``: a low one favours the levels, but only near the break-even point,
+    where the two estimates are about equally precise.
+    """
+    p, stderr = levels.p, levels.stderr
+    if not (math.isfinite(held_out_weight) and p > 0 and math.isfinite(stderr)):
+        return False
+    predicted = max(held_out_weight / p - 1.0, 0.0) / n_final
+    return predicted > (stderr / p) ** 2
 
 
 def replicates_disagree(own: Sequence[Estimate]) -> bool:
