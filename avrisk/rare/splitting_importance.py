@@ -342,7 +342,10 @@ class SplittingImportanceSampling(SubsetSimulation):
             return ()
         reasons = []
         if details.get("answer") == "splitting":  # the levels' own doubts
-            reasons.extend(SubsetSimulation.doubts(estimate, gamma))
+            for survivors in details.get("survivors") or []:  # per replicate
+                one = {"details": {"survivors": survivors}}
+                reasons.extend(SubsetSimulation.doubts(one, gamma)[:1])
+            reasons = list(dict.fromkeys(reasons))
         exhausted = details.get("replicates_exhausted") or 0
         if exhausted:
             reasons.append(
