@@ -750,5 +750,5 @@ def combined_levels(
 def splitting_is(
     f: BatchFunction, base: ExponentialFamily, gamma: float, **options: Any
 ) -> Estimate:
-    """Splitting + is: ``estimate("splitting_is", f, base, gamma, **options)``."""
+    """Splitting + IS: ``estimate("splitting_is", f, base, gamma, **options)``."""
     return estimate("splitting_is", f, base, gamma, **options)
