@@ -11,7 +11,8 @@ their command and date.
 What is not a timing: physical durations of the simulated world (``dt 0.1 s``,
 a ``15 s`` window, ``min TTC <= 0.1 s``), which are given in seconds, and code
 literals in double backquotes (a format example such as ``"7 min 20 s"``).
-Docstrings are read with :mod:`ast`, comments with :mod:`tokenize`.
+Docstrings are read with :mod:`ast`, comments with :mod:`tokenize`; a
+citation is found as ``tests/test_docs.py`` finds it (and checked there).
 """
 
 import ast
@@ -21,6 +22,8 @@ import tokenize
 from pathlib import Path
 
 import pytest
+
+from tests.test_docs import CITATION
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "avrisk"
@@ -50,10 +53,6 @@ SPEED = re.compile(
     r"(?:per[ \t]+second|/[ \t]*s)\b",
     re.IGNORECASE,
 )
-#: A citation of a BENCHMARKS.md section, whose heading may hold a date:
-#: ``BENCHMARKS.md, "Title"``, ``BENCHMARKS.md "Title"`` or
-#: ``BENCHMARKS.md ("Title"``, the title possibly over several lines.
-CITATION = re.compile(r'BENCHMARKS\.md,?\s*\(?\s*"([^"]+)"')
 #: A code literal: an example of a format, not a measurement.
 LITERAL = re.compile(r"``[^`]+``")
 
