@@ -39,6 +39,7 @@ _RANGE = rf"{_NUMBER}(?:[ \t]*(?:-|–|to)[ \t]*{_NUMBER})?"
 TIMING = re.compile(
     rf"{_RANGE}[ \t]*(?:(?-i:ms|µs|us|ns)|(?:milli|micro)seconds?"
     r"|min|minutes?|h|hours?)\b"
+    r"|\ba\s+minute\b"
     rf"|\b(?:took|takes|take|taking|spent|spends|lasted|costs?)\s+"
     rf"(?:about\s+|under\s+|over\s+|only\s+|some\s+)?{_RANGE}[ \t]*(?:s|seconds?)\b"
     rf"|{_RANGE}[ \t]*(?:s|seconds?)\s+(?:per|a|an|each)\s+"
@@ -49,6 +50,7 @@ TIMING = re.compile(
 SPEED = re.compile(
     rf"{_RANGE}[ \t]*(?:%|x|×|times)\s+(?:faster|slower|quicker|speed-?up|as fast)\b"
     rf"|\b(?:gain|gains|gained|saves?|saved|cuts?)\s+(?:about\s+)?{_RANGE}[ \t]*%"
+    rf"|{_RANGE}[ \t]*(?:x|×|times)\s+(?:the\s+)?(?:\w+\s+)?(?:throughput|speed)\b"
     rf"|{_RANGE}[ \t]*(?:rollouts|steps|samples|calls|frames|images)[ \t]*"
     r"(?:per[ \t]+second|/[ \t]*s)\b",
     re.IGNORECASE,
@@ -159,6 +161,8 @@ def test_every_module_left_to_clean_still_exists():
         "which took 3 minutes",
         "about 250 microseconds a call",
         "about seven minutes on one core",
+        "after a compilation of about a minute per new batch size",
+        "about three times the eager throughput at batch 1024",
     ],
 )
 def test_a_measurement_is_found(text):

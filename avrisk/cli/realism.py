@@ -219,8 +219,8 @@ def realism_command(
     Part A replays held-out NGSIM I-80 car following (learned drivers and
     IDM against the human followers); part B counts lane changes in six-lane
     traffic against held-out US-101 vehicles. Both use only data shipped with
-    avrisk. At the defaults it runs for a minute or so on one thread
-    (BENCHMARKS.md, "The report: avrisk realism").
+    avrisk. Its cost at the defaults is in BENCHMARKS.md ("The report: avrisk
+    realism").
     """
     with user_errors(ValueError):
         guard = _brake_guard(brake_guard)
