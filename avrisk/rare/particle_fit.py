@@ -102,18 +102,12 @@ class ParticleFit(NamedTuple):
     along_slope : bool
         Whether the shift is the particles' mean along the direction in which
         ``f`` falls (:func:`slope_direction`) rather than per coordinate.
-    held_out_weight : float
-        Mean weight ``p0 / q`` of the particles under the chosen fit to the
-        other half of the chains (:meth:`HeldOut.mean_weight`): predicts the
-        importance-sampling stage's variance before it is drawn. NaN when the
-        particles' chains cannot be halved.
     """
 
     proposal: MixtureProposal
     threshold: float
     n_shifted: int
     along_slope: bool = False
-    held_out_weight: float = float("nan")
 
 
 def slope_direction(z: FloatArray, values: FloatArray) -> FloatArray | None:
@@ -250,32 +244,16 @@ def particle_proposal(
     held_out = HeldOut(z, chain)
     threshold, k, along_slope = THRESHOLDS[0], 1, False
     chosen = per_coordinate(threshold, k)
-    predicted = float("nan")
     if held_out.usable:
         scores = _per_coordinate_scores(held_out, per_coordinate, settings.n_components)
         threshold, k = max(scores, key=lambda tk: held_out.score(scores[tk]))
-        chosen, ratios = per_coordinate(threshold, k), scores[threshold, k]
+        chosen = per_coordinate(threshold, k)
         # the shift along the slope, if clearly better than the best
         # per-coordinate mixture (a close call goes to the mixture)
-        if along is not None:
-            slope_ratios = held_out.log_ratios(fit_along)
-            if held_out.clearly_better(slope_ratios, ratios):
-                chosen, ratios, along_slope = fit_along, slope_ratios, True
-                threshold = 0.0
-
-        def completed(
-            points: FloatArray, point_chain: np.ndarray
-        ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
-            """The chosen fit to a half, with every particle's light regions."""
-            components, weights, shifted = chosen(points, point_chain)
-            return (
-                *with_light_regions(z, components, weights, shifted, base, rng),
-                shifted,
-            )
-
-        # as the final proposal holds the light regions of all the particles
-        completed_ratios = held_out.log_ratios(completed)
-        predicted = held_out.mean_weight(completed_ratios, settings.defensive)
+        if along is not None and held_out.clearly_better(
+            held_out.log_ratios(fit_along), scores[threshold, k]
+        ):
+            chosen, threshold, along_slope = fit_along, 0.0, True
     components, weights, shifted = chosen(z, chain)
     components, weights = with_light_regions(z, components, weights, shifted, base, rng)
     proposal = MixtureProposal(components, weights, base, settings.defensive)
@@ -284,7 +262,6 @@ def particle_proposal(
         threshold,
         int(np.count_nonzero(shifted)),
         along_slope=along_slope,
-        held_out_weight=predicted,
     )
 
 
@@ -363,23 +340,6 @@ class HeldOut:
         """
         mean, stderr = block_means((a - b)[:, None], self.chain)
         return bool(mean[0] > 2.0 * np.nan_to_num(stderr[0], nan=np.inf))
-
-    @staticmethod
-    def mean_weight(log_ratios: FloatArray, defensive: float) -> float:
-        """Mean importance weight ``p0 / q`` of the particles.
-
-        ``q`` with its defensive share ``lam``: ``w = 1 / (lam + (1 - lam)
-        q_shifts / p0)``, from the held-out ``log(q_shifts / p0)``.
-        The particles follow ``P0(. | f <= gamma)``, so this estimates
-        ``E[w | f <= gamma]``, and ``E[w | f <= gamma] / p - 1`` is the
-        relative variance of one importance-sampling draw's ``w 1{f <= gamma}``
-        (``E_q[(w 1_F)^2] = p E[w | F]``). Held out, it counts what a fit
-        misses: a particle in a region the other half's fit leaves out weighs
-        up to ``1 / lam``.
-        """
-        lam = defensive
-        mixed = np.logaddexp(np.log(lam), np.log1p(-lam) + log_ratios)
-        return float(np.mean(np.exp(-mixed)))
 
 
 def with_light_regions(

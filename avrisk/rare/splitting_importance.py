@@ -100,23 +100,14 @@ a region no replicate reached. A replicate whose ``max_levels`` sets end above
 left out of the fit and the run says caution; only when none reaches
 ``gamma`` is it subset simulation's error.
 
-The answer
-----------
-The importance-sampling estimate: the proposal is fixed before its samples
-are drawn, so it is unbiased whatever the particles, and its standard error
-is the weighted mean's (the usual CLT interval, trusted while the hits'
-weights have Pareto ``k <= 0.7``). Unless the particles say beforehand that
-the levels' own product (the replicates' mean) will be more precise
-(:func:`levels_more_precise`): the particles' mean weight under fits to the
-other half of the chains predicts the importance sample's variance, and a
-proposal that cannot hold what they found (many regions with few particles
-each in many dimensions; a set that narrows ``P0``'s spread rather than
-shifting it) predicts a large one. ``details["answer"]`` says which
-(``"importance_sampling"`` or ``"splitting"``); both estimates are kept in
-``details`` (``importance_sampling``, ``splitting``, each replicate's in
-``details["replicates"]``) as a cross-check from the same budget: the two
-are not independent (the run's particles made the proposal) but have
-different errors.
+The estimate is that of the importance-sampling stage alone: the proposal is
+fixed before its samples are drawn, so it is unbiased whatever the particles,
+and its standard error is the weighted mean's (the usual CLT interval, trusted
+while the hits' weights have Pareto ``k <= 0.7``). The splitting estimate of
+the same run is kept beside it in ``details`` (``splitting``) as a cross-check
+from the same budget (the replicates' mean, and each replicate's in
+``details["replicates"]``); the two are not independent (the run's particles
+made the proposal) but have different errors.
 
 :class:`SplittingImportanceSampling` is registered as ``"splitting_is"``;
 :func:`splitting_is` is the top-level function.
@@ -133,8 +124,6 @@ using Gaussian densities revisited." Structural Safety 76, 2019.
 from __future__ import annotations
 
 import dataclasses
-import math
-import warnings
 from collections.abc import Sequence
 from typing import Any, Literal, NamedTuple
 
@@ -152,7 +141,7 @@ from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
 from avrisk.rare.particle_fit import particle_proposal, slope_direction
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
-from avrisk.rare.results import Estimate, GammaEstimate
+from avrisk.rare.results import Estimate
 from avrisk.rare.splitting import (
     Z_CONFIDENCE,
     SplittingInfo,
@@ -185,10 +174,6 @@ ADVICE = Advice(
 #: they disagree (*Replicates*): two-sided 0.3% for normal errors, as subset
 #: simulation's own errors are somewhat optimistic.
 DISAGREEMENT_Z = 3.0
-
-#: What ``details["importance_sampling"]`` keeps of the sample's estimate at
-#: each threshold (the answer's may be the levels').
-SAMPLED_KEYS = ("p", "ci", "n_hits", "ess", "pareto_k")
 
 #: Extra key of the fit's generator (k-means++ seeding), so that it draws no
 #: chunk's stream.
@@ -338,11 +323,6 @@ class SplittingImportanceSampling(SubsetSimulation):
         if gamma != estimate.get("gamma") or main is None or not own:
             return ()
         reasons = []
-        if details.get("answer") == "splitting":  # the levels' own doubts
-            for survivors in details.get("survivors") or []:  # per replicate
-                one = {"details": {"survivors": survivors}}
-                reasons.extend(SubsetSimulation.doubts(one, gamma)[:1])
-            reasons = list(dict.fromkeys(reasons))
         exhausted = details.get("replicates_exhausted") or 0
         if exhausted:
             reasons.append(
@@ -424,9 +404,6 @@ class SplittingImportanceSampling(SubsetSimulation):
         if "splitting" not in details:
             return levels
         by_gamma = sorted(estimate["by_gamma"], key=lambda g: g["gamma"])
-        sampled = details.get("importance_sampling")
-        if sampled:  # the sample's own estimates, whichever is the answer
-            by_gamma = [{**g, **sampled[str(g["gamma"])]} for g in by_gamma]
         main = next(g for g in by_gamma if g["gamma"] == estimate["gamma"])
         fit = (
             details["n_components"],
@@ -468,19 +445,11 @@ class SplittingImportanceSampling(SubsetSimulation):
                     for g, s in zip(by_gamma, own, strict=True)
                 ],
                 note=(
-                    "A cross-check from the same run: importance sampling beside "
-                    "the product of the levels' shares. The two are not "
-                    "independent (the levels made the proposal) but err "
+                    "A cross-check from the same run: the answer (importance "
+                    "sampling) beside the product of the levels' shares. The two "
+                    "are not independent (the levels made the proposal) but err "
                     "differently: intervals far apart say one of them missed part "
-                    "of the event. "
-                    + (
-                        "The answer is the levels' product: before the final "
-                        "samples were drawn, the particles predicted a larger "
-                        "variance for them (the proposal cannot hold everything "
-                        "the levels found)."
-                        if details.get("answer") == "splitting"
-                        else "The answer is importance sampling's."
-                    )
+                    "of the event."
                 ),
             ),
         ]
@@ -538,24 +507,11 @@ class SplittingImportanceSampling(SubsetSimulation):
         stage = context.stage(
             problem, proposal, s.n_final, FINAL_STAGE, final_after=n_evals
         )
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            sampled = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
-        from_levels = levels_more_precise(
-            fitted.held_out_weight, combined.by_gamma[problem.gamma], s.n_final
-        )
-        if not from_levels:  # the sample's doubts are the answer's
-            for caught_warning in caught:
-                warnings.warn_explicit(
-                    caught_warning.message,
-                    caught_warning.category,
-                    caught_warning.filename,
-                    caught_warning.lineno,
-                )
+        by_gamma = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
         return Estimate(
             method="splitting_is",
             gamma=problem.gamma,
-            by_gamma=dict(combined.by_gamma) if from_levels else sampled,
+            by_gamma=by_gamma,
             n_evals=n_evals + stage.values.size,
             proposal=proposal,
             stopped_by=stage.stopped_by or "budget",
@@ -577,12 +533,6 @@ class SplittingImportanceSampling(SubsetSimulation):
                     str(g): {"p": e.p, "ci": list(e.ci)}
                     for g, e in combined.by_gamma.items()
                 },
-                "importance_sampling": {
-                    str(g): {k: e.to_dict()[k] for k in SAMPLED_KEYS}
-                    for g, e in sampled.items()
-                },
-                "answer": "splitting" if from_levels else "importance_sampling",
-                "held_out_weight": fitted.held_out_weight,
                 "replicates": [
                     {"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own
                 ],
@@ -590,33 +540,6 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "replicates_exhausted": n_exhausted,
             },
         )
-
-
-def levels_more_precise(
-    held_out_weight: float, levels: GammaEstimate, n_final: int
-) -> bool:
-    """Whether the levels' estimate is expected to be more precise than the IS stage's.
-
-    Decided before the importance sample is drawn, from the particles: one
-    draw's ``w 1{f <= gamma}`` has relative variance ``E[w | f <= gamma] / p -
-    1``, with ``E[w | f <= gamma]`` the particles' held-out mean weight
-    (:meth:`~avrisk.rare.particle_fit.HeldOut.mean_weight`) and ``p`` the
-    levels' estimate, so ``n_final`` draws have that over ``n_final``; the
-    levels' own relative variance is ``(stderr / p)^2``. Where the proposal
-    cannot hold what the particles found (many regions, each with few
-    particles, in many dimensions; a failure set that narrows ``P0``'s spread
-    rather than shifting it), its weights' variance is large and the levels'
-    product is the better answer; where it can (the bundled scenarios), the
-    importance sample's. The decision uses the particles only, never the
-    importance sample, so it selects no draw of it. It does use the levels'
-    ``p``: a low one favours the levels, but only near the break-even point,
-    where the two estimates are about equally precise.
-    """
-    p, stderr = levels.p, levels.stderr
-    if not (math.isfinite(held_out_weight) and p > 0 and math.isfinite(stderr)):
-        return False
-    predicted = max(held_out_weight / p - 1.0, 0.0) / n_final
-    return predicted > (stderr / p) ** 2
 
 
 def replicates_disagree(own: Sequence[Estimate]) -> bool:

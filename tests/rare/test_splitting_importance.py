@@ -18,15 +18,12 @@ from avrisk.rare import (
 )
 from avrisk.rare.cross_entropy import SEARCH_ADVICE, CESettings
 from avrisk.rare.estimator import estimator_class
-from avrisk.rare.families.standard_space import StandardSpaceShift
-from avrisk.rare.particle_fit import HeldOut, particle_proposal, slope_direction
-from avrisk.rare.results import GammaEstimate
+from avrisk.rare.particle_fit import particle_proposal, slope_direction
 from avrisk.rare.splitting import SubsetSimulation
 from avrisk.rare.splitting_importance import (
     ADVICE,
     SplittingImportanceSampling,
     SplittingISSettings,
-    levels_more_precise,
 )
 from avrisk.rare.trust import estimate_trust
 from avrisk.report.plots import table_cells
@@ -36,7 +33,6 @@ from avrisk.testing import (
     four_branch_problem,
     gaussian_linear_problem,
 )
-from avrisk.testing.suite import suite_problem
 
 
 def sis(problem, seed=0, **kw):
@@ -105,55 +101,6 @@ def test_rotated_regions_get_a_component_each_shifted_on_every_coordinate():
     means = np.array([c.mean for c in fit.proposal.components])
     nearest = (means @ directions.T).argmax(axis=1)
     assert sorted(set(nearest.tolist())) == list(range(k))
-
-
-def test_the_held_out_weight_counts_a_region_the_fit_misses():
-    # particles of two regions; the fit to each half holds both: weights of
-    # about p; drop one region's particles from the fits (a fitter that sees
-    # only the first): its particles weigh about 1 / defensive
-    rng = np.random.default_rng(4)
-    d = 2
-    z = np.vstack(
-        [rng.normal((5, 0), 0.3, (400, d)), rng.normal((0, 5), 0.3, (400, d))]
-    )
-    chain = rng.permutation(800) // 8
-    held_out = HeldOut(z, chain)
-    both = StandardSpaceShift(FixedCovNormal(np.zeros(d), cov=np.eye(d)), [5.0, 0.0])
-    other = both.with_natural_params(np.array([0.0, 5.0]))
-
-    def fitter(components):
-        return lambda points, point_chain: (
-            components,
-            np.full(len(components), 1 / len(components)),
-            np.ones(d, dtype=bool),
-        )
-
-    full = held_out.mean_weight(held_out.log_ratios(fitter([both, other])), 0.1)
-    half = held_out.mean_weight(held_out.log_ratios(fitter([both])), 0.1)
-    assert full < 1e-3  # 2 exp(-12.5 + ...) / 0.9: tiny
-    assert half == pytest.approx(0.5 / (0.1 + 0.9 * np.exp(-12.5)), rel=0.05)
-
-
-def test_the_levels_answer_when_the_particles_predict_them_more_precise():
-    levels = GammaEstimate(0.0, 1e-6, 2e-7, (6e-7, 1.4e-6), 50, 50.0, 4000)
-    # IS relative variance per draw 1e-4 / 1e-6 - 1 = 99; over 10,000 draws
-    # 0.0099 < 0.04 = (0.2)^2: importance sampling; with 10 times the weight
-    # 0.0999 > 0.04: the levels
-    assert not levels_more_precise(1e-4, levels, 10_000)
-    assert levels_more_precise(1e-3, levels, 10_000)
-    assert not levels_more_precise(float("nan"), levels, 10_000)
-
-
-def test_a_set_that_narrows_p0_is_answered_by_the_levels():
-    # RP63: u_1 >= 0.1 |u_2..u_100|^2 - 4.5 narrows the spread of 99
-    # coordinates, which a mean shift cannot follow: the particles predict a
-    # poor importance sample, and the levels' product is the answer
-    problem = suite_problem("RP63")
-    est = sis(problem, seed=0, n_particles=2000, n_final=5000)
-    assert est.details["answer"] == "splitting"
-    levels = est.details["splitting"][str(problem.gamma)]
-    assert est.p == levels["p"] and list(est.ci) == levels["ci"]
-    assert est.ci[0] <= problem.p_exact <= est.ci[1]
 
 
 def test_a_weak_shift_of_every_coordinate_is_kept_and_noise_is_dropped():
