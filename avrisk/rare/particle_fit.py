@@ -33,9 +33,7 @@ __all__ = [
     "MIN_REGION_PARTICLES",
     "N_BLOCKS",
     "OUTLIER_TAIL",
-    "PATIENCE",
     "THRESHOLDS",
-    "HeldOut",
     "ParticleFit",
     "ProposalSettings",
     "block_means",
@@ -52,9 +50,6 @@ __all__ = [
 #: docstring), the sparsest first (ties of the held-out score go to it); 0
 #: keeps every coordinate.
 THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
-#: Components are added (at each threshold) until this many more in a row
-#: fail to raise the held-out score (:func:`particle_proposal`).
-PATIENCE = 2
 #: Blocks of chains whose means give those standard errors.
 N_BLOCKS = 20
 
@@ -203,6 +198,7 @@ def particle_proposal(
         if settings.shift == "all"
         else np.asarray(base.searched_coordinates(), dtype=bool)
     )
+
     along = None
     if slope is not None and np.any(allowed & (slope != 0)):
         along = np.where(allowed, slope, 0.0)
@@ -218,128 +214,75 @@ def particle_proposal(
         noise = float(np.nan_to_num(stderr[0] ** 2))
         return [shrink(shift, 1.0, noise)], np.ones(1), shifted
 
-    def per_coordinate(threshold: float, k: int) -> Fitter:
+    def fit(
+        points: FloatArray, point_chain: np.ndarray, threshold: float, k: int
+    ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
         """Shifts of the informative coordinates, ``k`` components, shrunk."""
+        moments = moment_errors(points, point_chain)
+        shifted = allowed & _informative(moments, threshold)
+        structure = StandardSpaceShift(base, searched=shifted)
+        masked = np.where(shifted, points, 0.0)  # the others play no part in it
+        weights = np.full(len(points), 1.0 / len(points))
+        start = seed_components(structure, masked, weights, k, rng)
+        mixture = fit_mixture(*start, masked, weights, settings.min_weight)
+        components, shares = merge_overlapping(mixture.components, mixture.weights)
+        noise = float(np.nansum(moments[0][1][shifted] ** 2))
+        shrunk = [
+            shrink(c, share, noise) for c, share in zip(components, shares, strict=True)
+        ]
+        return shrunk, shares, shifted
 
-        def fit(
-            points: FloatArray, point_chain: np.ndarray
-        ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
-            moments = moment_errors(points, point_chain)
-            shifted = allowed & _informative(moments, threshold)
-            structure = StandardSpaceShift(base, searched=shifted)
-            masked = np.where(shifted, points, 0.0)  # the others play no part
-            weights = np.full(len(points), 1.0 / len(points))
-            start = seed_components(structure, masked, weights, k, rng)
-            mixture = fit_mixture(*start, masked, weights, settings.min_weight)
-            components, shares = merge_overlapping(mixture.components, mixture.weights)
-            noise = float(np.nansum(moments[0][1][shifted] ** 2))
-            shrunk = [
-                shrink(c, share, noise)
-                for c, share in zip(components, shares, strict=True)
-            ]
-            return shrunk, shares, shifted
+    first = chain < (chain.max() + 1) / 2
 
-        return fit
+    def held_out_points(fitter: Fitter) -> FloatArray:
+        """Each particle's log-likelihood under the fit to the other half, (n,)."""
+        scores = np.empty(len(z))
+        for train in (first, ~first):
+            components, weights, _ = fitter(z[train], chain[train])
+            log_joint = np.log(weights) + component_log_kernels(components, z[~train])
+            scores[~train] = logsumexp(log_joint, axis=1)
+        return scores
 
-    held_out = HeldOut(z, chain)
-    threshold, k, along_slope = THRESHOLDS[0], 1, False
-    chosen = per_coordinate(threshold, k)
-    if held_out.usable:
-        scores = _per_coordinate_scores(held_out, per_coordinate, settings.n_components)
-        threshold, k = max(scores, key=lambda tk: held_out.score(scores[tk]))
+    def summed(scores: FloatArray) -> float:
+        """Mean held-out log-likelihood of each half, summed over the halves."""
+        return float(scores[~first].mean() + scores[first].mean())
+
+    def clearly_better(a: FloatArray, b: FloatArray) -> bool:
+        """Whether held-out scores ``a`` beat ``b`` by two standard errors.
+
+        The paired differences' mean over particles, its standard error from
+        blocks of chains (:func:`block_means`, the chains' correlation in it).
+        """
+        mean, stderr = block_means((a - b)[:, None], chain)
+        return bool(mean[0] > 2.0 * np.nan_to_num(stderr[0], nan=np.inf))
+
+    def per_coordinate(threshold: float, k: int) -> Fitter:
+        """:func:`fit` with its threshold and number of components set."""
+        return lambda points, point_chain: fit(points, point_chain, threshold, k)
+
+    threshold = THRESHOLDS[0]
+    chosen = per_coordinate(threshold, 1)
+    along_slope = False
+    if first.any() and not first.all():  # max keeps the first of ties
+        threshold = max(
+            THRESHOLDS, key=lambda t: summed(held_out_points(per_coordinate(t, 1)))
+        )
+        points = {
+            k: held_out_points(per_coordinate(threshold, k))
+            for k in range(1, settings.n_components + 1)
+        }
+        k = max(points, key=lambda k: summed(points[k]))
         chosen = per_coordinate(threshold, k)
         # the shift along the slope, if clearly better than the best
         # per-coordinate mixture (a close call goes to the mixture)
-        if along is not None and held_out.clearly_better(
-            held_out.log_ratios(fit_along), scores[threshold, k]
-        ):
+        if along is not None and clearly_better(held_out_points(fit_along), points[k]):
             chosen, threshold, along_slope = fit_along, 0.0, True
     components, weights, shifted = chosen(z, chain)
     components, weights = with_light_regions(z, components, weights, shifted, base, rng)
     proposal = MixtureProposal(components, weights, base, settings.defensive)
     return ParticleFit(
-        proposal,
-        threshold,
-        int(np.count_nonzero(shifted)),
-        along_slope=along_slope,
+        proposal, threshold, int(np.count_nonzero(shifted)), along_slope=along_slope
     )
-
-
-def _per_coordinate_scores(
-    held_out: HeldOut, fitter: Callable[[float, int], Fitter], most: int
-) -> dict[tuple[float, int], FloatArray]:
-    """Held-out log-ratios of per-coordinate fits, by (threshold, components).
-
-    For each threshold, fits of 1, 2, ... components, until ``PATIENCE`` in a
-    row fail to raise the held-out score or ``most`` is reached: the number of
-    components comes from the particles (a region per component as long as
-    the other half's particles bear it out), not from a fixed cap. The keys
-    are in the order tried (the sparsest threshold, the fewest components
-    first), so that ``max`` gives ties to the simpler fit.
-    """
-    scores: dict[tuple[float, int], FloatArray] = {}
-    for threshold in THRESHOLDS:
-        best, stale = -np.inf, 0
-        for k in range(1, most + 1):
-            scores[threshold, k] = held_out.log_ratios(fitter(threshold, k))
-            score = held_out.score(scores[threshold, k])
-            best, stale = (score, 0) if score > best else (best, stale + 1)
-            if stale >= PATIENCE:
-                break
-    return scores
-
-
-class HeldOut:
-    """Candidate fits scored on the half of the chains they were not fitted to.
-
-    Chains are numbered in the order of their ancestors, so the two halves
-    (chains below and above the middle number) descend from different draws
-    of ``P0`` and are close to independent: a fit to one half scores the
-    other's particles as fresh draws of the target would score it.
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        Particles in standard-normal space.
-    chain : ndarray of int, shape (n,)
-        Their chains.
-    """
-
-    def __init__(self, z: FloatArray, chain: np.ndarray) -> None:
-        self.z, self.chain = z, chain
-        self.first = chain < (chain.max() + 1) / 2
-
-    @property
-    def usable(self) -> bool:
-        """Whether both halves hold particles."""
-        return bool(self.first.any() and not self.first.all())
-
-    def log_ratios(self, fitter: Fitter) -> FloatArray:
-        """``log(q / p0)`` of each particle under the fit to the other half, (n,).
-
-        ``q`` is the fit's mixture of shifts without the defensive share; for
-        shifts of ``N(0, I)`` this is the log-likelihood less ``log p0(z)``,
-        the same for every candidate, so it ranks fits as the likelihood does.
-        """
-        out = np.empty(len(self.z))
-        for train in (self.first, ~self.first):
-            components, weights, _ = fitter(self.z[train], self.chain[train])
-            kernels = component_log_kernels(components, self.z[~train])
-            out[~train] = logsumexp(np.log(weights) + kernels, axis=1)
-        return out
-
-    def score(self, log_ratios: FloatArray) -> float:
-        """Mean held-out log-likelihood of each half, summed over the halves."""
-        return float(log_ratios[~self.first].mean() + log_ratios[self.first].mean())
-
-    def clearly_better(self, a: FloatArray, b: FloatArray) -> bool:
-        """Whether held-out log-ratios ``a`` beat ``b`` by two standard errors.
-
-        The paired differences' mean over particles, its standard error from
-        blocks of chains (:func:`block_means`, the chains' correlation in it).
-        """
-        mean, stderr = block_means((a - b)[:, None], self.chain)
-        return bool(mean[0] > 2.0 * np.nan_to_num(stderr[0], nan=np.inf))
 
 
 def with_light_regions(

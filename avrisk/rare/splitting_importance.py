@@ -35,14 +35,10 @@ and estimates ``p`` by importance sampling from it:
    coordinate and relies on the shrinkage alone: the fit for a failure set
    that depends a little on each of many coordinates (a linear limit state in
    ``D = 1000``), where no single coordinate stands out. The threshold ``t``
-   (from ``THRESHOLDS``) and the number of components, chosen together, are
-   those whose fits to the particles of one half of the chains give the other
-   half's particles the highest mean log-likelihood, summed over both ways
-   round (ties to the sparser fit); at each threshold components are added
-   while the score rises (up to ``n_components``), so several failure regions
-   get as many components, each shifted on the coordinates they all need
-   (chosen with one component, the threshold would see only the regions'
-   average, where their shifts cancel); the
+   (from ``THRESHOLDS``, with one component), then the number of components
+   (from 1 to ``n_components``), is the one whose fits to the particles of one
+   half of the chains give the other half's particles the highest mean
+   log-likelihood, summed over both ways round (ties to the sparser fit); the
    proposal is then fitted to all particles with those choices, unless one
    more candidate scores higher by more than two standard errors of the
    paired difference (from blocks of chains; a close call goes to the
@@ -190,9 +186,8 @@ class SplittingISSettings(SplittingSettings):
     ----------
     n_final : int, default=10000
         Samples of the fitted proposal.
-    n_components : int, default=12
-        Most mean shifts fitted to the particles: fits with more components
-        are tried while the held-out score rises (fewer survive merging on one
+    n_components : int, default=4
+        Mean shifts seeded from the particles (fewer survive merging on one
         failure region).
     defensive : float, default=0.1
         Weight ``lam`` of ``P0`` in the proposal, in [0, 1): every weight is
@@ -210,7 +205,7 @@ class SplittingISSettings(SplittingSettings):
 
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
     n_components: int = Field(
-        12, ge=1, description="Most mean shifts fitted to the particles."
+        4, ge=1, description="Mean shifts seeded from the particles."
     )
     defensive: ShareOfP0 = Field(
         0.1, description="Weight of P0 in the proposal (weights <= 1/defensive)."
@@ -384,7 +379,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         s = self.settings
         return (
             f"{super().describe()}, then IS {s.n_final:,} "
-            f"(up to {s.n_components} components, defensive {s.defensive:g})"
+            f"({s.n_components} components, defensive {s.defensive:g})"
         )
 
     @staticmethod
