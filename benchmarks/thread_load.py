@@ -55,8 +55,12 @@ CONFIGS = {
 }
 
 
-def run_demo(config: str, demo_args: list[str], workdir: Path) -> dict:
-    """One demo command: its CPU time [s] (children included), wall time [s], digest."""
+def run_demo(config: str, demo_args: list[str], workdir: Path, limit_s: float) -> dict:
+    """One demo command: its CPU time [s] (children included), wall time [s], digest.
+
+    A command still running after ``limit_s`` is stopped: its figures are then
+    lower bounds (``stopped``) and it has no digest.
+    """
     env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
     env.update(CONFIGS[config])
     out = workdir / "estimates.json"
@@ -72,20 +76,31 @@ def run_demo(config: str, demo_args: list[str], workdir: Path) -> dict:
     load_before = os.getloadavg()[0]
     start = time.perf_counter()
     with (workdir / "stdout.txt").open("w") as log:
-        process = subprocess.Popen(
-            command, env=env, stdout=log, stderr=subprocess.STDOUT
-        )
-        _, status, usage = os.wait4(process.pid, 0)
+        process = subprocess.Popen(command, env=env, stdout=log, stderr=log)
+        status, usage, stopped = _wait(process, start + limit_s)
     wall = time.perf_counter() - start
-    process.returncode = os.waitstatus_to_exitcode(status)
-    if process.returncode != 0:
-        raise RuntimeError(f"{shlex.join(command)} failed; see {workdir}/stdout.txt")
+    if not stopped and os.waitstatus_to_exitcode(status) != 0:
+        log_text = (workdir / "stdout.txt").read_text()[-2000:]
+        raise RuntimeError(f"{shlex.join(command)} failed:\n{log_text}")
     return {
         "cpu_s": usage.ru_utime + usage.ru_stime,
         "wall_s": wall,
         "load_before": load_before,
-        "digest": digest(workdir),
+        "stopped": stopped,
+        "digest": None if stopped else digest(workdir),
     }
+
+
+def _wait(process: subprocess.Popen, deadline: float) -> tuple[int, object, bool]:
+    """(wait status, resource usage, whether it was stopped at ``deadline``)."""
+    while time.perf_counter() < deadline:
+        pid, status, usage = os.wait4(process.pid, os.WNOHANG)
+        if pid:
+            return status, usage, False
+        time.sleep(0.5)
+    process.kill()
+    _, status, usage = os.wait4(process.pid, 0)
+    return status, usage, True
 
 
 def digest(workdir: Path) -> str:
@@ -145,30 +160,53 @@ def table(
     results: dict[tuple[int, str], list[dict]], configs: list[str], load: int
 ) -> str:
     """Markdown table: medians (quiet, loaded) and their ratios, per configuration."""
-    med = {
-        k: {m: statistics.median(r[m] for r in v) for m in ("cpu_s", "wall_s")}
-        for k, v in results.items()
-    }
+    med = {k: _medians(v) for k, v in results.items()}
     base = med[(0, configs[0])]
     lines = [
         "| threads | quiet CPU [s] | loaded CPU [s] | loaded / quiet CPU "
+        f"| loaded CPU / {configs[0]}'s quiet "
         f"| quiet wall [s] | loaded wall [s] | quiet wall / {configs[0]}'s | runs |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for c in configs:
         q, ld = med[(0, c)], med[(load, c)]
         cells = [
             c,
-            f"{q['cpu_s']:.1f}",
-            f"{ld['cpu_s']:.1f}",
-            f"**{ld['cpu_s'] / q['cpu_s']:.2f}**",
-            f"{q['wall_s']:.1f}",
-            f"{ld['wall_s']:.1f}",
-            f"**{q['wall_s'] / base['wall_s']:.2f}**",
+            _figure(q, "cpu_s"),
+            _figure(ld, "cpu_s"),
+            _ratio(ld, q, "cpu_s"),
+            _ratio(ld, base, "cpu_s"),
+            _figure(q, "wall_s"),
+            _figure(ld, "wall_s"),
+            _ratio(q, base, "wall_s"),
             f"{len(results[(0, c)])} + {len(results[(load, c)])}",
         ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _medians(runs: list[dict]) -> dict[str, float]:
+    """Median CPU and wall time, and whether any run was stopped.
+
+    A stopped run's figures are lower bounds: the medians are then too.
+    """
+    return {
+        "cpu_s": statistics.median(r["cpu_s"] for r in runs),
+        "wall_s": statistics.median(r["wall_s"] for r in runs),
+        "stopped": any(r["stopped"] for r in runs),
+    }
+
+
+def _figure(med: dict, key: str) -> str:
+    return ("≥ " if med["stopped"] else "") + f"{med[key]:.1f}"
+
+
+def _ratio(top: dict, bottom: dict, key: str) -> str:
+    """top / bottom in bold; ≥ for a lower bound; ? where the bottom is one."""
+    if bottom["stopped"] and top is not bottom:
+        return "?"
+    prefix = "≥ " if top["stopped"] and top is not bottom else ""
+    return f"**{prefix}{top[key] / bottom[key]:.2f}**"
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -177,6 +215,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--load", type=int, default=2, help="Competing processes.")
     parser.add_argument("--demo-args", default=DEMO_ARGS)
+    parser.add_argument(
+        "--limit", type=float, default=3600, help="Stop a run after this many s."
+    )
     parser.add_argument("--json", type=Path, help="Write every run's figures here.")
     args = parser.parse_args(argv)
     configs = args.configs.split(",")
@@ -189,18 +230,23 @@ def main(argv: list[str] | None = None) -> None:
     runs = []
     for n, config in schedule(configs, args.repeats, args.load):
         with tempfile.TemporaryDirectory() as tmp, CompetingLoad(n):
-            result = run_demo(config, shlex.split(args.demo_args), Path(tmp))
+            result = run_demo(
+                config, shlex.split(args.demo_args), Path(tmp), args.limit
+            )
         result.update(config=config, load=n)
         runs.append(result)
         results.setdefault((n, config), []).append(result)
         print(json.dumps(result), flush=True)
-        if result["digest"] != runs[0]["digest"]:
+        digests = {r["digest"] for r in runs} - {None}
+        if len(digests) > 1:
             sys.exit(f"{config} with load {n} gave other estimates than the first run")
     if args.json:
         args.json.write_text(json.dumps(runs, indent=2))
     print(
         f"\n`avrisk demo {args.demo_args}`, {args.load} competing processes, "
-        f"{args.repeats} rounds; all {len(runs)} runs gave the same estimates\n"
+        f"{args.repeats} rounds; the {sum(not r['stopped'] for r in runs)} runs of "
+        f"{len(runs)} that finished gave the same estimates (>=: a run stopped "
+        f"after {args.limit:g} s, its figures lower bounds)\n"
     )
     print(table(results, configs, args.load))
 
