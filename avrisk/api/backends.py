@@ -25,7 +25,6 @@ from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import ProcessPoolEvaluator
 from avrisk.rare.ray_evaluator import RayEvaluator
 from avrisk.registry import Registry
-from avrisk.tensors.threads import threads_fitted_to_load
 
 if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
     from avrisk.assembly import ObjectiveFactory, SimulationObjective
@@ -93,12 +92,14 @@ def _local(
     """In this process, or in ``workers`` worker processes on this machine.
 
     In this process, with as many torch threads as cores are idle when the
-    run starts (:func:`~avrisk.tensors.threads.threads_fitted_to_load`:
+    run starts (:func:`~avrisk.assembly.threads.threads_fitted_to_load`:
     threads spinning beside other processes' work waste the machine).
     """
     if address is not None:
         raise UserError("--address joins a Ray cluster: add --backend ray")
     if workers is None:
+        from avrisk.assembly.threads import threads_fitted_to_load
+
         with threads_fitted_to_load():
             yield None
         return

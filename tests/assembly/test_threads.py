@@ -4,8 +4,8 @@ import pytest
 import torch
 
 from avrisk.api.backends import open_evaluator
-from avrisk.tensors import threads
-from avrisk.tensors.threads import (
+from avrisk.assembly import threads
+from avrisk.assembly.threads import (
     USER_SETTING,
     idle_cores,
     parse_proc_stat,

@@ -29,6 +29,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import torch
+
 __all__ = ["USER_SETTING", "WINDOW_S", "idle_cores", "threads_fitted_to_load"]
 
 #: The environment variable with which a user fixes the thread count.
@@ -52,8 +54,6 @@ def threads_fitted_to_load(window_s: float = WINDOW_S) -> Iterator[int]:
     :data:`USER_SETTING` or the idle cores cannot be measured. The previous
     count is restored on exit.
     """
-    import torch  # here, not at import: the command line lists backends without it
-
     previous = torch.get_num_threads()
     idle = None if USER_SETTING in os.environ else idle_cores(window_s)
     threads = previous if idle is None else max(1, min(previous, round(idle)))
