@@ -12,8 +12,9 @@ needs (BENCHMARKS.md, "Threads under a competing load").
 window (:func:`idle_cores`, from ``/proc/stat``) and runs its block with that
 many intra-op threads: torch's own default on an idle machine, one thread
 beside CPU-bound neighbours. The count is chosen once, when the block starts.
-Results do not depend on it (the rollouts' operations give the same bits on
-any number of threads; the benchmark checks the demo's estimates).
+Results do not depend on it: the demo's estimates and the rollouts' ``f``
+come out the same bit for bit on one thread and two (``benchmarks/thread_load.py``
+checks it).
 
 A user's choice wins: with ``OMP_NUM_THREADS`` in the environment the thread
 count is left as torch set it. Where ``/proc/stat`` cannot be read (macOS,
@@ -31,7 +32,13 @@ from pathlib import Path
 
 import torch
 
-__all__ = ["USER_SETTING", "WINDOW_S", "idle_cores", "threads_fitted_to_load"]
+__all__ = [
+    "USER_SETTING",
+    "WINDOW_S",
+    "idle_cores",
+    "parse_proc_stat",
+    "threads_fitted_to_load",
+]
 
 #: The environment variable with which a user fixes the thread count.
 USER_SETTING = "OMP_NUM_THREADS"
