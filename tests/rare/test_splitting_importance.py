@@ -18,13 +18,12 @@ from avrisk.rare import (
 )
 from avrisk.rare.cross_entropy import SEARCH_ADVICE, CESettings
 from avrisk.rare.estimator import estimator_class
+from avrisk.rare.particle_fit import particle_proposal, slope_direction
 from avrisk.rare.splitting import SubsetSimulation
 from avrisk.rare.splitting_importance import (
     ADVICE,
     SplittingImportanceSampling,
     SplittingISSettings,
-    particle_proposal,
-    slope_direction,
 )
 from avrisk.rare.trust import estimate_trust
 from avrisk.report.plots import table_cells
