@@ -78,11 +78,19 @@ def worker_factory(objective: SimulationObjective) -> ObjectiveFactory:
 def _local(
     objective: SimulationObjective, workers: int | None, address: str | None
 ) -> Iterator[Evaluator | None]:
-    """In this process, or in ``workers`` worker processes on this machine."""
+    """In this process, or in ``workers`` worker processes on this machine.
+
+    In this process, with as many torch threads as cores are idle when the
+    run starts (:func:`~avrisk.assembly.threads.threads_fitted_to_load`:
+    threads spinning beside other processes' work waste the machine).
+    """
     if address is not None:
         raise UserError("--address joins a Ray cluster: add --backend ray")
     if workers is None:
-        yield None
+        from avrisk.assembly.threads import threads_fitted_to_load
+
+        with threads_fitted_to_load():
+            yield None
         return
     with ProcessPoolEvaluator(worker_factory(objective), workers or 1) as evaluator:
         yield evaluator

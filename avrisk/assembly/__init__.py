@@ -15,7 +15,9 @@ simulator (:mod:`avrisk.sim`), the drivers and ego policies
 * :mod:`~avrisk.assembly.trace_camera` -- the ego camera's images of a
   recorded rollout, rendered again from its trace;
 * :mod:`~avrisk.assembly.typicality` -- how typical a rollout's start and
-  drivers are under ``P0``, as percentiles (the ranking of failures).
+  drivers are under ``P0``, as percentiles (the ranking of failures);
+* :mod:`~avrisk.assembly.threads` -- torch's CPU threads in this process,
+  as many as cores are idle (worker processes: one each, :class:`ObjectiveFactory`).
 """
 
 from avrisk.assembly.builder import ScenarioSimulator
