@@ -68,7 +68,7 @@ from avrisk.rare.final_stage import (
     weighted_hits_estimate,
 )
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, InvalidOutputError
-from avrisk.rare.results import Estimate, GammaEstimate, jsonable
+from avrisk.rare.results import GammaEstimate, jsonable
 from avrisk.rare.splitting_importance import (
     SplittingImportanceSampling,
     SplittingISSettings,
@@ -181,9 +181,9 @@ class PairedEstimate:
         ``P(B fails, A does not)``, its ``n_hits`` those samples.
     fixes : GammaEstimate
         ``P(A fails, B does not)``.
-    union : Estimate
+    union : dict
         The search's estimate of ``P(A or B)`` (``splitting_is`` on ``min(f_A,
-        f_B)``), with its details.
+        f_B)``), as ``Estimate.to_dict()`` (a run summary's ``estimate``).
     trust : Trust
         The engine's trust rule on the union, each version and the
         discordant samples.
@@ -196,13 +196,13 @@ class PairedEstimate:
     ratio: Contrast
     regressions: GammaEstimate
     fixes: GammaEstimate
-    union: Estimate
+    union: dict[str, Any]
     trust: Trust
 
     @property
     def n_evals(self) -> int:
         """Calls of the paired box (each evaluates both versions)."""
-        return self.union.n_evals
+        return int(self.union["n_evals"])
 
     @property
     def regression_share(self) -> float:
@@ -229,7 +229,7 @@ class PairedEstimate:
                 "fix_share": self.fix_share,
                 "n_evals": self.n_evals,
                 "trust": {"word": self.trust.word, "reasons": list(self.trust.reasons)},
-                "union": self.union.to_dict(),
+                "union": self.union,
             }
         )
 
@@ -503,24 +503,22 @@ def _versions_words(wording: Wording) -> dict[str, Wording]:
 
 
 def paired_trust(
-    union: Estimate,
+    union: Mapping[str, Any],
     parts: Mapping[str, GammaEstimate],
     wording: Wording = GENERIC,
 ) -> Trust:
     """The engine's trust rule on a paired estimate, each reason once.
 
-    ``union``: the search's estimate (:func:`~avrisk.rare.trust.estimate_trust`
-    of ``splitting_is``); ``parts``: the estimates of ``"a"``, ``"b"`` and
+    ``union``: the search's estimate as a dictionary
+    (:func:`~avrisk.rare.trust.estimate_trust` of ``splitting_is``, at its
+    ``gamma``); ``parts``: the estimates of ``"a"``, ``"b"`` and
     ``"xor"`` (the discordant samples), each read by
     :func:`~avrisk.rare.trust.trust_at` as a weighted estimate.
     """
     words = _versions_words(wording)
     reasons = list(
         estimate_trust(
-            SplittingImportanceSampling,
-            union.to_dict(),
-            union.main.to_dict(),
-            words["union"],
+            SplittingImportanceSampling, union, _main(union), words["union"]
         ).reasons
     )
     for key, part in parts.items():
@@ -528,8 +526,16 @@ def paired_trust(
     return Trust(tuple(dict.fromkeys(reasons)))
 
 
+def _main(union: Mapping[str, Any]) -> dict[str, Any]:
+    """The entry of an estimate dictionary's ``by_gamma`` at its ``gamma``."""
+    return next(g for g in union["by_gamma"] if g["gamma"] == union["gamma"])
+
+
 def paired_estimate(
-    sample: PairedSample, gamma: float, union: Estimate, wording: Wording = GENERIC
+    sample: PairedSample,
+    gamma: float,
+    union: Mapping[str, Any],
+    wording: Wording = GENERIC,
 ) -> PairedEstimate:
     """Every estimate of the module docstring from one weighted paired sample.
 
@@ -539,8 +545,9 @@ def paired_estimate(
         The final stage's samples with both versions' values (``n >= 2``).
     gamma : float
         Failure threshold.
-    union : Estimate
-        The search's estimate of ``P(A or B)`` from the same sample.
+    union : mapping
+        The search's estimate of ``P(A or B)`` from the same sample, as
+        ``Estimate.to_dict()``.
     wording : Wording, default=GENERIC
         How trust reasons name ``f`` and a sample.
     """
@@ -578,7 +585,7 @@ def paired_estimate(
         ratio=_ratio(terms, a, bound),
         regressions=share(b_hit & ~a_hit),
         fixes=share(a_hit & ~b_hit),
-        union=union,
+        union=dict(union),
         trust=paired_trust(
             union,
             {"a": a, "b": b, "xor": weighted_hits_estimate(log_w, discordant, gamma)},
@@ -657,34 +664,45 @@ def paired_splitting_is(
         **options,
     )
     if not tap.chunks:  # the levels ended with a bound and no final stage
-        return bound_only(union, wording)
-    return paired_estimate(tap.sample(union.n_samples), union.gamma, union, wording)
+        return bound_only(union.to_dict(), wording)
+    sample = tap.sample(union.n_samples)
+    return paired_estimate(sample, union.gamma, union.to_dict(), wording)
 
 
-def bound_only(union: Estimate, wording: Wording = GENERIC) -> PairedEstimate:
+def bound_only(union: Mapping[str, Any], wording: Wording = GENERIC) -> PairedEstimate:
     """A search that found no sample of the union: every figure a bound.
 
     ``p_A``, ``p_B`` and the discordant shares are 0 with the union's bound
-    as upper end, the difference ``+-`` it, and the ratio unbounded.
+    (``union``: its estimate as a dictionary) as upper end, the difference
+    ``+-`` it, and the ratio unbounded.
     """
-    main = union.main
-    high = main.ci[1]
-    zero = dataclasses.replace(main, p=0.0, stderr=0.0, ci=(0.0, high), n_hits=0)
+    main = _main(union)
+    high = float(main["ci"][1])
+    zero = GammaEstimate(
+        gamma=float(union["gamma"]),
+        p=0.0,
+        stderr=0.0,
+        ci=(0.0, high),
+        n_hits=0,
+        ess=0.0,
+        n_samples=int(main["n_samples"]),
+        interval=main.get("interval") or "",
+    )
     difference = Contrast(
-        0.0, 0.0, (-high, high), -high, high, CONFIDENCE, main.interval
+        0.0, 0.0, (-high, high), -high, high, CONFIDENCE, zero.interval
     )
     ratio = Contrast(
-        math.nan, math.inf, (0.0, math.inf), 0.0, math.inf, CONFIDENCE, main.interval
+        math.nan, math.inf, (0.0, math.inf), 0.0, math.inf, CONFIDENCE, zero.interval
     )
     parts = {"a": zero, "b": zero, "xor": zero}
     return PairedEstimate(
-        union.gamma,
+        zero.gamma,
         zero,
         zero,
         difference,
         ratio,
         zero,
         zero,
-        union,
+        dict(union),
         paired_trust(union, parts, wording),
     )

@@ -182,7 +182,21 @@ def test_a_resumed_run_replays_the_final_stage_and_gives_the_same_estimate():
         )
     assert not calls  # everything replayed
     assert again.to_dict() | {"union": None} == first.to_dict() | {"union": None}
-    assert again.union.p == first.union.p
+    assert again.union["p"] == first.union["p"]
+
+
+def test_a_search_that_finds_no_failure_bounds_every_figure():
+    def never(x):
+        return np.ones((len(x), 2))
+
+    base = pair_problem("nested_r0_p1e-04_d2").base
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = paired_splitting_is(never, base, 0.0, n_particles=200, n_final=500)
+    assert est.a.p == est.b.p == 0.0
+    assert 0.0 < est.a.ci[1] == est.difference.ci[1] == -est.difference.ci[0]
+    assert est.ratio.ci == (0.0, math.inf)
+    assert not est.trust.ok
 
 
 @pytest.mark.slow
