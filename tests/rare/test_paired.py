@@ -12,6 +12,7 @@ from avrisk.rare.paired import (
     MinOfPair,
     discordance_bound,
     fieller_interval,
+    gate,
     paired_splitting_is,
 )
 from avrisk.rare.problem import InvalidOutputError
@@ -197,6 +198,22 @@ def test_a_search_that_finds_no_failure_bounds_every_figure():
     assert 0.0 < est.a.ci[1] == est.difference.ci[1] == -est.difference.ci[0]
     assert est.ratio.ci == (0.0, math.inf)
     assert not est.trust.ok
+
+
+def test_the_gate_passes_half_the_risk_fails_twice_and_cannot_tell_equal():
+    half = run(pair_problem("nested_r0.5_p1e-04_d4"))
+    twice = run(pair_problem("disjoint_ratio2_p1e-04_d4"))
+    same = run(pair_problem("nested_r0_p1e-04_d4"))
+    assert gate(half, 1.0).outcome == "pass"
+    assert gate(twice, 1.0).outcome == "fail"
+    verdict = gate(same, 1.0)
+    assert verdict.outcome == "inconclusive"
+    assert verdict.lower <= 1.0 < verdict.upper
+    assert verdict.n_final_needed is None  # an estimate at the margin
+    # a margin just above half's upper bound: more samples would decide it
+    close = gate(half, half.ratio.upper * 0.99)
+    assert close.outcome == "inconclusive"
+    assert close.n_final_needed > half.a.n_samples
 
 
 @pytest.mark.slow
