@@ -14,13 +14,19 @@ The package is split the way the data flows (see ``DESIGN.md``):
 * :mod:`avrisk.assembly` -- a scenario built into a simulator, its actors and
   its measure: the estimator's black box.
 * :mod:`avrisk.api` -- the scenario-level calls (:func:`estimate`,
-  :func:`compare_methods`, :func:`simulate`, :func:`write_report`), light to import:
-  each loads the simulator when called.
+  :func:`compare_methods`, :func:`compare_egos`, :func:`simulate`,
+  :func:`write_report`), light to import: each loads the simulator when called.
 * :mod:`avrisk.cli` -- the ``avrisk`` command, a shell over :mod:`avrisk.api`.
 """
 
 __version__ = "0.1.0"
 
-from avrisk.api import compare_methods, estimate, simulate, write_report  # noqa: E402
+from avrisk.api import (  # noqa: E402
+    compare_egos,
+    compare_methods,
+    estimate,
+    simulate,
+    write_report,
+)
 
-__all__ = ["compare_methods", "estimate", "simulate", "write_report"]
+__all__ = ["compare_egos", "compare_methods", "estimate", "simulate", "write_report"]
