@@ -249,7 +249,8 @@ def compare_egos(
     UserError
         For settings, egos, a scenario or a run directory that cannot be used.
     """
-    from avrisk.api.ab import UNION_METHOD, compare_specs
+    from avrisk.api.ab import compare_specs
+    from avrisk.rare.paired import UNION_METHOD
 
     return compare_specs(
         _spec(scenario, ego_a),

@@ -35,6 +35,7 @@ from avrisk.pipeline.provenance import stamp
 from avrisk.pipeline.repeatability import ReplayCheck
 from avrisk.rare.paired import (
     PAIR_COLUMNS,
+    UNION_METHOD,
     MinOfPair,
     PairedEstimate,
     PairedSample,
@@ -52,8 +53,6 @@ __all__ = ["AB_FILE", "AB_SCHEMA", "ABResult", "compare_specs", "final_sample"]
 AB_FILE = "ab.json"
 #: Schema of ``ab.json`` and of ``avrisk ab --json``.
 AB_SCHEMA = "avrisk.ab/1"
-#: The method of the union's search: the one whose final sample is weighted.
-UNION_METHOD = "splitting_is"
 #: The run's label in progress events.
 LABEL = "A/B (both egos per rollout)"
 

@@ -80,6 +80,7 @@ from avrisk.rare.weights import kish_ess
 
 __all__ = [
     "PAIR_COLUMNS",
+    "UNION_METHOD",
     "Contrast",
     "FinalStageTap",
     "PairedEstimate",
@@ -93,6 +94,8 @@ __all__ = [
     "paired_splitting_is",
 ]
 
+#: The estimator that searches the union of the two failure sets.
+UNION_METHOD = SplittingImportanceSampling.name
 #: The recorded columns of each version's outcome, A's first.
 PAIR_COLUMNS = ("f_a", "f_b")
 
