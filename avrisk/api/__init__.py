@@ -205,6 +205,7 @@ def compare_egos(
     gamma: float = 0.14,
     seed: int = 0,
     batch_size: int = 4096,
+    failures: int = 3,
     device: str = "cpu",
     progress: Progress = ignore,
     **options: Any,
@@ -235,6 +236,9 @@ def compare_egos(
         The threshold on both egos' minimum TTC [s].
     seed, batch_size, device, progress
         As for :func:`estimate`.
+    failures : int, default=3
+        Regressions (and fixes) the report ``ab_report.html`` animates, each
+        with both egos on the same situation, the most realistic first.
     **options
         ``splitting_is``'s settings by name (``n_final=20000``).
 
@@ -258,6 +262,7 @@ def compare_egos(
         _settings(UNION_METHOD, gamma, (), seed, batch_size, options),
         Path(out),
         max_ratio=max_ratio,
+        failures=failures,
         device=device,
         progress=progress,
     )

@@ -27,7 +27,14 @@ from avrisk.api.errors import UserError, write_failures
 from avrisk.api.events import Progress, ignore, run_events
 from avrisk.api.readback import check_recorded
 from avrisk.api.runs import check_thresholds, plan, planned, samples_directory
-from avrisk.assembly import SimulationObjective, base_distribution
+from avrisk.assembly import (
+    MECHANISMS,
+    ScenarioSimulator,
+    SimulationObjective,
+    base_distribution,
+    param_layout,
+    scenario_typicality,
+)
 from avrisk.assembly.paired import PairedObjective
 from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
 from avrisk.pipeline.files import write_json
@@ -44,6 +51,9 @@ from avrisk.rare.paired import (
     paired_estimate,
 )
 from avrisk.rare.problem import FINAL_STAGE, STATUS
+from avrisk.rare.results import jsonable
+from avrisk.report.ab import AB_REPORT_FILE, write_ab_report
+from avrisk.report.animate import animate_samples
 from avrisk.report.answer import SCENARIO_WORDING
 from avrisk.scenario import ScenarioSpec
 
@@ -73,6 +83,11 @@ class ABResult:
         The gate's outcome at ``max_ratio``.
     path : Path
         The run directory.
+    discordant : dict
+        ``"regressions"`` and ``"fixes"``: the final stage's discordant
+        rollouts, the most realistic first (:func:`ranked_discordant`).
+    report : Path or None
+        The HTML report.
     """
 
     scenario: str
@@ -80,6 +95,8 @@ class ABResult:
     paired: PairedEstimate
     verdict: Verdict
     path: Path
+    discordant: dict[str, list[dict[str, Any]]]
+    report: Path | None = None
 
     def line(self) -> str:
         """One line for a CI log: the outcome, the ratio's bound, both ``p``."""
@@ -108,7 +125,9 @@ class ABResult:
             "verdict": self.verdict.to_dict(),
             "line": self.line(),
             "paired": self.paired.to_dict(),
+            "discordant": jsonable(self.discordant),
             "path": str(self.path),
+            "report": None if self.report is None else str(self.report),
         }
 
     def __str__(self) -> str:
@@ -139,10 +158,15 @@ def compare_specs(
     out: Path,
     *,
     max_ratio: float = 1.0,
+    failures: int = 3,
     device: str = "cpu",
     progress: Progress = ignore,
 ) -> ABResult:
     """Run (or resume, or read back) the comparison of two egos into ``out``.
+
+    Then ``ab.json`` and the report ``ab_report.html``: the discordant
+    rollouts ranked, the first ``failures`` regressions and fixes animated
+    with each ego on the same situation.
 
     Parameters
     ----------
@@ -154,6 +178,8 @@ def compare_specs(
         The run directory.
     max_ratio : float, default=1.0
         The gate's margin on ``p_B / p_A``.
+    failures : int, default=3
+        Regressions and fixes animated in the report (each, 0: none).
     device : str, default="cpu"
     progress : callable, optional
         The plan, then the run's events (:mod:`avrisk.api.events`).
@@ -195,7 +221,116 @@ def compare_specs(
     paired = paired_estimate(
         final_sample(run_dir), run_settings.gamma, summary["estimate"], SCENARIO_WORDING
     )
-    result = ABResult(spec_a.name, egos, paired, gate(paired, max_ratio), run_dir.path)
-    with write_failures(out, "the comparison is complete: free space and rerun"):
+    discordant = ranked_discordant(run_dir, spec_a, run_settings.gamma)
+    then = "the comparison is complete: free space and rerun"
+    with write_failures(out, then):
+        animated = animate_discordant(out, objective, run_dir, discordant, failures)
+        result = ABResult(
+            spec_a.name,
+            egos,
+            paired,
+            gate(paired, max_ratio),
+            run_dir.path,
+            discordant,
+            out / AB_REPORT_FILE,
+        )
         write_json(out / AB_FILE, result.document())
+        write_ab_report(out, result.document(), jsonable(animated))
     return result
+
+
+def ranked_discordant(
+    run_dir: RunDirectory, spec: ScenarioSpec, gamma: float
+) -> dict[str, list[dict[str, Any]]]:
+    """The final stage's discordant rollouts, the most realistic first.
+
+    Regressions: ``f_B <= gamma < f_A``; fixes: the reverse (rollouts that
+    failed to evaluate left out). Ranked as the report ranks failures
+    (:meth:`~avrisk.assembly.typicality.Typicality.rank`: the lower of the
+    start's and the drivers' percentiles under P0, then ``log p0``). Each row:
+    ``row`` (in ``samples.parquet``), ``seed``, ``f_a``, ``f_b`` [s],
+    ``weight``, ``log_p0``, ``percentile`` and ``mechanism`` (the failing
+    ego's contact, :data:`~avrisk.assembly.MECHANISMS`).
+    """
+    column, names = MECHANISMS
+    table = run_dir.samples(
+        ["stage", "seed", "log_p0", "weight", *PAIR_COLUMNS, STATUS]
+        + [f"{column}_a", f"{column}_b"]
+    )
+    get = {
+        name: np.asarray(table[name].to_numpy(zero_copy_only=False))
+        for name in table.column_names
+    }
+    usable = (get["stage"] == FINAL_STAGE) & (get[STATUS] == 0)
+    fails_a, fails_b = get["f_a"] <= gamma, get["f_b"] <= gamma
+    kinds = {
+        "regressions": (usable & fails_b & ~fails_a, "_b"),
+        "fixes": (usable & fails_a & ~fails_b, "_a"),
+    }
+    typical = scenario_typicality(spec)
+    columns = param_layout(spec).columns
+    out: dict[str, list[dict[str, Any]]] = {}
+    for kind, (mask, failing) in kinds.items():
+        rows = np.flatnonzero(mask)
+        if not rows.size:
+            out[kind] = []
+            continue
+        x = run_dir.samples(columns, rows=rows)
+        situation = np.stack(
+            [
+                np.asarray(x[c], dtype=np.float64)
+                for c in columns[: typical.n_situation]
+            ],
+            axis=1,
+        )
+        keys = typical.rank(situation, get["log_p0"][rows])
+        order = np.lexsort((keys[:, 1], keys[:, 0]))[::-1]
+        out[kind] = [
+            {
+                "row": int(rows[i]),
+                "seed": int(get["seed"][rows[i]]),
+                "f_a": float(get["f_a"][rows[i]]),
+                "f_b": float(get["f_b"][rows[i]]),
+                "weight": float(get["weight"][rows[i]]),
+                "log_p0": float(get["log_p0"][rows[i]]),
+                "percentile": float(keys[i, 0]),
+                "mechanism": names.get(int(get[column + failing][rows[i]]), names[-1]),
+            }
+            for i in order
+        ]
+    return out
+
+
+def animate_discordant(
+    out: Path,
+    objective: PairedObjective,
+    run_dir: RunDirectory,
+    discordant: dict[str, list[dict[str, Any]]],
+    n: int,
+) -> dict[str, list[dict[str, Any]]]:
+    """The first ``n`` of each kind, with each ego's animation on the same row.
+
+    GIFs go to ``out/ab/<kind><i>_<a|b>.gif`` (kept when there already: a
+    read-back does not simulate them again); the rows get their paths,
+    relative to ``out``, as ``animation_a`` and ``animation_b``.
+    """
+    columns = list(param_layout(objective.a.simulator.spec).columns)
+    shown: dict[str, list[dict[str, Any]]] = {}
+    for kind, rows in discordant.items():
+        shown[kind] = []
+        for i, row in enumerate(rows[:n], start=1):
+            x = run_dir.samples(columns, rows=[row["row"]]).to_pylist()[0]
+            sample = {**x, "seed": row["seed"]}
+            paths = {}
+            for side, sim in zip("ab", _simulators(objective), strict=True):
+                path = out / "ab" / f"{kind}{i}_{side}.gif"
+                if not path.is_file():
+                    animate_samples(sim, [sample], path)
+                paths[f"animation_{side}"] = str(path.relative_to(out))
+            shown[kind].append({**row, **paths})
+    return shown
+
+
+def _simulators(objective: PairedObjective) -> tuple[ScenarioSimulator, ...]:
+    """Each ego's simulator."""
+    return tuple(o.simulator for o in objective.objectives)

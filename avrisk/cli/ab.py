@@ -116,6 +116,14 @@ def ab(
         int, typer.Option(min=1, help="Rollout pairs simulated together.")
     ] = 2048,
     set_: Set = None,
+    failures: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            help="Regressions and fixes the report animates, each with both egos on "
+            "the same situation, the most realistic first.",
+        ),
+    ] = 3,
     device: Device = "cpu",
     as_json: Json = False,
 ) -> None:
@@ -148,6 +156,7 @@ def ab(
             gamma=gamma,
             seed=seed,
             batch_size=batch_size,
+            failures=failures,
             device=device,
             progress=RichProgress(err_console),
             **options,

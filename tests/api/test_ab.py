@@ -11,7 +11,7 @@ from avrisk.api.runs import scenario_spec
 from avrisk.pipeline import RunDirectoryError
 
 #: A short, not-rare comparison: a few hundred rollout pairs.
-SMALL = dict(gamma=2.0, n_particles=100, n_final=200, batch_size=200)
+SMALL = dict(gamma=2.0, n_particles=100, n_final=200, batch_size=200, failures=0)
 HOLD = {"policy": "tests.user_components:HoldSpeedEgo", "params": {"speed": 25}}
 
 
@@ -25,7 +25,12 @@ def short_scenario():
 def test_two_egos_are_compared_written_and_read_back(tmp_path):
     seen = []
     result = avrisk.compare_egos(
-        short_scenario(), "idm_mobil", HOLD, out=tmp_path, progress=seen.append, **SMALL
+        short_scenario(),
+        "idm_mobil",
+        HOLD,
+        out=tmp_path,
+        progress=seen.append,
+        **{**SMALL, "failures": 1},
     )
     kinds = [type(e) for e in seen]
     assert kinds[:3] == [events.Plan, events.RunOpened, events.RunStarted]
@@ -40,6 +45,17 @@ def test_two_egos_are_compared_written_and_read_back(tmp_path):
     assert document == json.loads(json.dumps(result.document()))
     config = json.loads((tmp_path / "config.json").read_text())
     assert config["ego_a"]["policy"] == "idm_mobil" and config["ego_b"] == HOLD
+    # the discordant rollouts, the most realistic first, and their share of p
+    regressions = result.discordant["regressions"]
+    assert len(regressions) == est.regressions.n_hits > 0
+    assert all(r["f_b"] <= 2.0 < (r["f_a"] or np.inf) for r in regressions)
+    ranks = [r["percentile"] for r in regressions]
+    assert ranks == sorted(ranks, reverse=True)
+    html = result.report.read_text()
+    assert html.index("regressions: B fails, A does not") < html.index("fixes: A fails")
+    for side in "ab":  # the first regression, with each ego on the same draw
+        assert (tmp_path / "ab" / f"regressions1_{side}.gif").is_file()
+        assert f"ab/regressions1_{side}.gif" in html
     again = []
     same = avrisk.compare_egos(
         short_scenario(),

@@ -10,7 +10,7 @@ from typer.testing import CliRunner
 from avrisk.cli.app import app
 from tests.scenario_files import shortened_scenario
 
-SMALL = ("--gamma", 2.0, "--set", "n_particles=100", "--n-final", 200)
+SMALL = ("--gamma", 2.0, "--set", "n_particles=100", "--n-final", 200, "--failures", 0)
 HOLD_FAST = '{policy: "tests.user_components:HoldSpeedEgo", params: {speed: 30}}'
 
 
