@@ -2,6 +2,7 @@
 
 import json
 import socket
+from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
@@ -9,6 +10,8 @@ from typer.testing import CliRunner
 
 from avrisk.cli.app import app
 from tests.scenario_files import shortened_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
 
 SMALL = ("--gamma", 2.0, "--set", "n_particles=100", "--n-final", 200, "--failures", 0)
 HOLD_FAST = '{policy: "tests.user_components:HoldSpeedEgo", params: {speed: 30}}'
@@ -98,5 +101,22 @@ def test_two_external_avs_are_compared_on_the_same_draws(short, tmp_path):
     table = pq.read_table(tmp_path / "ab" / "samples.parquet")
     assert (table["status"].to_numpy() == 0).all()
     # a later brake changes some rollouts, not all: the draws are shared
+    f_a, f_b = table["f_a"].to_numpy(), table["f_b"].to_numpy()
+    assert 0 < (f_a != f_b).sum() < len(f_a)
+
+
+def test_the_bundled_lidar_pair_runs_on_the_same_draws(tmp_path):
+    pair = ROOT / "examples" / "ab_lidar"
+    short = shortened_scenario(tmp_path, 2.0, scenario="highway_default")
+    result = invoke(
+        "ab", short, "--ego-a", pair / "lidar_ego.yaml",
+        "--ego-b", pair / "lidar_ego_degraded.yaml",
+        "--out", tmp_path / "ab", *SMALL, "--json",
+    )  # fmt: skip
+    assert result.exit_code in (0, 1, 3), result.output
+    document = json.loads(result.stdout)
+    assert document["ego_b"]["params"] == {"range_scale": 1.3}
+    # on the same draws the degraded sensor changes some rollouts, not all
+    table = pq.read_table(tmp_path / "ab" / "samples.parquet", columns=["f_a", "f_b"])
     f_a, f_b = table["f_a"].to_numpy(), table["f_b"].to_numpy()
     assert 0 < (f_a != f_b).sum() < len(f_a)
