@@ -120,3 +120,31 @@ def test_the_bundled_lidar_pair_runs_on_the_same_draws(tmp_path):
     table = pq.read_table(tmp_path / "ab" / "samples.parquet", columns=["f_a", "f_b"])
     f_a, f_b = table["f_a"].to_numpy(), table["f_b"].to_numpy()
     assert 0 < (f_a != f_b).sum() < len(f_a)
+
+
+def test_ctrl_c_says_how_to_resume_and_the_resume_gives_the_same_answer(
+    short, tmp_path, monkeypatch
+):
+    from avrisk.pipeline import RunDirectory
+
+    args = ("ab", short, "--ego-b", HOLD_FAST, "--out", tmp_path / "ab", *SMALL)
+    whole = invoke(*args[:4], "--out", tmp_path / "whole", *SMALL, "--json")
+    record = RunDirectory.record
+    calls = []
+
+    def interrupted(self, batch):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return record(self, batch)
+
+    monkeypatch.setattr(RunDirectory, "record", interrupted)
+    stopped = invoke(*args)
+    assert stopped.exit_code == 130
+    assert "Resume with: avrisk ab" in " ".join(stopped.output.split())
+    monkeypatch.setattr(RunDirectory, "record", record)
+    resumed = invoke(*args, "--json")
+    assert resumed.exit_code == whole.exit_code == 1
+    a, b = json.loads(resumed.stdout), json.loads(whole.stdout)
+    assert a["paired"]["ratio"] == b["paired"]["ratio"]
+    assert a["line"] == b["line"]
