@@ -12,6 +12,8 @@ the paired run, one call of the pair counting as one)::
         [--cases nested_r0.05_p1e-04_d10,...] [--seeds 0-199] \\
         [--out benchmarks/results/ab/runs.jsonl]
     python benchmarks/ab_coverage.py table [--results ...] [--md T.md] [--json T.json]
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py gate \
+        [--seeds 0-19] [--out benchmarks/results/ab/gate.json]
 
 One setting for every case (``PAIRED``, ``INDEPENDENT``). ``run`` appends one
 JSON line per (case, seed) and skips those already there, so an interrupted
@@ -26,6 +28,11 @@ sweep goes on. ``table`` prints per case:
   runs' estimates, their ratio (``> 1``: the paired one is narrower), and
   both methods' mean calls;
 * runs the engine's trust rule labelled ``caution``.
+
+``gate`` runs the gate (:func:`avrisk.rare.paired.gate`, margin 1) on the
+paired run of ``GATE_CASES`` (a ``B`` with half ``A``'s ``p``, one with twice
+it, two with the same ``p`` as ``A`` on other failure sets) over 20 seeds at
+the same setting, and counts each outcome.
 """
 
 from __future__ import annotations
@@ -47,10 +54,19 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from avrisk.rare.paired import paired_splitting_is  # noqa: E402
+from avrisk.rare.paired_gate import gate  # noqa: E402
 from avrisk.rare.splitting_importance import splitting_is  # noqa: E402
 from avrisk.testing.pairs import PAIR_SUITE, AnalyticPair, pair_problem  # noqa: E402
 
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "ab" / "runs.jsonl"
+GATE_OUT = ROOT / "benchmarks" / "results" / "ab" / "gate.json"
+#: The gate's cases: what B is, by the pair that makes it.
+GATE_CASES = {
+    "half": "nested_r0.5_p1e-04_d10",
+    "twice": "disjoint_ratio2_p1e-04_d10",
+    "equal, overlapping": "overlap_r0.3_p1e-04_d10",
+    "equal, disjoint": "disjoint_ratio1_p1e-04_d10",
+}
 
 #: The paired run's settings, for every case.
 PAIRED = {"n_particles": 2000, "n_final": 10_000}
@@ -226,6 +242,30 @@ def table(results: Path) -> tuple[list[dict[str, Any]], str]:
     return rows, "\n".join(md)
 
 
+def gate_sweep(seeds: list[int], out: Path) -> dict[str, Any]:
+    """The gate's outcomes at margin 1 per case of ``GATE_CASES``, over ``seeds``."""
+    counts: dict[str, Any] = {}
+    for label, name in GATE_CASES.items():
+        pair = pair_problem(name)
+        outcomes = []
+        for seed in seeds:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                est = paired_splitting_is(
+                    pair.f, pair.base, pair.gamma, seed=seed, **PAIRED
+                )
+            outcomes.append(gate(est, 1.0).outcome)
+        counts[label] = {
+            "case": name,
+            "ratio": pair.ratio,
+            **{o: outcomes.count(o) for o in ("pass", "fail", "inconclusive")},
+        }
+        print(label, counts[label], flush=True)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"settings": PAIRED, "seeds": seeds, **counts}, indent=1))
+    return counts
+
+
 def main(argv: list[str] | None = None) -> None:
     """``run`` or ``table`` (module docstring)."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -238,9 +278,15 @@ def main(argv: list[str] | None = None) -> None:
     t.add_argument("--results", type=Path, default=DEFAULT_OUT)
     t.add_argument("--md", type=Path)
     t.add_argument("--json", type=Path)
+    g = sub.add_parser("gate")
+    g.add_argument("--seeds", default="0-19")
+    g.add_argument("--out", type=Path, default=GATE_OUT)
     args = parser.parse_args(argv)
     if args.command == "run":
         run(args.cases.split(","), parse_seeds(args.seeds), args.out)
+        return
+    if args.command == "gate":
+        gate_sweep(parse_seeds(args.seeds), args.out)
         return
     rows, md = table(args.results)
     print(md)

@@ -46,10 +46,9 @@ from avrisk.rare.paired import (
     MinOfPair,
     PairedEstimate,
     PairedSample,
-    Verdict,
-    gate,
     paired_estimate,
 )
+from avrisk.rare.paired_gate import Verdict, gate
 from avrisk.rare.problem import FINAL_STAGE, STATUS
 from avrisk.rare.results import jsonable
 from avrisk.report.ab import AB_REPORT_FILE, write_ab_report

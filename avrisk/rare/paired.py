@@ -54,12 +54,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.final_stage import (
@@ -67,105 +66,45 @@ from avrisk.rare.final_stage import (
     bracket_failures,
     weighted_hits_estimate,
 )
-from avrisk.rare.problem import FINAL_STAGE, BatchFunction, InvalidOutputError
+from avrisk.rare.paired_intervals import (
+    DISCORDANCE_BOUND,
+    Contrast,
+    difference_contrast,
+    discordance_bound,
+    ratio_contrast,
+)
+from avrisk.rare.paired_sample import (
+    PAIR_COLUMNS,
+    FinalStageTap,
+    MinOfPair,
+    PairedSample,
+)
+from avrisk.rare.problem import BatchFunction
 from avrisk.rare.results import GammaEstimate, jsonable
 from avrisk.rare.splitting_importance import (
     SplittingImportanceSampling,
     SplittingISSettings,
     splitting_is,
 )
-from avrisk.rare.stages import BatchCache, BatchRecorder, StageBatch
+from avrisk.rare.stages import BatchCache, BatchRecorder
 from avrisk.rare.trust import GENERIC, Trust, Wording, estimate_trust, trust_at
-from avrisk.rare.weights import kish_ess
 
 __all__ = [
     "PAIR_COLUMNS",
     "UNION_METHOD",
     "Contrast",
     "FinalStageTap",
+    "MinOfPair",
     "PairedEstimate",
     "PairedSample",
-    "discordance_bound",
-    "fieller_interval",
-    "MinOfPair",
+    "bound_only",
     "paired_estimate",
-    "Verdict",
-    "gate",
     "paired_splitting_is",
+    "paired_trust",
 ]
 
 #: The estimator that searches the union of the two failure sets.
 UNION_METHOD = SplittingImportanceSampling.name
-#: The recorded columns of each version's outcome, A's first.
-PAIR_COLUMNS = ("f_a", "f_b")
-
-#: Interval descriptions of :class:`Contrast`.
-PAIRED_NORMAL = (
-    "normal approximation of the paired weighted mean (CLT over the one "
-    "weighted sample both versions share)"
-)
-FIELLER = (
-    "Fieller's interval for the ratio of the two correlated weighted means "
-    "(their covariance from the one weighted sample both versions share)"
-)
-DISCORDANCE_BOUND = (
-    "bound from no discordant sample: P(A xor B) at most the zero-hit bound of "
-    "its share of the union's effective hits, times the union's upper bound"
-)
-
-
-@dataclass(frozen=True)
-class Contrast:
-    """A difference or a ratio of ``p_B`` and ``p_A``, with its intervals.
-
-    Attributes
-    ----------
-    value : float
-        The estimate (``inf`` or NaN for a ratio over ``p_A = 0``).
-    stderr : float
-        Its standard error (delta method for a ratio); 0 with no discordant
-        sample.
-    ci : tuple of float
-        Two-sided interval at level ``confidence``.
-    lower, upper : float
-        One-sided bounds at level ``confidence`` each (``P(true < lower) <=
-        1 - confidence``): what a one-sided test reads (a CI gate).
-    confidence : float
-    interval : str
-        How the intervals were computed, in words.
-    """
-
-    value: float
-    stderr: float
-    ci: tuple[float, float]
-    lower: float
-    upper: float
-    confidence: float = CONFIDENCE
-    interval: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready (non-finite floats become ``None``)."""
-        return jsonable(dataclasses.asdict(self))
-
-
-@dataclass(frozen=True)
-class PairedSample:
-    """The final weighted sample with both versions' outcomes.
-
-    Attributes
-    ----------
-    log_w : ndarray of shape (n,)
-        ``log p0 - log q`` of each sample.
-    f_a, f_b : ndarray of shape (n,)
-        Each version's value (NaN where the evaluation failed).
-    failed : ndarray of bool, shape (n,)
-        Samples whose evaluation failed (counted safe for both versions).
-    """
-
-    log_w: FloatArray
-    f_a: FloatArray
-    f_b: FloatArray
-    failed: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -246,250 +185,6 @@ class PairedEstimate:
             f"{self.regressions.n_hits} regressions and {self.fixes.n_hits} fixes "
             f"sampled, {self.n_evals} paired calls; {self.trust}"
         )
-
-
-class MinOfPair:
-    """The black box ``min(f_A, f_B)`` of a paired one, both values kept.
-
-    Parameters
-    ----------
-    pair : callable
-        ``pair(x)`` (or ``pair(x, seeds=...)`` with ``needs_seeds = True``)
-        returns an ``(n, 2)`` array of ``(f_A, f_B)``, or a mapping with it
-        under ``"f"`` and other per-sample outputs (``"status"`` ...) as
-        ``(n,)`` arrays.
-
-    Returns (when called)
-    ---------------------
-    dict
-        ``f``: ``min(f_A, f_B)`` (NaN where either is), ``f_a``, ``f_b``,
-        and the pair's other outputs.
-    """
-
-    def __init__(self, pair: BatchFunction) -> None:
-        self.pair = pair
-        self.needs_seeds = bool(getattr(pair, "needs_seeds", False))
-
-    def __call__(
-        self, x: FloatArray, seeds: np.ndarray | None = None
-    ) -> dict[str, np.ndarray]:
-        """``f``: ``min(f_A, f_B)`` (NaN where either is), ``f_a``, ``f_b``, the rest.
-
-        Raises
-        ------
-        InvalidOutputError
-            If the pair's values are not of shape (n, 2).
-        """
-        out = self.pair(x, seeds=seeds) if self.needs_seeds else self.pair(x)
-        extras: dict[str, Any] = {}
-        if isinstance(out, Mapping):
-            extras = {k: v for k, v in out.items() if k != "f"}
-            out = out["f"]
-        values = np.asarray(out, dtype=np.float64)
-        if values.shape != (len(x), 2):
-            raise InvalidOutputError(
-                f"a paired f must return an array of shape ({len(x)}, 2) (f_A, "
-                f"f_B) for {len(x)} input rows; got shape {values.shape}"
-            )
-        f_a, f_b = values[:, 0], values[:, 1]
-        return {"f": np.minimum(f_a, f_b), "f_a": f_a, "f_b": f_b, **extras}
-
-
-class FinalStageTap:
-    """Keeps the final stage's chunks, evaluated or replayed, on their way.
-
-    Wraps a run's ``on_batch`` and ``cache`` (either may be None): every
-    chunk of :data:`~avrisk.rare.problem.FINAL_STAGE` that is evaluated or
-    replayed is kept (a re-evaluated chunk replaces its replay), and passed on
-    unchanged; the others pass through. The estimator is not changed: the tap
-    sees what the run's record sees.
-    """
-
-    def __init__(
-        self, on_batch: BatchRecorder | None = None, cache: BatchCache | None = None
-    ) -> None:
-        self._on_batch = on_batch
-        self._cache = cache
-        self.chunks: dict[int, StageBatch] = {}
-
-    def record(self, batch: StageBatch) -> None:
-        """``on_batch`` of the run."""
-        if batch.stage == FINAL_STAGE:
-            self.chunks[batch.chunk] = batch
-        if self._on_batch is not None:
-            self._on_batch(batch)
-
-    def replay(self, stage: int, chunk: int) -> StageBatch | None:
-        """``cache`` of the run."""
-        batch = self._cache(stage, chunk) if self._cache is not None else None
-        if batch is not None and stage == FINAL_STAGE:
-            self.chunks[chunk] = batch
-        return batch
-
-    def sample(self, n: int) -> PairedSample:
-        """The first ``n`` samples of the final stage (its chunks in order).
-
-        Raises
-        ------
-        RuntimeError
-            If a chunk is missing or lacks the pair's columns.
-        """
-        ordered, total = [], 0
-        while total < n:
-            batch = self.chunks.get(len(ordered))
-            if batch is None or not set(PAIR_COLUMNS) <= set(batch.extras):
-                raise RuntimeError(
-                    f"chunk {len(ordered)} of the final stage was not seen with both "
-                    f"versions' values ({', '.join(PAIR_COLUMNS)})"
-                )
-            ordered.append(batch)
-            total += batch.values.size
-
-        def column(get: Callable[[StageBatch], np.ndarray]) -> np.ndarray:
-            return np.concatenate([get(b) for b in ordered])[:n]
-
-        return PairedSample(
-            column(lambda b: b.log_p0 - b.log_q),
-            column(lambda b: np.asarray(b.extras["f_a"], dtype=np.float64)),
-            column(lambda b: np.asarray(b.extras["f_b"], dtype=np.float64)),
-            column(lambda b: b.failed),
-        )
-
-
-def _z(one_sided: float) -> float:
-    """The standard normal quantile of one-sided level ``one_sided``."""
-    return float(stats.norm.ppf(one_sided))
-
-
-#: Normal quantiles of the two-sided interval and of the one-sided bounds.
-Z_TWO_SIDED = _z(0.5 + CONFIDENCE / 2)
-Z_ONE_SIDED = _z(CONFIDENCE)
-
-
-def discordance_bound(
-    log_w: FloatArray, union: np.ndarray, union_upper: float
-) -> float:
-    """Upper bound of ``P(A xor B)`` when no sample of the union is discordant.
-
-    Parameters
-    ----------
-    log_w : ndarray of shape (n,)
-        Log-weights of the sample.
-    union : ndarray of bool, shape (n,)
-        Samples in ``A or B``.
-    union_upper : float
-        Upper end of the union's two-sided interval (a one-sided bound at
-        ``(1 + CONFIDENCE) / 2``).
-
-    Returns
-    -------
-    float
-        ``union_upper (1 - alpha^(1 / m))``, ``m`` the Kish ESS of the union's
-        hits and ``alpha = (1 - CONFIDENCE) / 2``: the exact bound of a share
-        seen 0 times in ``m`` draws, at the same one-sided level as
-        ``union_upper``, so that both hold together at ``CONFIDENCE``.
-        ``union_upper`` itself without a hit.
-
-    Examples
-    --------
-    >>> # 0.1 (1 - 0.025^(1/4)): 4 equally weighted hits, none discordant
-    >>> round(discordance_bound(np.zeros(4), np.ones(4, bool), 0.1), 4)
-    0.0602
-    """
-    m = kish_ess(log_w[union])
-    if m <= 0.0:
-        return float(union_upper)
-    alpha = (1.0 - CONFIDENCE) / 2.0
-    return float(union_upper * -math.expm1(math.log(alpha) / m))
-
-
-def fieller_interval(
-    means: tuple[float, float], cov: FloatArray, z: float
-) -> tuple[float, float]:
-    """Fieller's interval of ``mean_b / mean_a``, two correlated means, in ``[0, inf]``.
-
-    The set of ``R >= 0`` with ``(mean_b - R mean_a)^2 <= z^2 Var(mean_b - R
-    mean_a)``, ``Var = v_bb - 2 R v_ab + R^2 v_aa``: exact for normal means.
-    Bounded when ``mean_a`` is more than ``z`` standard errors above 0;
-    otherwise it reaches ``inf`` (and starts at 0 unless ``mean_b`` is more
-    than ``z`` standard errors above 0). Its ends at ``z`` for a one-sided
-    level are the one-sided bounds at that level.
-
-    Parameters
-    ----------
-    means : (float, float)
-        ``mean_a``, ``mean_b``.
-    cov : ndarray of shape (2, 2)
-        Covariance matrix of the two means (not of single terms).
-    z : float
-        Normal quantile.
-
-    Examples
-    --------
-    >>> lo, hi = fieller_interval((1.0, 2.0), np.diag([0.01, 0.01]), 1.96)
-    >>> round(lo, 3), round(hi, 3)
-    (1.626, 2.534)
-    """
-    a, b = means
-    z2 = z * z
-    quad = float(a * a - z2 * cov[0, 0])
-    half = float(a * b - z2 * cov[0, 1])
-    const = float(b * b - z2 * cov[1, 1])
-    disc = max(half * half - quad * const, 0.0)
-    if quad > 0.0:
-        low, high = (half - math.sqrt(disc)) / quad, (half + math.sqrt(disc)) / quad
-        return max(low, 0.0), max(high, 0.0)
-    if const <= 0.0:  # neither mean clearly above 0
-        return 0.0, math.inf
-    # quad <= 0 < const: positive at 0, it falls below 0 past its one
-    # positive root (the roots' product const / quad is negative)
-    if quad < 0.0:
-        return (half - math.sqrt(disc)) / quad, math.inf
-    return (const / (2.0 * half) if half > 0.0 else 0.0), math.inf
-
-
-def _difference(
-    terms: tuple[FloatArray, FloatArray], scale: float, bound: float | None
-) -> Contrast:
-    """``p_B - p_A`` from scaled terms ``w a``, ``w b`` (``bound``: none discordant)."""
-    if bound is not None:
-        return Contrast(
-            0.0, 0.0, (-bound, bound), -bound, bound, CONFIDENCE, DISCORDANCE_BOUND
-        )
-    d = (terms[1] - terms[0]) * scale
-    value = float(d.mean())
-    se = float(d.std(ddof=1) / math.sqrt(d.size))
-    return Contrast(
-        value,
-        se,
-        (value - Z_TWO_SIDED * se, value + Z_TWO_SIDED * se),
-        value - Z_ONE_SIDED * se,
-        value + Z_ONE_SIDED * se,
-        CONFIDENCE,
-        PAIRED_NORMAL,
-    )
-
-
-def _ratio(
-    terms: tuple[FloatArray, FloatArray], a: GammaEstimate, bound: float | None
-) -> Contrast:
-    """``p_B / p_A`` from the scaled terms (``bound``: none discordant; ``a``: p_A)."""
-    wa, wb = terms
-    n = wa.size
-    mean_a, mean_b = float(wa.mean()), float(wb.mean())
-    if mean_a > 0.0:
-        value = mean_b / mean_a
-        se = float((wb - value * wa).std(ddof=1) / math.sqrt(n) / mean_a)
-    else:
-        value, se = (math.inf if mean_b > 0.0 else math.nan), math.inf
-    if bound is not None:  # p_B / p_A = 1 + (p_B - p_A) / p_A
-        half = bound / a.ci[0] if a.ci[0] > 0.0 else math.inf
-        ends = (max(1.0 - half, 0.0), 1.0 + half)
-        return Contrast(value, 0.0, ends, *ends, CONFIDENCE, DISCORDANCE_BOUND)
-    cov = np.cov(np.stack([wa, wb])) / n
-    ci = fieller_interval((mean_a, mean_b), cov, Z_TWO_SIDED)
-    lower, upper = fieller_interval((mean_a, mean_b), cov, Z_ONE_SIDED)
-    return Contrast(value, se, ci, lower, upper, CONFIDENCE, FIELLER)
 
 
 def _versions_words(wording: Wording) -> dict[str, Wording]:
@@ -586,8 +281,8 @@ def paired_estimate(
         gamma=gamma,
         a=a,
         b=b,
-        difference=_difference(terms, math.exp(shift), bound),
-        ratio=_ratio(terms, a, bound),
+        difference=difference_contrast(terms, math.exp(shift), bound),
+        ratio=ratio_contrast(terms, a, bound),
         regressions=share(b_hit & ~a_hit),
         fixes=share(a_hit & ~b_hit),
         union=dict(union),
@@ -711,74 +406,3 @@ def bound_only(union: Mapping[str, Any], wording: Wording = GENERIC) -> PairedEs
         dict(union),
         paired_trust(union, parts, wording),
     )
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """A one-sided test of ``p_B / p_A`` against a margin (a release gate).
-
-    Attributes
-    ----------
-    outcome : str
-        ``"pass"``: the one-sided upper bound of ``p_B / p_A`` is at most
-        ``max_ratio``; ``"fail"``: the one-sided lower bound is above it;
-        ``"inconclusive"`` otherwise. Each bound at level ``confidence``.
-    max_ratio : float
-        The margin.
-    lower, upper : float
-        The one-sided bounds of the ratio.
-    n_final_needed : int or None
-        For an inconclusive verdict, the final-stage samples at which the
-        bound on the side of the estimate would reach the margin if the
-        estimate stayed where it is (its standard error falling as one over
-        the root of the samples); None otherwise, or when no number would
-        (an estimate at the margin, or an unbounded ratio).
-    confidence : float
-    """
-
-    outcome: str
-    max_ratio: float
-    lower: float
-    upper: float
-    n_final_needed: int | None = None
-    confidence: float = CONFIDENCE
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready (non-finite floats become ``None``)."""
-        return jsonable(dataclasses.asdict(self))
-
-
-def gate(estimate: PairedEstimate, max_ratio: float) -> Verdict:
-    """Pass, fail or inconclusive: ``p_B / p_A`` against ``max_ratio``.
-
-    Parameters
-    ----------
-    estimate : PairedEstimate
-    max_ratio : float
-        Largest acceptable ``p_B / p_A`` (1: ``B`` no riskier than ``A``).
-    """
-    ratio = estimate.ratio
-    lower, upper = ratio.lower, ratio.upper
-    if upper <= max_ratio:
-        return Verdict("pass", max_ratio, lower, upper)
-    if lower > max_ratio:
-        return Verdict("fail", max_ratio, lower, upper)
-    return Verdict(
-        "inconclusive", max_ratio, lower, upper, _samples_to_decide(estimate, max_ratio)
-    )
-
-
-def _samples_to_decide(estimate: PairedEstimate, max_ratio: float) -> int | None:
-    """Final-stage samples at which the ratio's bound would clear ``max_ratio``.
-
-    The bound on the estimate's side of the margin is ``z s`` away from it,
-    ``s`` the standard error it implies; at ``n`` samples ``s`` scales as
-    ``1 / sqrt(n)``, so it clears the margin at ``n (z s / |R - max_ratio|)^2``.
-    """
-    ratio = estimate.ratio
-    gap = ratio.value - max_ratio
-    spread = ratio.upper - ratio.value if gap < 0 else ratio.value - ratio.lower
-    n_final = estimate.a.n_samples
-    if gap == 0 or not math.isfinite(spread) or not math.isfinite(gap):
-        return None
-    return math.ceil(n_final * (spread / abs(gap)) ** 2)

@@ -8,13 +8,9 @@ import warnings
 import numpy as np
 import pytest
 
-from avrisk.rare.paired import (
-    MinOfPair,
-    discordance_bound,
-    fieller_interval,
-    gate,
-    paired_splitting_is,
-)
+from avrisk.rare.paired import MinOfPair, paired_splitting_is
+from avrisk.rare.paired_gate import gate
+from avrisk.rare.paired_intervals import discordance_bound, fieller_interval
 from avrisk.rare.problem import InvalidOutputError
 from avrisk.rare.splitting_importance import splitting_is
 from avrisk.testing.pairs import AnalyticPair, pair_problem
