@@ -32,14 +32,17 @@ gamma}`` and ``b_i`` alike:
   b (1 - a))``, as a share of ``p_B``) and fixes (the reverse, as a share of
   ``p_A``); ``p_B - p_A`` is their difference.
 
-No discordant sample. Then the sample's own spread of the difference is 0,
-yet the versions may differ where no sample fell. The bound is the one a
-naive sample with no hit gives: among the union's ``m`` effective hits (Kish
-ESS of their weights) none was discordant, so ``P(A xor B | A or B) <= 1 -
-alpha^(1 / m)`` at one-sided level ``1 - alpha``, and ``|p_B - p_A| <=
-P(A xor B)`` is at most that share of the union's upper bound. The
-difference's interval is ``+-`` that bound, and the ratio's ``1 +-`` it over
-``p_A``'s lower bound: never of zero width.
+A discordant side with no sample. When no sample has ``B`` failing and
+``A`` not (or the reverse), the terms of that side are all 0, yet the
+versions may differ where no sample fell. Its bound is the one a naive
+sample with no hit gives: among the union's ``m`` effective hits (Kish ESS
+of their weights) none was of that side, so its share of the union is at
+most ``1 - alpha^(1 / m)`` at one-sided level ``1 - alpha``, and its mass at
+most that share of the union's upper bound
+(:func:`~avrisk.rare.paired_intervals.discordance_bound`). The difference's
+interval is widened by it on that side, and the ratio's by it over
+``p_A``'s lower bound; with no discordant sample at all both are that bound
+alone: never of zero width, and never blind to the side a sample missed.
 
 Trust. The engine's one rule (:mod:`avrisk.rare.trust`): the union's search
 and estimate (:func:`~avrisk.rare.trust.estimate_trust` of ``splitting_is``),
@@ -269,11 +272,13 @@ def paired_estimate(
     a, b = version(sample.f_a), version(sample.f_b)
     union_upper = weighted_hits_estimate(log_w, either, gamma).ci[1]
     discordant = a_hit ^ b_hit
-    bound = None if discordant.any() else discordance_bound(log_w, either, union_upper)
+    regressions, fixes = b_hit & ~a_hit, a_hit & ~b_hit
+    bound = discordance_bound(log_w, either, union_upper)
+    unseen = tuple(0.0 if hits.any() else bound for hits in (fixes, regressions))
 
     def share(hits: np.ndarray) -> GammaEstimate:
         est = weighted_hits_estimate(log_w, hits, gamma)
-        if est.n_hits or bound is None:
+        if est.n_hits:
             return est
         return dataclasses.replace(est, ci=(0.0, bound), interval=DISCORDANCE_BOUND)
 
@@ -281,10 +286,10 @@ def paired_estimate(
         gamma=gamma,
         a=a,
         b=b,
-        difference=difference_contrast(terms, math.exp(shift), bound),
-        ratio=ratio_contrast(terms, a, bound),
-        regressions=share(b_hit & ~a_hit),
-        fixes=share(a_hit & ~b_hit),
+        difference=difference_contrast(terms, math.exp(shift), unseen),
+        ratio=ratio_contrast(terms, a, unseen),
+        regressions=share(regressions),
+        fixes=share(fixes),
         union=dict(union),
         trust=paired_trust(
             union,

@@ -42,8 +42,9 @@ FIELLER = (
     "(their covariance from the one weighted sample both versions share)"
 )
 DISCORDANCE_BOUND = (
-    "bound from no discordant sample: P(A xor B) at most the zero-hit bound of "
-    "its share of the union's effective hits, times the union's upper bound"
+    "bound of a discordant side with no sample (B failing and A not, or the "
+    "reverse): the zero-hit bound of its share of the union's effective hits, "
+    "times the union's upper bound"
 )
 
 
@@ -174,31 +175,40 @@ def fieller_interval(
 
 
 def difference_contrast(
-    terms: tuple[FloatArray, FloatArray], scale: float, bound: float | None
+    terms: tuple[FloatArray, FloatArray], scale: float, unseen: tuple[float, float]
 ) -> Contrast:
-    """``p_B - p_A`` from scaled terms ``w a``, ``w b`` (``bound``: none discordant)."""
-    if bound is not None:
-        return Contrast(
-            0.0, 0.0, (-bound, bound), -bound, bound, CONFIDENCE, DISCORDANCE_BOUND
-        )
+    """``p_B - p_A`` from the scaled terms ``w a`` and ``w b`` (times ``scale``).
+
+    The paired normal interval of ``mean(w (b - a))``, widened below by
+    ``unseen[0]`` and above by ``unseen[1]``: the bounds of ``P(A, not B)``
+    and ``P(B, not A)`` where no such sample was drawn (0 where one was), so
+    that a side the sample never saw is bounded, not taken for 0.
+    """
     d = (terms[1] - terms[0]) * scale
     value = float(d.mean())
     se = float(d.std(ddof=1) / math.sqrt(d.size))
+    down, up = unseen
     return Contrast(
         value,
         se,
-        (value - Z_TWO_SIDED * se, value + Z_TWO_SIDED * se),
-        value - Z_ONE_SIDED * se,
-        value + Z_ONE_SIDED * se,
+        (value - Z_TWO_SIDED * se - down, value + Z_TWO_SIDED * se + up),
+        value - Z_ONE_SIDED * se - down,
+        value + Z_ONE_SIDED * se + up,
         CONFIDENCE,
-        PAIRED_NORMAL,
+        _described(PAIRED_NORMAL, unseen),
     )
 
 
 def ratio_contrast(
-    terms: tuple[FloatArray, FloatArray], a: GammaEstimate, bound: float | None
+    terms: tuple[FloatArray, FloatArray], a: GammaEstimate, unseen: tuple[float, float]
 ) -> Contrast:
-    """``p_B / p_A`` from the scaled terms (``bound``: none discordant; ``a``: p_A)."""
+    """``p_B / p_A`` from the scaled terms, ``a`` the estimate of ``p_A``.
+
+    Fieller's interval, widened as :func:`difference_contrast` widens the
+    difference's, divided by ``p_A``'s lower bound (``p_B / p_A = 1 + (p_B -
+    p_A) / p_A``). With no discordant sample at all Fieller's interval is
+    the point 1, and the widening alone makes it.
+    """
     wa, wb = terms
     n = wa.size
     mean_a, mean_b = float(wa.mean()), float(wb.mean())
@@ -207,11 +217,30 @@ def ratio_contrast(
         se = float((wb - value * wa).std(ddof=1) / math.sqrt(n) / mean_a)
     else:
         value, se = (math.inf if mean_b > 0.0 else math.nan), math.inf
-    if bound is not None:  # p_B / p_A = 1 + (p_B - p_A) / p_A
-        half = bound / a.ci[0] if a.ci[0] > 0.0 else math.inf
-        ends = (max(1.0 - half, 0.0), 1.0 + half)
-        return Contrast(value, 0.0, ends, *ends, CONFIDENCE, DISCORDANCE_BOUND)
     cov = np.cov(np.stack([wa, wb])) / n
-    ci = fieller_interval((mean_a, mean_b), cov, Z_TWO_SIDED)
+    low, high = fieller_interval((mean_a, mean_b), cov, Z_TWO_SIDED)
     lower, upper = fieller_interval((mean_a, mean_b), cov, Z_ONE_SIDED)
-    return Contrast(value, se, ci, lower, upper, CONFIDENCE, FIELLER)
+    down, up = (_over(u, a.ci[0]) for u in unseen)
+    return Contrast(
+        value,
+        se,
+        (max(low - down, 0.0), high + up),
+        max(lower - down, 0.0),
+        upper + up,
+        CONFIDENCE,
+        _described(FIELLER, unseen),
+    )
+
+
+def _over(bound: float, a_low: float) -> float:
+    """A bound on ``p_B - p_A`` as one on ``p_B / p_A - 1``, over ``p_A``'s low end."""
+    if bound == 0.0:
+        return 0.0
+    return bound / a_low if a_low > 0.0 else math.inf
+
+
+def _described(interval: str, unseen: tuple[float, float]) -> str:
+    """``interval``, and the widening by ``unseen`` when there is one."""
+    if not any(unseen):
+        return interval
+    return f"{interval}, widened by the {DISCORDANCE_BOUND}"

@@ -64,8 +64,14 @@ def test_a_nested_fix_has_fixes_and_no_regression():
     assert est.regressions.n_hits == 0 and est.fixes.n_hits > 100
     assert est.regression_share == 0.0
     assert within(est.fix_share, 0.3, 4 * est.fixes.stderr / est.a.p)
-    # no regression sampled: its interval is the discordance bound, not 0 wide
-    assert est.regressions.ci[0] == 0.0 and est.regressions.ci[1] > 0.0
+    # no regression sampled: its interval is the discordance bound, not 0 wide,
+    # and the difference's upper end makes room for it (B may regress unseen)
+    bound = est.regressions.ci[1]
+    assert est.regressions.ci[0] == 0.0 and bound > 0.0
+    d = est.difference
+    assert d.ci[0] == pytest.approx(d.value - 1.959964 * d.stderr, rel=1e-6)
+    assert d.ci[1] == pytest.approx(d.value + 1.959964 * d.stderr + bound, rel=1e-6)
+    assert d.upper == pytest.approx(d.value + 1.644854 * d.stderr + bound, rel=1e-6)
 
 
 def test_the_paired_difference_has_a_smaller_error_than_two_independent_ones():
