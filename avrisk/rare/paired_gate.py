@@ -9,6 +9,7 @@ from typing import Any
 
 from avrisk.rare.final_stage import CONFIDENCE
 from avrisk.rare.paired import PairedEstimate
+from avrisk.rare.paired_intervals import Z_ONE_SIDED
 from avrisk.rare.results import jsonable
 
 __all__ = ["Verdict", "gate"]
@@ -31,9 +32,9 @@ class Verdict:
     n_final_needed : int or None
         For an inconclusive verdict, the final-stage samples at which the
         bound on the side of the estimate would reach the margin if the
-        estimate stayed where it is (its standard error falling as one over
-        the root of the samples); None otherwise, or when no number would
-        (an estimate at the margin, or an unbounded ratio).
+        estimate stayed where it is (:func:`_samples_to_decide`); None
+        otherwise, or when no number would (an estimate at the margin, or
+        an unbounded ratio).
     confidence : float
     """
 
@@ -72,14 +73,24 @@ def gate(estimate: PairedEstimate, max_ratio: float) -> Verdict:
 def _samples_to_decide(estimate: PairedEstimate, max_ratio: float) -> int | None:
     """Final-stage samples at which the ratio's bound would clear ``max_ratio``.
 
-    The bound on the estimate's side of the margin is ``z s`` away from it,
-    ``s`` the standard error it implies; at ``n`` samples ``s`` scales as
-    ``1 / sqrt(n)``, so it clears the margin at ``n (z s / |R - max_ratio|)^2``.
+    The bound on the estimate's side of the margin lies ``z s + u`` from it:
+    ``s`` its standard error, which at ``k`` times the samples falls to ``s /
+    sqrt(k)``, and ``u`` the rest (the bound of a discordant side with no
+    sample, :mod:`avrisk.rare.paired_intervals`), which falls as ``u / k``
+    (the zero-hit bound of a share of ``m`` effective hits is about ``3 /
+    m``). The smallest ``k`` with ``z s / sqrt(k) + u / k <= |R - max_ratio|``
+    solves a quadratic in ``1 / sqrt(k)``.
     """
     ratio = estimate.ratio
-    gap = ratio.value - max_ratio
-    spread = ratio.upper - ratio.value if gap < 0 else ratio.value - ratio.lower
-    n_final = estimate.a.n_samples
-    if gap == 0 or not math.isfinite(spread) or not math.isfinite(gap):
+    gap = abs(ratio.value - max_ratio)
+    side = ratio.upper if ratio.value < max_ratio else ratio.lower
+    spread = abs(side - ratio.value)
+    if gap == 0.0 or not math.isfinite(spread) or not math.isfinite(gap):
         return None
-    return math.ceil(n_final * (spread / abs(gap)) ** 2)
+    sampled = min(Z_ONE_SIDED * ratio.stderr, spread)
+    unseen = spread - sampled
+    if unseen > 0.0:  # unseen t^2 + sampled t - gap = 0, t = 1 / sqrt(k)
+        t = (math.sqrt(sampled**2 + 4.0 * unseen * gap) - sampled) / (2.0 * unseen)
+    else:
+        t = gap / sampled
+    return math.ceil(estimate.a.n_samples / t**2)

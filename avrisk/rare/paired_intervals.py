@@ -25,6 +25,8 @@ from avrisk.rare.weights import kish_ess
 
 __all__ = [
     "DISCORDANCE_BOUND",
+    "Z_ONE_SIDED",
+    "Z_TWO_SIDED",
     "Contrast",
     "difference_contrast",
     "discordance_bound",
