@@ -1,6 +1,7 @@
 """avrisk: rare-event risk estimation for autonomous-vehicle policies.
 
-The package is split the way the data flows (see ``DESIGN.md``):
+The package is split the way the data flows (``docs/design.md`` gives the
+layers, what each may import and why):
 
 * :mod:`avrisk.rare` -- the estimation engine. It knows nothing of cars: it
   sees a base distribution and a batched black-box function ``f``.

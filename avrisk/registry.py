@@ -1,6 +1,7 @@
 """Name registries: build a component from its name in a YAML file or the CLI.
 
-Code imports classes directly; registries serve configuration only (STYLE.md).
+Code imports classes directly; registries serve configuration only, so that
+every dependency of code shows in the import graph (``docs/design.md``).
 Configuration names a component in one of two forms
 (:func:`check_component_name`):
 

@@ -9,7 +9,8 @@ answers are::
     OMP_NUM_THREADS=1 python benchmarks/exact_suite.py run \\
         [--problems RP110,kregions_k5_d50_p1e-06] [--methods splitting_is,ot_ce] \\
         [--seeds 0-49] [--jobs 1] [--out benchmarks/results/exact_suite/runs.jsonl]
-    python benchmarks/exact_suite.py table [--results ...jsonl] [--md T.md] \\
+    python benchmarks/exact_suite.py table [--results A.jsonl B.jsonl:ce,mixture] \\
+        [--md T.md] \\
         [--json T.json]
     python benchmarks/exact_suite.py settings
 
@@ -422,9 +423,31 @@ HEADER = (
 )
 
 
+def _results(specs: list[str]) -> list[dict]:
+    """The records of ``FILE`` or ``FILE:METHOD,METHOD`` specs, in order.
+
+    A method's runs come from the first spec that names it (or names no
+    method and holds it): the latest runs of a changed method beside the
+    earlier ones of the others.
+    """
+    records: list[dict] = []
+    taken: set[str] = set()
+    for spec in specs:
+        path, _, names = spec.partition(":")
+        wanted = set(names.split(",")) if names else None
+        found = [
+            r
+            for r in _read(Path(path))
+            if r["method"] not in taken and (wanted is None or r["method"] in wanted)
+        ]
+        records.extend(found)
+        taken |= {r["method"] for r in found}
+    return records
+
+
 def table(args: argparse.Namespace) -> None:
     """Print (and write) the table of ``args.results``."""
-    records = _read(args.results)
+    records = _results(args.results)
     rows = summarize(records)
     methods = sorted(
         {r["method"] for r in records}, key=lambda m: list(LABELS).index(m)
@@ -476,7 +499,13 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--out", type=Path, default=DEFAULT_OUT)
     r.set_defaults(func=run)
     t = sub.add_parser("table", help="tabulate a results file")
-    t.add_argument("--results", type=Path, default=DEFAULT_OUT)
+    t.add_argument(
+        "--results",
+        nargs="+",
+        default=[str(DEFAULT_OUT)],
+        help="FILE or FILE:METHOD,METHOD (runs of a method from the first that "
+        "holds it)",
+    )
     t.add_argument("--md", type=Path, default=None, help="write the markdown here")
     t.add_argument("--json", type=Path, default=None, help="write the rows here")
     t.set_defaults(func=table)

@@ -1,4 +1,4 @@
-"""The import rules of DESIGN.md, checked on the source (no imports executed).
+"""The import rules of docs/design.md, checked on the source (no imports executed).
 
 Every import statement counts, wherever it stands (top level, inside a
 function, under ``TYPE_CHECKING``): a deferred import is still a dependency.

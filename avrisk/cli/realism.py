@@ -219,7 +219,8 @@ def realism_command(
     Part A replays held-out NGSIM I-80 car following (learned drivers and
     IDM against the human followers); part B counts lane changes in six-lane
     traffic against held-out US-101 vehicles. Both use only data shipped with
-    avrisk. Takes one to two minutes at the defaults on one thread.
+    avrisk. Its cost at the defaults is in BENCHMARKS.md ("The report: avrisk
+    realism").
     """
     with user_errors(ValueError):
         guard = _brake_guard(brake_guard)

@@ -3,8 +3,9 @@
 Runs :func:`avrisk.learning.train.train_drivers` on the NGSIM I-80 data
 shipped with the package (``avrisk/data/ngsim/``) or in ``--data-dir`` (behaviour
 cloning, DAgger, the bootstrap ensemble of heads, the graphical-lasso prior of
-``xi``; about seven minutes on one core) with one torch thread, so that the
-same seed, data and CPU kernels give the same files (the shipped ones were
+``xi``; minutes on one core: BENCHMARKS.md, "Keeping the safest of several
+trainings") with one torch thread, so that the same seed, data and CPU
+kernels give the same files (the shipped ones were
 trained with ``ATEN_CPU_CAPABILITY=avx2 OPENBLAS_CORETYPE=Haswell``; the
 command warns when the kernels here differ), and writes into ``--out``::
 

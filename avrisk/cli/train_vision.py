@@ -2,8 +2,9 @@
 
 Runs :func:`avrisk.learning.vision.train_vision` (behaviour cloning of the
 lidar ego's steering on camera images of ``highway_vision``, then DAgger
-rounds; about ten minutes on one core) with one torch thread, so that the same
-seed and machine give the same weights, and writes into ``--out``::
+rounds; minutes on one core, as ``avrisk/data/vision/SOURCE.md`` records for
+the shipped weights) with one torch thread, so that the same seed and
+machine give the same weights, and writes into ``--out``::
 
     pilotnet.npz            PilotNet weights (avrisk.agents.vision.PilotNet)
     training_report.json    held-out steering error, closed-loop lane keeping

@@ -35,10 +35,14 @@ and estimates ``p`` by importance sampling from it:
    coordinate and relies on the shrinkage alone: the fit for a failure set
    that depends a little on each of many coordinates (a linear limit state in
    ``D = 1000``), where no single coordinate stands out. The threshold ``t``
-   (from ``THRESHOLDS``, with one component), then the number of components
-   (from 1 to ``n_components``), is the one whose fits to the particles of one
-   half of the chains give the other half's particles the highest mean
-   log-likelihood, summed over both ways round (ties to the sparser fit); the
+   (from ``THRESHOLDS``) and the number of components, chosen together, are
+   those whose fits to the particles of one half of the chains give the other
+   half's particles the highest mean log-likelihood, summed over both ways
+   round (ties to the sparser fit); at each threshold components are added
+   while the score rises (up to ``n_components``), so several failure regions
+   get as many components, each shifted on the coordinates they all need
+   (chosen with one component, the threshold would see only the regions'
+   average, where their shifts cancel); the
    proposal is then fitted to all particles with those choices, unless one
    more candidate scores higher by more than two standard errors of the
    paired difference (from blocks of chains; a close call goes to the
@@ -125,8 +129,6 @@ from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
-from scipy import stats
-from scipy.special import logsumexp
 
 from avrisk.rare.cross_entropy import ShareOfP0
 from avrisk.rare.estimator import (
@@ -137,15 +139,8 @@ from avrisk.rare.estimator import (
 )
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
-from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
-from avrisk.rare.mixture import (
-    MixtureProposal,
-    component_log_kernels,
-    fit_mixture,
-    merge_overlapping,
-    seed_components,
-)
+from avrisk.rare.particle_fit import particle_proposal, slope_direction
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
 from avrisk.rare.results import Estimate
 from avrisk.rare.splitting import (
@@ -163,41 +158,9 @@ from avrisk.rare.stages import BatchCache, BatchRecorder
 from avrisk.rare.stopping import StoppingRule
 
 __all__ = [
-    "THRESHOLDS",
-    "ParticleFit",
-    "block_means",
     "SplittingISSettings",
-    "informative_coordinates",
-    "moment_errors",
     "SplittingImportanceSampling",
-    "particle_proposal",
-    "shrink",
-    "slope_direction",
     "splitting_is",
-    "with_light_regions",
-]
-
-#: Candidate thresholds, in standard errors, beyond which a coordinate's particle
-#: mean (or mean square) counts as informative (step 3 of the module
-#: docstring), the sparsest first (ties of the held-out score go to it); 0
-#: keeps every coordinate.
-THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
-#: Blocks of chains whose means give those standard errors.
-N_BLOCKS = 20
-
-#: A particle farther from every fitted shift than a draw of it is with this
-#: probability lies in a region of its own (:func:`with_light_regions`).
-OUTLIER_TAIL = 1e-6
-#: Fewest such particles that make a region of their own.
-MIN_REGION_PARTICLES = 3
-#: Least proposal weight of a region kept for its separation alone.
-LIGHT_REGION_SHARE = 0.02
-
-#: A proposal's fit to particles and their chains: its components, their
-#: weights and the coordinates it shifts (inside :func:`particle_proposal`).
-Fitter = Callable[
-    [FloatArray, np.ndarray],
-    tuple[list[ExponentialFamily], FloatArray, np.ndarray],
 ]
 
 #: Remedies of an unreliable importance-sampling stage, in its settings' names.
@@ -230,8 +193,9 @@ class SplittingISSettings(SplittingSettings):
     ----------
     n_final : int, default=10000
         Samples of the fitted proposal.
-    n_components : int, default=4
-        Mean shifts seeded from the particles (fewer survive merging on one
+    n_components : int, default=12
+        Most mean shifts fitted to the particles: fits with more components
+        are tried while the held-out score rises (fewer survive merging on one
         failure region).
     defensive : float, default=0.1
         Weight ``lam`` of ``P0`` in the proposal, in [0, 1): every weight is
@@ -249,7 +213,7 @@ class SplittingISSettings(SplittingSettings):
 
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
     n_components: int = Field(
-        4, ge=1, description="Mean shifts seeded from the particles."
+        12, ge=1, description="Most mean shifts fitted to the particles."
     )
     defensive: ShareOfP0 = Field(
         0.1, description="Weight of P0 in the proposal (weights <= 1/defensive)."
@@ -279,382 +243,6 @@ class SplittingISSettings(SplittingSettings):
                 "particles each"
             )
         return replicates
-
-
-class ParticleFit(NamedTuple):
-    """The proposal fitted to the particles, and the choices the fit made.
-
-    Attributes
-    ----------
-    proposal : MixtureProposal
-        Mean shifts of the base's standard normals (``StandardSpaceShift``)
-        and ``P0`` with weight ``settings.defensive``.
-    threshold : float
-        The standard errors beyond which a coordinate was shifted (one of
-        ``THRESHOLDS``; 0 for a shift along the slope).
-    n_shifted : int
-        Coordinates shifted.
-    along_slope : bool
-        Whether the shift is the particles' mean along the direction in which
-        ``f`` falls (:func:`slope_direction`) rather than per coordinate.
-    """
-
-    proposal: MixtureProposal
-    threshold: float
-    n_shifted: int
-    along_slope: bool = False
-
-
-def slope_direction(z: FloatArray, values: FloatArray) -> FloatArray | None:
-    """The unit direction in which ``f`` falls, by least squares over particles.
-
-    ``f ~ b + w . z`` fitted to the particles with finite values; the direction
-    is ``-w / |w|``. For a linear limit state it is exact (whatever the
-    particles' correlation, once they span the space); otherwise it is ``f``'s
-    average slope over the particles, a candidate the held-out likelihood of
-    :func:`particle_proposal` weighs against the per-coordinate fits.
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        Particles in standard-normal space (e.g. the last level's).
-    values : ndarray of shape (n,)
-        Their ``f``.
-
-    Returns
-    -------
-    ndarray of shape (D,) or None
-        None with fewer than ``D + 2`` finite values or ``f`` constant on them.
-
-    Examples
-    --------
-    >>> rng = np.random.default_rng(0)
-    >>> z = rng.standard_normal((50, 3))
-    >>> (slope_direction(z, 5.0 - 2.0 * z[:, 0]).round(6) + 0.0).tolist()
-    [1.0, 0.0, 0.0]
-    """
-    finite = np.isfinite(values)
-    if np.count_nonzero(finite) < z.shape[1] + 2:
-        return None
-    points, f = z[finite], values[finite]
-    f = f - f.mean()
-    if not f.any():
-        return None
-    w, *_ = np.linalg.lstsq(points - points.mean(axis=0), f, rcond=None)
-    norm = float(np.linalg.norm(w))
-    return None if norm == 0.0 or not np.isfinite(norm) else -w / norm
-
-
-def particle_proposal(
-    z: FloatArray,
-    chain: np.ndarray,
-    base: ExponentialFamily,
-    settings: SplittingISSettings,
-    rng: np.random.Generator,
-    slope: FloatArray | None = None,
-) -> ParticleFit:
-    """The importance-sampling proposal fitted to particles (steps 3-4 above).
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        Particles of ``P0(. | f <= gamma)`` in the base's standard-normal space.
-    chain : ndarray of int, shape (n,)
-        The chain of each particle, chains numbered in the order of their
-        ancestors (the threshold and the number of components are chosen by
-        fitting one half of the chains and scoring the other).
-    base : ExponentialFamily
-        ``P0``.
-    settings : SplittingISSettings
-        ``n_components``, ``min_weight``, ``defensive`` and ``shift``.
-    rng : numpy.random.Generator
-        For the k-means++ seeding.
-    slope : ndarray of shape (D,), optional
-        A unit direction in which ``f`` falls (:func:`slope_direction`): one
-        more candidate, a single shift along it by the particles' mean, shrunk
-        by its noise. It wins where many coordinates each matter a little and
-        the per-coordinate mean is mostly noise (``D / n_eff`` in squared norm
-        against ``1 / n_eff`` along one direction).
-
-    Returns
-    -------
-    ParticleFit
-
-    Examples
-    --------
-    >>> from avrisk.rare import FixedCovNormal
-    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    >>> rng = np.random.default_rng(0)
-    >>> z = np.vstack([rng.normal((4, 0), 0.3, (500, 2)),
-    ...                rng.normal((-4, 0), 0.3, (500, 2))])
-    >>> chain = rng.permutation(1000) // 10
-    >>> fit = particle_proposal(z, chain, base, SplittingISSettings(), rng)
-    >>> sorted(round(float(c.mean[0])) for c in fit.proposal.components)
-    [-4, 4]
-    """
-    allowed = (
-        np.ones(base.dim, dtype=bool)
-        if settings.shift == "all"
-        else np.asarray(base.searched_coordinates(), dtype=bool)
-    )
-
-    along = None
-    if slope is not None and np.any(allowed & (slope != 0)):
-        along = np.where(allowed, slope, 0.0)
-        along = along / np.linalg.norm(along)
-
-    def fit_along(
-        points: FloatArray, point_chain: np.ndarray
-    ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
-        """One shift along ``along``: the particles' mean there, shrunk."""
-        shifted = along != 0
-        mean, stderr = block_means(points @ along[:, None], point_chain)
-        shift = StandardSpaceShift(base, mean[0] * along, searched=shifted)
-        noise = float(np.nan_to_num(stderr[0] ** 2))
-        return [shrink(shift, 1.0, noise)], np.ones(1), shifted
-
-    def fit(
-        points: FloatArray, point_chain: np.ndarray, threshold: float, k: int
-    ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
-        """Shifts of the informative coordinates, ``k`` components, shrunk."""
-        moments = moment_errors(points, point_chain)
-        shifted = allowed & _informative(moments, threshold)
-        structure = StandardSpaceShift(base, searched=shifted)
-        masked = np.where(shifted, points, 0.0)  # the others play no part in it
-        weights = np.full(len(points), 1.0 / len(points))
-        start = seed_components(structure, masked, weights, k, rng)
-        mixture = fit_mixture(*start, masked, weights, settings.min_weight)
-        components, shares = merge_overlapping(mixture.components, mixture.weights)
-        noise = float(np.nansum(moments[0][1][shifted] ** 2))
-        shrunk = [
-            shrink(c, share, noise) for c, share in zip(components, shares, strict=True)
-        ]
-        return shrunk, shares, shifted
-
-    first = chain < (chain.max() + 1) / 2
-
-    def held_out_points(fitter: Fitter) -> FloatArray:
-        """Each particle's log-likelihood under the fit to the other half, (n,)."""
-        scores = np.empty(len(z))
-        for train in (first, ~first):
-            components, weights, _ = fitter(z[train], chain[train])
-            log_joint = np.log(weights) + component_log_kernels(components, z[~train])
-            scores[~train] = logsumexp(log_joint, axis=1)
-        return scores
-
-    def summed(scores: FloatArray) -> float:
-        """Mean held-out log-likelihood of each half, summed over the halves."""
-        return float(scores[~first].mean() + scores[first].mean())
-
-    def clearly_better(a: FloatArray, b: FloatArray) -> bool:
-        """Whether held-out scores ``a`` beat ``b`` by two standard errors.
-
-        The paired differences' mean over particles, its standard error from
-        blocks of chains (:func:`block_means`, the chains' correlation in it).
-        """
-        mean, stderr = block_means((a - b)[:, None], chain)
-        return bool(mean[0] > 2.0 * np.nan_to_num(stderr[0], nan=np.inf))
-
-    def per_coordinate(threshold: float, k: int) -> Fitter:
-        """:func:`fit` with its threshold and number of components set."""
-        return lambda points, point_chain: fit(points, point_chain, threshold, k)
-
-    threshold = THRESHOLDS[0]
-    chosen = per_coordinate(threshold, 1)
-    along_slope = False
-    if first.any() and not first.all():  # max keeps the first of ties
-        threshold = max(
-            THRESHOLDS, key=lambda t: summed(held_out_points(per_coordinate(t, 1)))
-        )
-        points = {
-            k: held_out_points(per_coordinate(threshold, k))
-            for k in range(1, settings.n_components + 1)
-        }
-        k = max(points, key=lambda k: summed(points[k]))
-        chosen = per_coordinate(threshold, k)
-        # the shift along the slope, if clearly better than the best
-        # per-coordinate mixture (a close call goes to the mixture)
-        if along is not None and clearly_better(held_out_points(fit_along), points[k]):
-            chosen, threshold, along_slope = fit_along, 0.0, True
-    components, weights, shifted = chosen(z, chain)
-    components, weights = with_light_regions(z, components, weights, shifted, base, rng)
-    proposal = MixtureProposal(components, weights, base, settings.defensive)
-    return ParticleFit(
-        proposal, threshold, int(np.count_nonzero(shifted)), along_slope=along_slope
-    )
-
-
-def with_light_regions(
-    z: FloatArray,
-    components: Sequence[ExponentialFamily],
-    weights: FloatArray,
-    shifted: np.ndarray,
-    base: ExponentialFamily,
-    rng: np.random.Generator,
-) -> tuple[list[ExponentialFamily], FloatArray]:
-    """The fit, plus a component for each region its components leave out.
-
-    A particle farther from every fitted shift than a draw of it would be
-    with probability ``OUTLIER_TAIL`` (its squared distance over the shifted
-    coordinates against ``chi^2`` of as many degrees of freedom) lies in a
-    region of its own: a region few chains reached, which the held-out halves
-    cannot vouch for (one half holds it, the other not) and EM drops under
-    ``min_weight``. With at least ``MIN_REGION_PARTICLES`` such particles,
-    shifts are fitted to them alone (k-means++ seeding, EM, merging) and kept
-    unshrunk, each with a weight of its particles' share but at least
-    ``LIGHT_REGION_SHARE``: their share of the particles is that of ``p``
-    only on average, and a region a search barely reached may hold more.
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        The particles in standard-normal space.
-    components : sequence of StandardSpaceShift
-        The fitted shifts; ``weights`` their weights, shape (K,).
-    shifted : ndarray of bool, shape (D,)
-        The coordinates the shifts move.
-    base : ExponentialFamily
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    components : list of ExponentialFamily
-    weights : ndarray of shape (K',), summing to 1
-    """
-    d = int(np.count_nonzero(shifted))
-    if d == 0:
-        return list(components), weights
-    masked = np.where(shifted, z, 0.0)
-    means = np.array([c.mean for c in components])
-    far = ((masked[:, None, :] - means[None]) ** 2).sum(axis=2).min(axis=1)
-    outside = far > stats.chi2.isf(OUTLIER_TAIL, d)
-    n_out = int(np.count_nonzero(outside))
-    if n_out < MIN_REGION_PARTICLES:
-        return list(components), weights
-    structure = StandardSpaceShift(base, searched=shifted)
-    points = masked[outside]
-    even = np.full(n_out, 1.0 / n_out)
-    k = max(1, n_out // MIN_REGION_PARTICLES)
-    start = seed_components(structure, points, even, k, rng)
-    fit = fit_mixture(*start, points, even, 1.0 / n_out)
-    light, shares = merge_overlapping(fit.components, fit.weights)
-    light_weights = np.maximum(shares * n_out / len(z), LIGHT_REGION_SHARE)
-    kept = np.asarray(weights) * (1.0 - light_weights.sum())
-    return [*components, *light], np.concatenate([kept, light_weights])
-
-
-def shrink(
-    component: StandardSpaceShift, share: float, noise: float
-) -> StandardSpaceShift:
-    """A fitted shift ``m`` scaled by ``c = max(0, 1 - noise / (share |m|^2))``.
-
-    Parameters
-    ----------
-    component : StandardSpaceShift
-        The fit, of ``share`` of the particles.
-    share : float
-        Its mixture weight, in (0, 1].
-    noise : float
-        Sum of the shifted coordinates' squared standard errors of the mean
-        of all particles (a component of a share ``pi`` has ``1 / pi`` times
-        that noise).
-
-    Examples
-    --------
-    >>> from avrisk.rare import FixedCovNormal
-    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    >>> fit = StandardSpaceShift(base, [3.0, 4.0])
-    >>> shrink(fit, 0.5, 2.5).mean.round(6).tolist()  # c = 1 - 2.5 / (0.5 * 25)
-    [2.4, 3.2]
-    """
-    size = float(component.mean @ component.mean)
-    if size == 0.0:
-        return component
-    scale = max(0.0, 1.0 - noise / (share * size))
-    return component.with_natural_params(scale * component.mean)
-
-
-def block_means(z: FloatArray, chain: np.ndarray) -> tuple[FloatArray, FloatArray]:
-    """Mean of each coordinate and its standard error, from blocks of chains.
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        Particles (or any per-particle quantity).
-    chain : ndarray of int, shape (n,)
-        Their chains, numbered in the order of their ancestors (any integers
-        in that order).
-
-    Returns
-    -------
-    mean, stderr : ndarray of shape (D,)
-        ``stderr`` from the spread of the means of ``N_BLOCKS`` blocks of
-        consecutive chains (fewer blocks with fewer chains); NaN with fewer
-        than 4 chains (then nothing is shrunk).
-    """
-    _, order = np.unique(chain, return_inverse=True)
-    n_chains = int(order.max()) + 1
-    if n_chains < 4:
-        return z.mean(axis=0), np.full(z.shape[1], np.nan)
-    blocks = min(N_BLOCKS, n_chains)
-    block = order * blocks // n_chains
-    means = np.stack([z[block == b].mean(axis=0) for b in range(blocks)])
-    return z.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(blocks)
-
-
-def moment_errors(
-    z: FloatArray, chain: np.ndarray
-) -> tuple[tuple[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]:
-    """:func:`block_means` of the particles ``z`` and of ``z^2 - 1``, in that order.
-
-    Under ``N(0, 1)`` both moments are 0: what :func:`informative_coordinates`
-    tests, and the first one's standard errors are the noise of a fitted
-    shift (:func:`shrink`).
-    """
-    return block_means(z, chain), block_means(z * z - 1.0, chain)
-
-
-def _informative(
-    moments: tuple[tuple[FloatArray, FloatArray], ...], threshold: float
-) -> np.ndarray:
-    """Coordinates where a moment is off 0 by more than ``threshold`` errors."""
-    few_chains = np.isnan(moments[0][1]).all()  # no standard errors: keep all
-    informative = np.full(moments[0][0].shape, threshold == 0.0 or few_chains)
-    for mean, stderr in moments:
-        informative |= np.abs(mean) > threshold * stderr
-    return informative
-
-
-def informative_coordinates(
-    z: FloatArray, chain: np.ndarray, threshold: float
-) -> np.ndarray:
-    """Coordinates whose particle mean or mean square is off ``N(0, 1)``'s (step 3).
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        Particles in standard-normal space.
-    chain : ndarray of int, shape (n,)
-        Their chains, numbered in the order of their ancestors (any integers
-        in that order).
-    threshold : float
-        Standard errors.
-
-    Returns
-    -------
-    ndarray of bool, shape (D,)
-        True where ``|mean(z_i)|`` or ``|mean(z_i^2) - 1|`` exceeds
-        ``threshold`` standard errors (:func:`block_means`); every
-        coordinate with fewer than 4 chains or ``threshold`` 0.
-
-    Examples
-    --------
-    >>> rng = np.random.default_rng(0)
-    >>> z = rng.standard_normal((2000, 4)) * [1.0, 1.0, 3.0, 1.0] + [0.0, 2.0, 0.0, 0.0]
-    >>> informative_coordinates(z, np.arange(2000) // 10, 3.0).tolist()
-    [False, True, True, False]
-    """
-    return _informative(moment_errors(z, chain), threshold)
 
 
 @register_estimator
@@ -799,7 +387,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         s = self.settings
         return (
             f"{super().describe()}, then IS {s.n_final:,} "
-            f"({s.n_components} components, defensive {s.defensive:g})"
+            f"(up to {s.n_components} components, defensive {s.defensive:g})"
         )
 
     @staticmethod

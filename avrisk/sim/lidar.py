@@ -203,9 +203,9 @@ def nearest_box(
     Notes
     -----
     Compiled, one box at a time makes no ``(..., J, R)`` temporary, and the
-    scan and the reduction fuse into one loop over ``(..., R)``: the lidar of
-    ``highway_default`` takes 1.8 ms instead of 2.5 ms per step at batch
-    1,024 on one CPU thread (BENCHMARKS.md "Simulator throughput"). Eager,
+    scan and the reduction fuse into one loop over ``(..., R)``, which is
+    faster than the all-boxes form (BENCHMARKS.md, "The lidar's reduction
+    fused, and freed memory kept"). Eager,
     it dispatches ``J`` times as many operations, which pays only where the
     ``(..., J, R)`` temporaries would leave the cache: the simulator's lidar
     chooses by batch size (:class:`avrisk.sim.Simulator`).

@@ -6,15 +6,14 @@ glibc's ``malloc`` serves a block above its mmap threshold (128 KiB at start,
 raised as such blocks are freed) with a fresh mapping, and gives freed memory
 at the top of its heap back to the system above its trim threshold: either
 way the next step's block is page-faulted and zeroed again, page by page.
-In a fresh process on one CPU thread, copying the network's bias into its
-4 MB output then took 1.5 ms of a 10 ms compiled step of ``highway_default``
-(0.17 ms with this module's settings). How often it happens depends on what
-the process allocated and freed before, since glibc adapts both thresholds
-to the blocks it has freed: fresh processes that build a simulator (as
-worker processes do) gained 6% compiled and 15-24% eager, the ``avrisk``
-command 1-3% (BENCHMARKS.md "Simulator throughput").
+These page faults take a noticeable share of a compiled step. How often they
+happen depends on what the process allocated and freed before, since glibc
+adapts both thresholds to the blocks it has freed.
 :func:`keep_freed_memory` raises both thresholds, so that such blocks come
-from the heap and are reused, whatever came before.
+from the heap and are reused, whatever came before: a fresh worker process
+gains most from it, the ``avrisk`` command (whose start-up already freed
+large blocks) least (BENCHMARKS.md, "The lidar's reduction fused, and freed
+memory kept", has the figures).
 
 Results do not depend on it (only where memory comes from). The cost: a
 process keeps up to :data:`TRIM_THRESHOLD` bytes of freed memory instead of

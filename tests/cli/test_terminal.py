@@ -126,8 +126,8 @@ def test_the_default_method_is_splitting_is_its_plan_a_bound_and_its_tables_show
     # gamma and the final stage: a bound
     assert (
         "plan: splitting + IS (subset simulation, 100 particles per level, p0 0.1, "
-        "then IS 100 (4 components, defensive 0.1)): at most 2,100 rollouts (fewer "
-        "if the levels reach gamma sooner); samples take at most about"
+        "then IS 100 (up to 12 components, defensive 0.1)): at most 2,100 rollouts "
+        "(fewer if the levels reach gamma sooner); samples take at most about"
     ) in err
     # its first batch: the first replicate's first set, 50 particles
     assert "rollouts/s on the first 50: at most about" in err

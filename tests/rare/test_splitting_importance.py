@@ -18,13 +18,12 @@ from avrisk.rare import (
 )
 from avrisk.rare.cross_entropy import SEARCH_ADVICE, CESettings
 from avrisk.rare.estimator import estimator_class
+from avrisk.rare.particle_fit import particle_proposal, slope_direction
 from avrisk.rare.splitting import SubsetSimulation
 from avrisk.rare.splitting_importance import (
     ADVICE,
     SplittingImportanceSampling,
     SplittingISSettings,
-    particle_proposal,
-    slope_direction,
 )
 from avrisk.rare.trust import estimate_trust
 from avrisk.report.plots import table_cells
@@ -85,6 +84,23 @@ def test_one_region_in_high_dimension_is_one_component():
     q = particle_proposal(z, chain, base, SplittingISSettings(), rng).proposal
     assert q.n_components == 1
     assert q.components[0].mean[0] == pytest.approx(4.0, abs=0.2)
+
+
+def test_rotated_regions_get_a_component_each_shifted_on_every_coordinate():
+    # five regions along random orthonormal directions in 30 dimensions: each
+    # direction spreads over every coordinate, and their average cancels; the
+    # threshold and the number of components are chosen together (more than
+    # the four a fixed cap allowed)
+    d, k, rng = 30, 5, np.random.default_rng(3)
+    base = FixedCovNormal(np.zeros(d), cov=np.eye(d))
+    directions = np.linalg.qr(rng.standard_normal((d, k)))[0].T
+    z = rng.standard_normal((2500, d)) + 4.0 * np.repeat(directions, 500, axis=0)
+    chain = rng.permutation(2500) // 10
+    fit = particle_proposal(z, chain, base, SplittingISSettings(), rng)
+    assert fit.threshold == 0.0 and fit.n_shifted == d
+    means = np.array([c.mean for c in fit.proposal.components])
+    nearest = (means @ directions.T).argmax(axis=1)
+    assert sorted(set(nearest.tolist())) == list(range(k))
 
 
 def test_a_weak_shift_of_every_coordinate_is_kept_and_noise_is_dropped():
@@ -246,7 +262,7 @@ def test_settings_budget_and_description():
     assert method.budget() == 400 * (8 + 5) + 400 + 900
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, then IS 900 "
-        "(4 components, defensive 0.1)"
+        "(up to 12 components, defensive 0.1)"
     )
     with pytest.raises(ValueError, match="shift"):
         get_estimator("splitting_is", shift="some")

@@ -197,6 +197,11 @@ def test_suite_command_runs_resumes_and_tabulates(tmp_path, capsys):
     rows = json.loads(js.read_text())
     assert {(r["problem"], r["method"]) for r in rows} >= {("RP22", "splitting_is")}
     assert "| RP22 |" in md.read_text()
+    # a method's runs from the first file that names it, the rest from the next
+    suite.main(["table", "--results", f"{out}:ce", "--json", str(js)])
+    assert {r["method"] for r in json.loads(js.read_text())} == {"ce"}
+    suite.main(["table", "--results", f"{out}:ce", str(out), "--json", str(js)])
+    assert {r["method"] for r in json.loads(js.read_text())} == set(methods)
 
 
 def test_suite_settings_keep_every_engine_method_within_the_budget():

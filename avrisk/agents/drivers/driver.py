@@ -3,13 +3,13 @@
 :class:`LearnedDriver` is an actor of the simulator
 (:class:`avrisk.sim.interfaces.Actor`): every vehicle of rollout ``b`` it
 controls is driven by the network with last layer ``xi[b]``, its per-rollout
-parameter block (one draw of ``xi ~ N(mu0, Sigma0)`` per rollout, DESIGN.md
-§2; columns of ``X``). Actions are sampled from the network's Gaussians with
+parameter block (one draw of ``xi ~ N(mu0, Sigma0)`` per rollout, as in the
+paper; columns of ``X``). Actions are sampled from the network's Gaussians with
 noise the simulator draws for it (:class:`~avrisk.sim.interfaces.NoiseRequest`,
 counter-based: a pure function of the rollout's seed, the step, the vehicle
 and the action), so a rollout gets the same noise alone or in any batch.
 :class:`LearnedEgoPolicy` drives vehicle 0 with the same network (the paper's
-non-vision ego, DESIGN.md §5), by default with its mean action.
+non-vision ego), by default with its mean action.
 
 Sampling: ``action_t = mean_t + c * std_t * eps_t`` with standardised noise
 ``eps_t = rho eps_{t-1} + sqrt(1 - rho^2) z_t``, ``z_t ~ N(0, 1)`` the

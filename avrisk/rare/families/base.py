@@ -6,8 +6,8 @@ returns a new instance of the same structure.
 
 In natural form a family has density ``p_theta(x) = h(x) exp(theta^T T(x) -
 A(theta))`` with sufficient statistic ``T``, log-partition ``A`` and mean
-parameter ``grad A(theta) = E_theta[T(X)]``. The CE update (DESIGN.md §1, step 4)
-is the constrained moment-matching projection
+parameter ``grad A(theta) = E_theta[T(X)]``. The CE update (the paper's
+Algorithm 1) is the constrained moment-matching projection
 
     theta_new = argmax_{theta in search box} theta^T m - A(theta)
 

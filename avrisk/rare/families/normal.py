@@ -9,7 +9,8 @@ mu^T P mu / 2`` and the mean parameter is ``mu``. The CE projection
 equals ``argmin (mu - m)^T P (mu - m)`` over the box: a box-constrained quadratic
 program in the precision metric. :func:`box_qp` solves it exactly with a primal
 active-set method whose sub-problems are sparse linear solves in ``P``, so a
-sparse precision (graphical lasso, DESIGN.md §4) is used as such.
+sparse precision (the learned drivers' graphical-lasso prior of ``xi``) is
+used as such.
 """
 
 from __future__ import annotations
