@@ -15,12 +15,18 @@ layers, what each may import and why):
 * :mod:`avrisk.assembly` -- a scenario built into a simulator, its actors and
   its measure: the estimator's black box.
 * :mod:`avrisk.api` -- the scenario-level calls (:func:`estimate`,
-  :func:`compare_methods`, :func:`simulate`, :func:`write_report`), light to import:
-  each loads the simulator when called.
+  :func:`compare_methods`, :func:`compare_egos`, :func:`simulate`,
+  :func:`write_report`), light to import: each loads the simulator when called.
 * :mod:`avrisk.cli` -- the ``avrisk`` command, a shell over :mod:`avrisk.api`.
 """
 
-from avrisk.api import compare_methods, estimate, simulate, write_report
+from avrisk.api import (
+    compare_egos,
+    compare_methods,
+    estimate,
+    simulate,
+    write_report,
+)
 from avrisk.version import __version__ as __version__
 
-__all__ = ["compare_methods", "estimate", "simulate", "write_report"]
+__all__ = ["compare_egos", "compare_methods", "estimate", "simulate", "write_report"]

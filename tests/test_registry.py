@@ -52,9 +52,9 @@ def test_params_are_validated_by_the_component_and_errors_name_the_field():
 def test_a_component_without_a_params_model_takes_no_params():
     assert _registry().build("bang_bang", {}) == "bang"
     with pytest.raises(ComponentError) as info:
-        get_policy("lidar_imitation", {"desired_speed": 20.0})
+        get_policy("vision_pilotnet", {"desired_speed": 20.0})
     assert str(info.value) == (
-        "ego policy 'lidar_imitation' takes no params; remove desired_speed"
+        "ego policy 'vision_pilotnet' takes no params; remove desired_speed"
     )
     with pytest.raises(ComponentError, match="'min_ttc' takes no params"):
         get_safety_measure("min_ttc", {"n_rays": 8})

@@ -23,12 +23,14 @@ from avrisk.api.errors import UserError
 from avrisk.api.events import Progress, ignore
 
 if TYPE_CHECKING:
+    from avrisk.api.ab import ABResult
     from avrisk.api.result import EstimationResult, Scenario
     from avrisk.api.rollouts import SimulationRun
     from avrisk.scenario import ScenarioSpec
 
 __all__ = [
     "UserError",
+    "compare_egos",
     "compare_methods",
     "estimate",
     "simulate",
@@ -189,6 +191,79 @@ def compare_methods(
         failures,
         device,
         (backend, workers, address),
+        progress=progress,
+    )
+
+
+def compare_egos(
+    scenario: Scenario,
+    ego_a: str | Mapping[str, Any],
+    ego_b: str | Mapping[str, Any],
+    *,
+    out: str | Path = "runs/ab",
+    max_ratio: float = 1.0,
+    gamma: float = 0.14,
+    seed: int = 0,
+    batch_size: int = 4096,
+    failures: int = 3,
+    device: str = "cpu",
+    progress: Progress = ignore,
+    **options: Any,
+) -> ABResult:
+    """Is ego B at most ``max_ratio`` times as risky as ego A? As ``avrisk ab``.
+
+    Both egos drive every draw of ``X`` with the same seed (common random
+    numbers); ``splitting_is`` searches the union of their failure sets and
+    one weighted sample gives ``p_A``, ``p_B``, ``p_B - p_A``, ``p_B / p_A``
+    and the regressions and fixes (:mod:`avrisk.rare.paired`); the gate
+    passes when the one-sided upper 95% bound of ``p_B / p_A`` is at most
+    ``max_ratio``, fails when the lower one is above it.
+
+    Parameters
+    ----------
+    scenario : str, Path, ScenarioSpec or dict
+        The scenario; its own ego is replaced by each of the two.
+    ego_a, ego_b : str or mapping
+        Each ego as :func:`estimate`'s ``ego``: a registered policy name, an
+        import path ``"package.module:Class"``, or ``{"policy": ...,
+        "params": {...}}`` (an external ZeroMQ server: ``{"policy":
+        "external", "params": {"address": ...}}``).
+    out : str or Path, default="runs/ab"
+        The run directory: created, resumed, or read back when complete.
+    max_ratio : float, default=1.0
+        The gate's margin on ``p_B / p_A``.
+    gamma : float, default=0.14
+        The threshold on both egos' minimum TTC [s].
+    seed, batch_size, device, progress
+        As for :func:`estimate`.
+    failures : int, default=3
+        Regressions (and fixes) the report ``ab_report.html`` animates, each
+        with both egos on the same situation, the most realistic first.
+    **options
+        ``splitting_is``'s settings by name (``n_final=20000``).
+
+    Returns
+    -------
+    ABResult
+        ``paired`` (the estimates), ``verdict``, ``line()`` for a CI log and
+        ``document()`` (``ab.json``, ``--json``).
+
+    Raises
+    ------
+    UserError
+        For settings, egos, a scenario or a run directory that cannot be used.
+    """
+    from avrisk.api.ab import compare_specs
+    from avrisk.rare.paired import UNION_METHOD
+
+    return compare_specs(
+        _spec(scenario, ego_a),
+        _spec(scenario, ego_b),
+        _settings(UNION_METHOD, gamma, (), seed, batch_size, options),
+        Path(out),
+        max_ratio=max_ratio,
+        failures=failures,
+        device=device,
         progress=progress,
     )
 

@@ -41,14 +41,19 @@ def method_label(method: str) -> str:
 
 
 def samples_directory(
-    out: Path, spec: ScenarioSpec, *, store_full: bool = False
+    out: Path,
+    spec: ScenarioSpec,
+    *,
+    store_full: bool = False,
+    outputs: dict[str, str] | None = None,
 ) -> RunDirectory:
     """A run directory of ``spec``: its units recorded, its large blocks regenerated.
 
-    See :class:`~avrisk.pipeline.RunDirectory` for ``store_full``.
+    See :class:`~avrisk.pipeline.RunDirectory` for ``store_full``;
+    ``outputs``: the units of outputs of ``f`` besides ``f`` [s] itself.
     """
     layout = param_layout(spec)
-    units = {**layout.units(), "f": "s", "log_p0": "log density"}
+    units = {**layout.units(), "f": "s", **(outputs or {}), "log_p0": "log density"}
     return RunDirectory(
         out,
         layout.columns,

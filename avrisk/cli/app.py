@@ -31,6 +31,7 @@ COMMANDS = {
     "run": ("avrisk.cli.run", "run"),
     "compare": ("avrisk.cli.run", "compare"),
     "report": ("avrisk.cli.run", "report"),
+    "ab": ("avrisk.cli.ab", "ab"),
     "simulate": ("avrisk.cli.simulate", "simulate"),
     "replay": ("avrisk.cli.simulate", "replay"),
     "demo": ("avrisk.cli.demo", "demo"),

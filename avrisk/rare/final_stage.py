@@ -174,26 +174,48 @@ def importance_estimates(
     threshold. The other thresholds' diagnostics are in their estimates
     (``n_hits``, ``ess``, ``pareto_k``), for a table, not warnings.
     """
-    out = {}
-    for g in thresholds:
-        hits = values <= g
-        k = int(np.count_nonzero(hits))
-        p, se = weighted_mean_and_stderr(log_w, hits)
-        out[g] = GammaEstimate(
-            gamma=g,
-            p=p,
-            stderr=se,
-            ci=normal_interval(p, se, CONFIDENCE) if k else (0.0, 1.0),
-            n_hits=k,
-            ess=kish_ess(log_w[hits]),
-            n_samples=values.size,
-            confidence=CONFIDENCE,
-            pareto_k=pareto_tail_index(log_w[hits]),
-            interval=INTERVAL_NAMES["normal" if k else "uninformative"],
-        )
+    out = {g: weighted_hits_estimate(log_w, values <= g, g) for g in thresholds}
     if thresholds:
         _warn_if_unreliable(out[thresholds[0]], advice)
     return out
+
+
+def weighted_hits_estimate(
+    log_w: FloatArray, hits: np.ndarray, gamma: float
+) -> GammaEstimate:
+    """``mean(w 1{hit})`` of one event, its standard error and diagnostics.
+
+    Parameters
+    ----------
+    log_w : ndarray of shape (n,)
+        Log-weights ``log p0 - log q`` of every sample of the stage.
+    hits : ndarray of bool, shape (n,)
+        The samples in the event (``f <= gamma``, or any other event of the
+        same samples: one version failing and not the other).
+    gamma : float
+        The threshold the event is labelled with.
+
+    Returns
+    -------
+    GammaEstimate
+        The normal interval with hits; ``(0, 1)`` without (the weights of
+        unseen events are unknown). No warning: see
+        :func:`importance_estimates`.
+    """
+    k = int(np.count_nonzero(hits))
+    p, se = weighted_mean_and_stderr(log_w, hits)
+    return GammaEstimate(
+        gamma=gamma,
+        p=p,
+        stderr=se,
+        ci=normal_interval(p, se, CONFIDENCE) if k else (0.0, 1.0),
+        n_hits=k,
+        ess=kish_ess(log_w[hits]),
+        n_samples=hits.size,
+        confidence=CONFIDENCE,
+        pareto_k=pareto_tail_index(log_w[hits]),
+        interval=INTERVAL_NAMES["normal" if k else "uninformative"],
+    )
 
 
 def _warn_if_unreliable(est: GammaEstimate, advice: Advice) -> None:

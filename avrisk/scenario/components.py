@@ -168,7 +168,8 @@ class EgoSpec(SpecModel):
     ``lidar_imitation``, the paper's non-vision ego (the shipped driver
     network on the ego's own lidar and lane features, with its trained shared
     last layer and its mean action; :class:`avrisk.agents.drivers.LearnedEgoPolicy`),
-    takes none; ``constant`` takes ``accel`` and ``steer``.
+    takes ``range_scale`` (a miscalibrated lidar, for a variant to compare;
+    default 1); ``constant`` takes ``accel`` and ``steer``.
     """
 
     policy: ComponentName = Field(

@@ -42,9 +42,11 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 from typing import NamedTuple
 
 import torch
+from pydantic import BaseModel, ConfigDict, Field
 from torch import Tensor
 
 from avrisk.agents.drivers.features import features_from_observation
@@ -317,10 +319,26 @@ class LearnedEgoPolicy:
         with noise of shape (B, 2).
     allow_reverse : bool, default=False
         See :class:`LearnedDriver`.
+    range_scale : float, default=1.0
+        Every lidar range the ego reads is multiplied by it: a miscalibrated
+        sensor, for a variant of the ego to compare (``avrisk ab``). Above 1
+        the gaps read longer than they are, so the ego brakes later.
     """
 
     #: The features include the ego's lidar.
     reads_lidar = True
+
+    class Params(BaseModel):
+        """``params`` of ``ego: {policy: lidar_imitation}`` (see the class)."""
+
+        model_config = ConfigDict(frozen=True, extra="forbid")
+
+        range_scale: float = Field(
+            1.0,
+            gt=0.0,
+            description="Factor on every lidar range the ego reads (a "
+            "miscalibrated sensor; above 1 it brakes later).",
+        )
 
     def __init__(
         self,
@@ -330,8 +348,10 @@ class LearnedEgoPolicy:
         *,
         stochastic: bool = False,
         allow_reverse: bool = False,
+        range_scale: float = 1.0,
     ) -> None:
         self.net = net
+        self.range_scale = float(range_scale)
         self.xi = _as_xi(net, xi)
         self.controlled = ego_only(n_vehicles, device=net.input_mean.device)
         self.stochastic = stochastic
@@ -357,6 +377,11 @@ class LearnedEgoPolicy:
         self, obs: Observation, state: LearnedState, noise: Tensor | None
     ) -> tuple[Action, LearnedState]:
         """The ego's action in every column, fields of shape (B, A)."""
+        if self.range_scale != 1.0 and obs.lidar is not None:
+            lidar = dataclasses.replace(
+                obs.lidar, range=obs.lidar.range * self.range_scale
+            )
+            obs = dataclasses.replace(obs, lidar=lidar)
         feats = features_from_observation(obs)[:, :1]  # (B, 1, F)
         dist = self.net(feats, state.xi)[:, 0]
         eps = None
@@ -376,13 +401,13 @@ class LearnedEgoPolicy:
 
 
 def _lidar_ego_factory(
-    *, n_vehicles: int, net: DriverNet | None = None
+    *, n_vehicles: int, net: DriverNet | None = None, range_scale: float = 1.0
 ) -> LearnedEgoPolicy:
     if net is None:
         from avrisk.agents.drivers.store import load_driver_net
 
         net = load_driver_net()
-    return LearnedEgoPolicy(net, n_vehicles)
+    return LearnedEgoPolicy(net, n_vehicles, range_scale=range_scale)
 
 
-register_policy("lidar_imitation", _lidar_ego_factory)
+register_policy("lidar_imitation", _lidar_ego_factory, params=LearnedEgoPolicy.Params)

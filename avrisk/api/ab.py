@@ -1,0 +1,336 @@
+"""Is the new release safer? Two egos compared on the same draws (``avrisk ab``).
+
+:func:`compare_specs` runs the scenario with ego ``A`` and ego ``B`` on every
+draw of ``X`` and its seed (:class:`avrisk.assembly.paired.PairedObjective`:
+common random numbers), searches the union of their failure sets with
+``splitting_is`` on the lower of the two minimum TTCs, and estimates ``p_A``,
+``p_B``, their difference and ratio, the regressions and fixes from its one
+weighted final sample (:mod:`avrisk.rare.paired`). A gate reads the ratio's
+one-sided bounds against a margin (:func:`avrisk.rare.paired.gate`).
+
+The run directory is ``avrisk run``'s: each rollout pair a row of
+``samples.parquet`` (``f`` the lower minimum TTC, ``f_a`` and ``f_b`` each
+ego's, and each ego's outcome columns), resumed when the same call is made
+again; a resume checks both egos, by their specs in ``config.json`` and by
+replaying recorded pairs. The paired estimate goes to ``ab.json``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from avrisk.api.errors import UserError, write_failures
+from avrisk.api.events import Progress, ignore, run_events
+from avrisk.api.readback import check_recorded
+from avrisk.api.result import samples_directory
+from avrisk.api.runs import check_thresholds, plan, planned
+from avrisk.assembly import (
+    MECHANISMS,
+    ScenarioSimulator,
+    SimulationObjective,
+    base_distribution,
+    param_layout,
+    scenario_typicality,
+)
+from avrisk.assembly.paired import PairedObjective
+from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
+from avrisk.pipeline.files import write_json
+from avrisk.pipeline.provenance import stamp
+from avrisk.pipeline.repeatability import ReplayCheck
+from avrisk.rare.paired import (
+    PAIR_COLUMNS,
+    UNION_METHOD,
+    MinOfPair,
+    PairedEstimate,
+    PairedSample,
+    paired_estimate,
+)
+from avrisk.rare.paired_gate import Verdict, gate
+from avrisk.rare.problem import FINAL_STAGE, STATUS
+from avrisk.rare.results import jsonable
+from avrisk.report.ab import AB_REPORT_FILE, write_ab_report
+from avrisk.report.animate import animate_samples
+from avrisk.report.answer import SCENARIO_WORDING
+from avrisk.scenario import ScenarioSpec
+
+__all__ = ["AB_FILE", "AB_SCHEMA", "ABResult", "compare_specs", "final_sample"]
+
+#: The paired estimate and the verdict, in the run directory.
+AB_FILE = "ab.json"
+#: Schema of ``ab.json`` and of ``avrisk ab --json``.
+AB_SCHEMA = "avrisk.ab/1"
+#: The run's label in progress events.
+LABEL = "A/B (both egos per rollout)"
+
+
+@dataclass(frozen=True)
+class ABResult:
+    """Two egos compared on one scenario: the estimate, the verdict, the files.
+
+    Attributes
+    ----------
+    scenario : str
+        The scenario's name.
+    egos : (dict, dict)
+        Ego ``A``'s and ego ``B``'s specs (``policy``, ``params``).
+    paired : PairedEstimate
+        ``p_A``, ``p_B``, difference, ratio, regressions and fixes.
+    verdict : Verdict
+        The gate's outcome at ``max_ratio``.
+    path : Path
+        The run directory.
+    discordant : dict
+        ``"regressions"`` and ``"fixes"``: the final stage's discordant
+        rollouts, the most realistic first (:func:`ranked_discordant`).
+    report : Path or None
+        The HTML report.
+    """
+
+    scenario: str
+    egos: tuple[dict[str, Any], dict[str, Any]]
+    paired: PairedEstimate
+    verdict: Verdict
+    path: Path
+    discordant: dict[str, list[dict[str, Any]]]
+    report: Path | None = None
+
+    def line(self) -> str:
+        """One line for a CI log: the outcome, the ratio's bound, both ``p``."""
+        v, est = self.verdict, self.paired
+        if v.outcome == "pass":
+            why = f"upper 95% bound {v.upper:.3g} <= {v.max_ratio:g}"
+        elif v.outcome == "fail":
+            why = f"lower 95% bound {v.lower:.3g} > {v.max_ratio:g}"
+        else:
+            why = f"95% bounds [{v.lower:.3g}, {v.upper:.3g}] straddle {v.max_ratio:g}"
+            if v.n_final_needed is not None:
+                why += f"; about n_final={v.n_final_needed:,} would likely decide"
+        return (
+            f"{v.outcome.upper()}: p_B/p_A = {est.ratio.value:.3g} ({why}); "
+            f"p_A = {est.a.p:.3g}, p_B = {est.b.p:.3g}, {est.n_evals:,} rollout "
+            f"pairs; trust {est.trust.word}"
+        )
+
+    def document(self) -> dict[str, Any]:
+        """Every figure, as ``ab.json`` and ``--json`` hold it (:data:`AB_SCHEMA`)."""
+        return {
+            "schema": AB_SCHEMA,
+            "scenario": self.scenario,
+            "ego_a": self.egos[0],
+            "ego_b": self.egos[1],
+            "verdict": self.verdict.to_dict(),
+            "line": self.line(),
+            "paired": self.paired.to_dict(),
+            "discordant": jsonable(self.discordant),
+            "path": str(self.path),
+            "report": None if self.report is None else str(self.report),
+        }
+
+    def __str__(self) -> str:
+        return self.line()
+
+
+def final_sample(run_dir: RunDirectory) -> PairedSample:
+    """The final stage of a finished paired run, both egos' values, from its table."""
+    columns = ["stage", "log_weight", *PAIR_COLUMNS, STATUS]
+    table = run_dir.samples(columns)
+    final = np.asarray(table["stage"]) == FINAL_STAGE
+
+    def column(name: str) -> np.ndarray:
+        return np.asarray(table[name].to_numpy(zero_copy_only=False))[final]
+
+    return PairedSample(
+        column("log_weight").astype(np.float64),
+        column("f_a").astype(np.float64),
+        column("f_b").astype(np.float64),
+        column(STATUS) != 0,
+    )
+
+
+def compare_specs(
+    spec_a: ScenarioSpec,
+    spec_b: ScenarioSpec,
+    run_settings: RunSettings,
+    out: Path,
+    *,
+    max_ratio: float = 1.0,
+    failures: int = 3,
+    device: str = "cpu",
+    progress: Progress = ignore,
+) -> ABResult:
+    """Run (or resume, or read back) the comparison of two egos into ``out``.
+
+    Then ``ab.json`` and the report ``ab_report.html``: the discordant
+    rollouts ranked, the first ``failures`` regressions and fixes animated
+    with each ego on the same situation.
+
+    Parameters
+    ----------
+    spec_a, spec_b : ScenarioSpec
+        The scenario with ego ``A`` and with ego ``B`` (nothing else may differ).
+    run_settings : RunSettings
+        Of ``splitting_is`` (the union's search); its ``gamma`` is both egos'.
+    out : Path
+        The run directory.
+    max_ratio : float, default=1.0
+        The gate's margin on ``p_B / p_A``.
+    failures : int, default=3
+        Regressions and fixes animated in the report (each, 0: none).
+    device : str, default="cpu"
+    progress : callable, optional
+        The plan, then the run's events (:mod:`avrisk.api.events`).
+    """
+    if run_settings.method != UNION_METHOD:
+        raise UserError(f"an A/B comparison searches with {UNION_METHOD}")
+    check_thresholds(spec_a, run_settings)
+    objective = PairedObjective(
+        SimulationObjective(spec_a, device=device, allow_import=True),
+        SimulationObjective(spec_b, device=device, allow_import=True),
+    )
+    progress(plan(spec_a, [planned(LABEL, run_settings)]))
+    check_recorded(out)
+    run_dir = samples_directory(out, spec_a, outputs={"f_a": "s", "f_b": "s"})
+    f = MinOfPair(objective)
+    definition = objective.definition()
+    egos = (spec_a.ego.model_dump(mode="json"), spec_b.ego.model_dump(mode="json"))
+    resume = "what was recorded is kept: free space and rerun the same command"
+    with write_failures(out, resume), run_events(LABEL, out, progress) as monitor:
+        summary = run_estimation(
+            run_dir,
+            base_distribution(spec_a),
+            f,
+            run_settings,
+            context={
+                "scenario": spec_a.model_dump(mode="json"),
+                "ego_a": egos[0],
+                "ego_b": egos[1],
+                "defines_p": definition,
+            },
+            monitor=monitor,
+            provenance=stamp(definition, objective.computed_with()),
+            replay_check=ReplayCheck(
+                f,
+                fresh=not objective.deterministic,
+                tolerance=objective.replay_tolerance,
+            ),
+        )
+    paired = paired_estimate(
+        final_sample(run_dir), run_settings.gamma, summary["estimate"], SCENARIO_WORDING
+    )
+    discordant = ranked_discordant(run_dir, spec_a, run_settings.gamma)
+    then = "the comparison is complete: free space and rerun"
+    with write_failures(out, then):
+        animated = animate_discordant(out, objective, run_dir, discordant, failures)
+        result = ABResult(
+            spec_a.name,
+            egos,
+            paired,
+            gate(paired, max_ratio),
+            run_dir.path,
+            discordant,
+            out / AB_REPORT_FILE,
+        )
+        write_json(out / AB_FILE, result.document())
+        write_ab_report(out, result.document(), jsonable(animated))
+    return result
+
+
+def ranked_discordant(
+    run_dir: RunDirectory, spec: ScenarioSpec, gamma: float
+) -> dict[str, list[dict[str, Any]]]:
+    """The final stage's discordant rollouts, the most realistic first.
+
+    Regressions: ``f_B <= gamma < f_A``; fixes: the reverse (rollouts that
+    failed to evaluate left out). Ranked as the report ranks failures
+    (:meth:`~avrisk.assembly.typicality.Typicality.rank`: the lower of the
+    start's and the drivers' percentiles under P0, then ``log p0``). Each row:
+    ``row`` (in ``samples.parquet``), ``seed``, ``f_a``, ``f_b`` [s],
+    ``weight``, ``log_p0``, ``percentile`` and ``mechanism`` (the failing
+    ego's contact, :data:`~avrisk.assembly.MECHANISMS`).
+    """
+    column, names = MECHANISMS
+    table = run_dir.samples(
+        ["stage", "seed", "log_p0", "weight", *PAIR_COLUMNS, STATUS]
+        + [f"{column}_a", f"{column}_b"]
+    )
+    get = {
+        name: np.asarray(table[name].to_numpy(zero_copy_only=False))
+        for name in table.column_names
+    }
+    usable = (get["stage"] == FINAL_STAGE) & (get[STATUS] == 0)
+    fails_a, fails_b = get["f_a"] <= gamma, get["f_b"] <= gamma
+    kinds = {
+        "regressions": (usable & fails_b & ~fails_a, "_b"),
+        "fixes": (usable & fails_a & ~fails_b, "_a"),
+    }
+    typical = scenario_typicality(spec)
+    columns = param_layout(spec).columns
+    out: dict[str, list[dict[str, Any]]] = {}
+    for kind, (mask, failing) in kinds.items():
+        rows = np.flatnonzero(mask)
+        if not rows.size:
+            out[kind] = []
+            continue
+        x = run_dir.samples(columns, rows=rows)
+        situation = np.stack(
+            [
+                np.asarray(x[c], dtype=np.float64)
+                for c in columns[: typical.n_situation]
+            ],
+            axis=1,
+        )
+        keys = typical.rank(situation, get["log_p0"][rows])
+        order = np.lexsort((keys[:, 1], keys[:, 0]))[::-1]
+        out[kind] = [
+            {
+                "row": int(rows[i]),
+                "seed": int(get["seed"][rows[i]]),
+                "f_a": float(get["f_a"][rows[i]]),
+                "f_b": float(get["f_b"][rows[i]]),
+                "weight": float(get["weight"][rows[i]]),
+                "log_p0": float(get["log_p0"][rows[i]]),
+                "percentile": float(keys[i, 0]),
+                "mechanism": names.get(int(get[column + failing][rows[i]]), names[-1]),
+            }
+            for i in order
+        ]
+    return out
+
+
+def animate_discordant(
+    out: Path,
+    objective: PairedObjective,
+    run_dir: RunDirectory,
+    discordant: dict[str, list[dict[str, Any]]],
+    n: int,
+) -> dict[str, list[dict[str, Any]]]:
+    """The first ``n`` of each kind, with each ego's animation on the same row.
+
+    GIFs go to ``out/ab/<kind><i>_<a|b>.gif`` (kept when there already: a
+    read-back does not simulate them again); the rows get their paths,
+    relative to ``out``, as ``animation_a`` and ``animation_b``.
+    """
+    columns = list(param_layout(objective.a.simulator.spec).columns)
+    shown: dict[str, list[dict[str, Any]]] = {}
+    for kind, rows in discordant.items():
+        shown[kind] = []
+        for i, row in enumerate(rows[:n], start=1):
+            x = run_dir.samples(columns, rows=[row["row"]]).to_pylist()[0]
+            sample = {**x, "seed": row["seed"]}
+            paths = {}
+            for side, sim in zip("ab", _simulators(objective), strict=True):
+                path = out / "ab" / f"{kind}{i}_{side}.gif"
+                if not path.is_file():
+                    animate_samples(sim, [sample], path)
+                paths[f"animation_{side}"] = str(path.relative_to(out))
+            shown[kind].append({**row, **paths})
+    return shown
+
+
+def _simulators(objective: PairedObjective) -> tuple[ScenarioSimulator, ...]:
+    """Each ego's simulator."""
+    return tuple(o.simulator for o in objective.objectives)

@@ -1,0 +1,300 @@
+"""Paired comparison of two versions: coverage and efficiency on exact pairs (issue 45).
+
+Runs the paired estimator (:func:`avrisk.rare.paired.paired_splitting_is`:
+``splitting_is`` on ``min(f_A, f_B)``, every figure from its one weighted
+sample) on the analytic pairs of :mod:`avrisk.testing.pairs` (half-spaces in
+standard-normal space, exact ``p_A``, ``p_B`` and ``p_AB``) and, on the same
+seeds, two independent ``splitting_is`` runs, one per version, with half the
+particles and half the final samples each (the same total calls of ``f`` as
+the paired run, one call of the pair counting as one)::
+
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py run \\
+        [--cases nested_r0.05_p1e-04_d10,...] [--seeds 0-199] \\
+        [--out benchmarks/results/ab/runs.jsonl]
+    python benchmarks/ab_coverage.py table [--results ...] [--md T.md] [--json T.json]
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py gate \
+        [--seeds 0-19] [--out benchmarks/results/ab/gate.json]
+
+One setting for every case (``PAIRED``, ``INDEPENDENT``). ``run`` appends one
+JSON line per (case, seed) and skips those already there, so an interrupted
+sweep goes on. ``table`` prints per case:
+
+* coverage of the 95% intervals of ``p_A``, ``p_B``, ``p_B - p_A`` and ``p_B
+  / p_A`` (runs whose interval holds the exact value), and how often the
+  exact ratio lies below the one-sided lower 95% bound or above the upper one
+  (what a CI gate reads; each should be at most about 5%);
+* efficiency: the spread (standard deviation over seeds) of the paired
+  estimate of ``p_B - p_A`` and of the difference of the two independent
+  runs' estimates, their ratio (``> 1``: the paired one is narrower), and
+  both methods' mean calls;
+* runs the engine's trust rule labelled ``caution``.
+
+``gate`` runs the gate (:func:`avrisk.rare.paired.gate`, margin 1) on the
+paired run of ``GATE_CASES`` (a ``B`` with half ``A``'s ``p``, one with twice
+it, two with the same ``p`` as ``A`` on other failure sets) over 20 seeds at
+the same setting, and counts each outcome.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import warnings
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from avrisk.rare.paired import paired_splitting_is  # noqa: E402
+from avrisk.rare.paired_gate import gate  # noqa: E402
+from avrisk.rare.splitting_importance import splitting_is  # noqa: E402
+from avrisk.testing.pairs import PAIR_SUITE, AnalyticPair, pair_problem  # noqa: E402
+
+DEFAULT_OUT = ROOT / "benchmarks" / "results" / "ab" / "runs.jsonl"
+GATE_OUT = ROOT / "benchmarks" / "results" / "ab" / "gate.json"
+#: The gate's cases: what B is, by the pair that makes it.
+GATE_CASES = {
+    "half": "nested_r0.5_p1e-04_d10",
+    "twice": "disjoint_ratio2_p1e-04_d10",
+    "equal, overlapping": "overlap_r0.3_p1e-04_d10",
+    "equal, disjoint": "disjoint_ratio1_p1e-04_d10",
+}
+
+#: The paired run's settings, for every case.
+PAIRED = {"n_particles": 2000, "n_final": 10_000}
+#: Each independent run's: half of the paired run's samples.
+INDEPENDENT = {"n_particles": 1000, "n_final": 5000}
+#: Offset of the independent runs' seeds (2 per paired seed), so that no
+#: independent run shares a paired run's draws.
+INDEPENDENT_SEED = 1_000_000
+
+
+def paired_record(pair: AnalyticPair, seed: int) -> dict[str, Any]:
+    """One paired run's figures against the exact ones."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = paired_splitting_is(pair.f, pair.base, pair.gamma, seed=seed, **PAIRED)
+    truth = {
+        "a": pair.p_a,
+        "b": pair.p_b,
+        "difference": pair.difference,
+        "ratio": pair.ratio,
+    }
+    parts = {
+        "a": est.a,
+        "b": est.b,
+        "difference": est.difference,
+        "ratio": est.ratio,
+    }
+    out: dict[str, Any] = {}
+    for key, part in parts.items():
+        value = part.p if key in ("a", "b") else part.value
+        lo, hi = part.ci
+        out[key] = {"value": value, "ci": [lo, hi], "covers": lo <= truth[key] <= hi}
+    out["ratio"]["below_lower"] = pair.ratio < est.ratio.lower
+    out["ratio"]["above_upper"] = pair.ratio > est.ratio.upper
+    out["n_evals"] = est.n_evals
+    out["discordant"] = est.regressions.n_hits + est.fixes.n_hits
+    out["trust"] = est.trust.word
+    out["reasons"] = list(est.trust.reasons)
+    return out
+
+
+def independent_record(pair: AnalyticPair, seed: int) -> dict[str, Any]:
+    """Two independent runs, one per version: their estimates and calls."""
+    estimates = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for which in (0, 1):
+            problem = pair.version(which)
+            run_seed = INDEPENDENT_SEED + 2 * seed + which
+            estimates.append(
+                splitting_is(
+                    problem.f, problem.base, problem.gamma, seed=run_seed, **INDEPENDENT
+                )
+            )
+    a, b = estimates
+    return {"a": a.p, "b": b.p, "n_evals": a.n_evals + b.n_evals}
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``"0-199"`` or ``"0,3,5"``."""
+    if "-" in text:
+        lo, hi = text.split("-")
+        return list(range(int(lo), int(hi) + 1))
+    return [int(s) for s in text.split(",")]
+
+
+def run(cases: list[str], seeds: list[int], out: Path) -> None:
+    """Append a line per (case, seed) not yet in ``out``."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    done = set()
+    if out.is_file():
+        for line in out.read_text().splitlines():
+            rec = json.loads(line)
+            done.add((rec["case"], rec["seed"]))
+    settings = {"paired": PAIRED, "independent": INDEPENDENT}
+    with out.open("a") as sink:
+        for name in cases:
+            pair = pair_problem(name)
+            for seed in seeds:
+                if (name, seed) in done:
+                    continue
+                rec = {
+                    "case": name,
+                    "seed": seed,
+                    "settings": settings,
+                    "exact": {
+                        "p_a": pair.p_a,
+                        "p_b": pair.p_b,
+                        "p_ab": pair.p_ab,
+                        "r": pair.discordant_share,
+                    },
+                    "paired": paired_record(pair, seed),
+                    "independent": independent_record(pair, seed),
+                }
+                sink.write(json.dumps(rec) + "\n")
+                sink.flush()
+            print(f"{name}: done", flush=True)
+
+
+def case_row(name: str, recs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The table's figures for one case."""
+    n = len(recs)
+    exact = recs[0]["exact"]
+    cover = {
+        k: sum(r["paired"][k]["covers"] for r in recs)
+        for k in ("a", "b", "difference", "ratio")
+    }
+    paired_diff = np.array([r["paired"]["difference"]["value"] for r in recs])
+    indep_diff = np.array([r["independent"]["b"] - r["independent"]["a"] for r in recs])
+    truth = exact["p_b"] - exact["p_a"]
+    spread_paired = float(paired_diff.std(ddof=1))
+    spread_indep = float(indep_diff.std(ddof=1))
+    return {
+        "case": name,
+        "runs": n,
+        "r": exact["r"],
+        "p_a": exact["p_a"],
+        "p_b": exact["p_b"],
+        "coverage": cover,
+        "ratio_below_lower": sum(r["paired"]["ratio"]["below_lower"] for r in recs),
+        "ratio_above_upper": sum(r["paired"]["ratio"]["above_upper"] for r in recs),
+        "spread_paired": spread_paired,
+        "spread_independent": spread_indep,
+        "narrower_by": spread_indep / spread_paired if spread_paired > 0 else math.inf,
+        "bias_paired": float(paired_diff.mean() - truth),
+        "calls_paired": float(np.mean([r["paired"]["n_evals"] for r in recs])),
+        "calls_independent": float(
+            np.mean([r["independent"]["n_evals"] for r in recs])
+        ),
+        "caution": sum(r["paired"]["trust"] != "ok" for r in recs),
+    }
+
+
+def table(results: Path) -> tuple[list[dict[str, Any]], str]:
+    """Rows per case and the markdown of the coverage and efficiency tables."""
+    by_case: dict[str, list[dict[str, Any]]] = {}
+    for line in results.read_text().splitlines():
+        rec = json.loads(line)
+        by_case.setdefault(rec["case"], []).append(rec)
+    rows = [case_row(name, recs) for name, recs in by_case.items()]
+    md = [
+        "| case | r | p_A | p_B | runs | p_A | p_B | p_B - p_A | p_B / p_A | "
+        "ratio < lower / > upper (one-sided 95%) | caution |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        c, n = row["coverage"], row["runs"]
+        md.append(
+            f"| {row['case']} | {row['r']:.2f} | {row['p_a']:.3g} | {row['p_b']:.3g} "
+            f"| {n} | {c['a']}/{n} | {c['b']}/{n} | {c['difference']}/{n} "
+            f"| {c['ratio']}/{n} | {row['ratio_below_lower']} / "
+            f"{row['ratio_above_upper']} | {row['caution']} |"
+        )
+    total = sum(row["runs"] for row in rows)
+    pooled = {k: sum(row["coverage"][k] for row in rows) for k in rows[0]["coverage"]}
+    md.append(
+        f"| pooled | | | | {total} | "
+        + " | ".join(f"{pooled[k] / total:.1%}" for k in pooled)
+        + " | | |"
+    )
+    md += [
+        "",
+        "| case | r | spread of p_B - p_A: paired | independent | "
+        "independent / paired | mean calls: paired | independent |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        md.append(
+            f"| {row['case']} | {row['r']:.2f} | {row['spread_paired']:.3g} "
+            f"| {row['spread_independent']:.3g} | {row['narrower_by']:.2f} "
+            f"| {row['calls_paired']:,.0f} | {row['calls_independent']:,.0f} |"
+        )
+    return rows, "\n".join(md)
+
+
+def gate_sweep(seeds: list[int], out: Path) -> dict[str, Any]:
+    """The gate's outcomes at margin 1 per case of ``GATE_CASES``, over ``seeds``."""
+    counts: dict[str, Any] = {}
+    for label, name in GATE_CASES.items():
+        pair = pair_problem(name)
+        outcomes = []
+        for seed in seeds:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                est = paired_splitting_is(
+                    pair.f, pair.base, pair.gamma, seed=seed, **PAIRED
+                )
+            outcomes.append(gate(est, 1.0).outcome)
+        counts[label] = {
+            "case": name,
+            "ratio": pair.ratio,
+            **{o: outcomes.count(o) for o in ("pass", "fail", "inconclusive")},
+        }
+        print(label, counts[label], flush=True)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"settings": PAIRED, "seeds": seeds, **counts}, indent=1))
+    return counts
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``run`` or ``table`` (module docstring)."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("--cases", default=",".join(PAIR_SUITE))
+    r.add_argument("--seeds", default="0-199")
+    r.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    t = sub.add_parser("table")
+    t.add_argument("--results", type=Path, default=DEFAULT_OUT)
+    t.add_argument("--md", type=Path)
+    t.add_argument("--json", type=Path)
+    g = sub.add_parser("gate")
+    g.add_argument("--seeds", default="0-19")
+    g.add_argument("--out", type=Path, default=GATE_OUT)
+    args = parser.parse_args(argv)
+    if args.command == "run":
+        run(args.cases.split(","), parse_seeds(args.seeds), args.out)
+        return
+    if args.command == "gate":
+        gate_sweep(parse_seeds(args.seeds), args.out)
+        return
+    rows, md = table(args.results)
+    print(md)
+    if args.md:
+        args.md.write_text(md + "\n")
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

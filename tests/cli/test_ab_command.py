@@ -1,0 +1,150 @@
+"""``avrisk ab``: the gate's line, exit codes, --json, resume, two external AVs."""
+
+import json
+import socket
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+from typer.testing import CliRunner
+
+from avrisk.cli.app import app
+from tests.scenario_files import shortened_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
+
+SMALL = ("--gamma", 2.0, "--set", "n_particles=100", "--n-final", 200, "--failures", 0)
+HOLD_FAST = '{policy: "tests.user_components:HoldSpeedEgo", params: {speed: 30}}'
+
+
+def invoke(*args):
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def short(tmp_path_factory):
+    """highway_idm with 3 s rollouts."""
+    return shortened_scenario(tmp_path_factory.mktemp("scenario"), 3.0)
+
+
+def test_a_worse_ego_fails_the_gate_with_exit_code_1(short, tmp_path):
+    out = tmp_path / "ab"
+    result = invoke("ab", short, "--ego-b", HOLD_FAST, "--out", out, *SMALL)
+    document = json.loads((out / "ab.json").read_text())
+    assert result.exit_code == 1, result.output
+    assert document["verdict"]["outcome"] == "fail"
+    assert result.stdout.strip() == document["line"]
+    assert document["line"].startswith("FAIL: p_B/p_A = ")
+    assert document["ego_a"]["policy"] == "idm_mobil"  # the scenario's own
+    # the reverse comparison passes at the same margin
+    back = invoke(
+        "ab", short, "--ego-a", HOLD_FAST, "--ego-b", "idm_mobil",
+        "--out", tmp_path / "ba", *SMALL, "--json",
+    )  # fmt: skip
+    assert back.exit_code == 0, back.output
+    assert json.loads(back.stdout)["verdict"]["outcome"] == "pass"
+
+
+def test_the_same_ego_is_inconclusive_with_exit_code_3_and_is_read_back(
+    short, tmp_path
+):
+    out = tmp_path / "same"
+    same = ("--ego-a", "idm_mobil", "--ego-b", "idm_mobil")  # default params both
+    args = ("ab", short, *same, "--out", out, *SMALL, "--json")
+    result = invoke(*args)
+    assert result.exit_code == 3, result.output
+    document = json.loads(result.stdout)
+    assert document["verdict"]["outcome"] == "inconclusive"
+    paired = document["paired"]
+    assert paired["regressions"]["n_hits"] == paired["fixes"]["n_hits"] == 0
+    low, high = paired["difference"]["ci"]
+    assert low < 0 < high
+    table = pq.read_table(out / "samples.parquet", columns=["f_a", "f_b"])
+    assert table["f_a"].equals(table["f_b"])  # the same draws, the same rollouts
+    again = invoke(*args)
+    assert again.exit_code == 3 and json.loads(again.stdout) == document
+
+
+def test_an_ego_that_is_not_a_mapping_is_one_line(short, tmp_path):
+    result = invoke("ab", short, "--ego-b", "{speed: 3}", "--out", tmp_path / "x")
+    assert result.exit_code == 2
+    assert "--ego-b must hold a mapping with 'policy'" in result.output
+
+
+def free_address():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp://127.0.0.1:{s.getsockname()[1]}"
+
+
+def test_two_external_avs_are_compared_on_the_same_draws(short, tmp_path):
+    pytest.importorskip("zmq")
+    from tests.cli.ego_servers import FaultyServer, LateBrakingController, in_thread
+
+    egos = [free_address(), free_address()]
+    servers = [
+        FaultyServer("none"),
+        FaultyServer("none", controller=LateBrakingController()),
+    ]
+
+    def ego(address):
+        return f'{{policy: external, params: {{address: "{address}"}}}}'
+
+    with in_thread(servers[0], egos[0]), in_thread(servers[1], egos[1]):
+        result = invoke(
+            "ab", short, "--ego-a", ego(egos[0]), "--ego-b", ego(egos[1]),
+            "--out", tmp_path / "ab", *SMALL, "--json",
+        )  # fmt: skip
+    assert result.exit_code in (0, 1, 3), result.output
+    document = json.loads(result.stdout)
+    assert document["ego_b"]["params"]["address"] == egos[1]
+    table = pq.read_table(tmp_path / "ab" / "samples.parquet")
+    assert (table["status"].to_numpy() == 0).all()
+    # a later brake changes some rollouts, not all: the draws are shared
+    f_a, f_b = table["f_a"].to_numpy(), table["f_b"].to_numpy()
+    assert 0 < (f_a != f_b).sum() < len(f_a)
+
+
+def test_the_bundled_lidar_pair_runs_on_the_same_draws(tmp_path):
+    pair = ROOT / "examples" / "ab_lidar"
+    short = shortened_scenario(tmp_path, 2.0, scenario="highway_default")
+    result = invoke(
+        "ab", short, "--ego-a", pair / "lidar_ego.yaml",
+        "--ego-b", pair / "lidar_ego_degraded.yaml",
+        "--out", tmp_path / "ab", *SMALL, "--json",
+    )  # fmt: skip
+    assert result.exit_code in (0, 1, 3), result.output
+    document = json.loads(result.stdout)
+    assert document["ego_b"]["params"] == {"range_scale": 1.3}
+    # on the same draws the degraded sensor changes some rollouts, not all
+    table = pq.read_table(tmp_path / "ab" / "samples.parquet", columns=["f_a", "f_b"])
+    f_a, f_b = table["f_a"].to_numpy(), table["f_b"].to_numpy()
+    assert 0 < (f_a != f_b).sum() < len(f_a)
+
+
+def test_ctrl_c_says_how_to_resume_and_the_resume_gives_the_same_answer(
+    short, tmp_path, monkeypatch
+):
+    from avrisk.pipeline import RunDirectory
+
+    args = ("ab", short, "--ego-b", HOLD_FAST, "--out", tmp_path / "ab", *SMALL)
+    whole = invoke(*args[:4], "--out", tmp_path / "whole", *SMALL, "--json")
+    record = RunDirectory.record
+    calls = []
+
+    def interrupted(self, batch):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return record(self, batch)
+
+    monkeypatch.setattr(RunDirectory, "record", interrupted)
+    stopped = invoke(*args)
+    assert stopped.exit_code == 130
+    assert "Resume with: avrisk ab" in " ".join(stopped.output.split())
+    monkeypatch.setattr(RunDirectory, "record", record)
+    resumed = invoke(*args, "--json")
+    assert resumed.exit_code == whole.exit_code == 1
+    a, b = json.loads(resumed.stdout), json.loads(whole.stdout)
+    assert a["paired"]["ratio"] == b["paired"]["ratio"]
+    assert a["line"] == b["line"]
