@@ -125,11 +125,11 @@ def test_the_bundled_lidar_pair_runs_on_the_same_draws(tmp_path):
 def test_ctrl_c_says_how_to_resume_and_the_resume_gives_the_same_answer(
     short, tmp_path, monkeypatch
 ):
-    from avrisk.pipeline import RunDirectory
+    from avrisk.pipeline.chunks import ChunkFiles
 
     args = ("ab", short, "--ego-b", HOLD_FAST, "--out", tmp_path / "ab", *SMALL)
     whole = invoke(*args[:4], "--out", tmp_path / "whole", *SMALL, "--json")
-    record = RunDirectory.record
+    record = ChunkFiles.record
     calls = []
 
     def interrupted(self, batch):
@@ -138,11 +138,11 @@ def test_ctrl_c_says_how_to_resume_and_the_resume_gives_the_same_answer(
             raise KeyboardInterrupt
         return record(self, batch)
 
-    monkeypatch.setattr(RunDirectory, "record", interrupted)
+    monkeypatch.setattr(ChunkFiles, "record", interrupted)
     stopped = invoke(*args)
     assert stopped.exit_code == 130
     assert "Resume with: avrisk ab" in " ".join(stopped.output.split())
-    monkeypatch.setattr(RunDirectory, "record", record)
+    monkeypatch.setattr(ChunkFiles, "record", record)
     resumed = invoke(*args, "--json")
     assert resumed.exit_code == whole.exit_code == 1
     a, b = json.loads(resumed.stdout), json.loads(whole.stdout)
