@@ -112,7 +112,7 @@ def _cut(starts: NDArray[Any], ends: NDArray[Any], n_steps: int) -> Iterator[int
 def car_following_windows(
     pairs: CarFollowingPairs,
     lateral: LateralPairs,
-    centres: LaneCentres,
+    centres: LaneCentres | None,
     n_steps: int,
     road: Road,
 ) -> CarFollowingWindows:
@@ -124,8 +124,9 @@ def car_following_windows(
         Already restricted to the wanted split.
     lateral : LateralPairs
         Already restricted to the wanted split.
-    centres : LaneCentres
-        Lane centre lines (fitted on the training split).
+    centres : LaneCentres or None
+        Lane centre lines (fitted on the training split); None only without
+        lateral pairs.
     n_steps : int
         ``T``.
     road : Road
@@ -155,6 +156,8 @@ def car_following_windows(
         cols["lane"].append(min(I80_N_LANES - lane, road.n_lanes - 1) if ok else 2)
         cols["heading"].append(0.0)
     if len(lateral):
+        if centres is None:
+            raise ValueError("lateral pairs need lane centre lines")
         offset, heading, _ = lateral_tracks(lateral, centres)
         s, e = episode_bounds(lateral.pair_id)
         for w in _cut(s, e, n_steps):

@@ -231,6 +231,11 @@ class TrainConfig:
         that leaves the following gaps and times to collision to the network
         (BENCHMARKS.md, "Training on top of the brake"). None writes drivers
         without one.
+    periods : tuple of str or None, default=None
+        The I-80 recording periods trained on (the pairs file's ``period``
+        values, e.g. ``("0400pm-0415pm",)``); None: all. The lateral file
+        (16:00-16:15) is read only when its period is among them. For
+        leave-one-period-out validation (:mod:`avrisk.realism.held_out`).
     """
 
     n_members: int = 20
@@ -256,8 +261,11 @@ class TrainConfig:
     max_shift: float = 0.01
     closed_loop: ClosedLoopConfig = field(default_factory=ClosedLoopConfig)
     guard: BrakeGuard | None = BrakeGuard(2.0, 2.0, hold_floor=True)
+    periods: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.periods is not None and not self.periods:
+            raise ValueError("periods must name at least one period (None: all)")
         if self.n_members < 2:
             raise ValueError(f"n_members must be >= 2; got {self.n_members}")
         for name in ("trunk_epochs", "head_epochs", "batch_size", "head_batch_size"):
