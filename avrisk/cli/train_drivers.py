@@ -218,7 +218,7 @@ def _print_selection(selection: dict) -> None:
     out_console.print(table)
 
 
-def _config(brake_guard: str | None, periods: list[str] | None) -> TrainConfig:
+def _config(brake_guard: str | None, periods: list[str] | None = None) -> TrainConfig:
     """The default recipe, with ``--brake-guard``'s brake and ``--period`` if given.
 
     Without a brake the closed loop trains the network alone.

@@ -237,6 +237,13 @@ class ReplayResult:
     crash: NDArray[np.bool_]
     offroad: NDArray[np.bool_]
 
+    def take(self, index: Any) -> ReplayResult:
+        """The replays ``index``."""
+        return dataclasses.replace(
+            self,
+            **{f.name: getattr(self, f.name)[index] for f in dataclasses.fields(self)},
+        )
+
 
 def replay_setup(
     windows: CarFollowingWindows, road: Road

@@ -13,8 +13,8 @@ them (:func:`~avrisk.learning.ngsim.lateral_pair_split` for the lateral file):
 Only the train splits are trained or calibrated on. ``TrainConfig.periods``
 restricts both files to some recording periods (leave-one-period-out
 validation, :mod:`avrisk.realism.held_out`): the lateral file, which covers
-16:00-16:15 only (:data:`LATERAL_PERIOD`), is read only when that period is
-among them.
+16:00-16:15 only (:data:`~avrisk.learning.ngsim.LATERAL_PERIOD`), is read
+only when that period is among them.
 """
 
 from __future__ import annotations
@@ -27,7 +27,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from avrisk.learning.demonstrations import Demonstrations
-from avrisk.learning.ngsim import lateral_pair_split, load_i80_lateral, load_i80_pairs
+from avrisk.learning.ngsim import (
+    LATERAL_PERIOD,
+    lateral_pair_split,
+    load_i80_lateral,
+    load_i80_pairs,
+    periods_of,
+)
 from avrisk.learning.ngsim_demonstrations import (
     i80_pair_demonstrations,
     lateral_pair_demonstrations,
@@ -40,16 +46,7 @@ from avrisk.learning.simulated_demonstrations import simulated_demonstrations
 from avrisk.learning.train_config import TrainConfig
 from avrisk.sim import Road
 
-__all__ = [
-    "LATERAL_PERIOD",
-    "available_periods",
-    "load_demonstrations",
-    "periods_of",
-    "training_windows",
-]
-
-#: The recording period of the lateral file (the pairs file's ``period`` name).
-LATERAL_PERIOD = "0400pm-0415pm"
+__all__ = ["available_periods", "load_demonstrations", "training_windows"]
 
 
 class _I80(NamedTuple):
@@ -66,11 +63,6 @@ class _I80(NamedTuple):
             self.pairs.take(self.pairs.split == split),
             self.lateral.take(self.lateral_split == split),
         )
-
-
-def periods_of(pairs: CarFollowingPairs) -> tuple[str, ...]:
-    """The recording periods of ``pairs``, sorted (e.g. ``"0400pm-0415pm"``)."""
-    return tuple(str(p) for p in np.unique(pairs.period))
 
 
 def _load_i80(
