@@ -3,7 +3,9 @@
 Trains the driver recipe once per (fold, seed, recipe), one training at a
 time, and scores each on the period it did not see
 (:func:`avrisk.realism.report.run_realism` with ``held_out`` set to that
-period), with the brake its weights carry and with the network alone. Each
+period), with the brake its weights carry, with the brake fitted to the
+fold's training windows (:mod:`avrisk.learning.guard_fit`) and with the
+network alone. Each
 result is written as it finishes to ``RESULTS/{fold}_{recipe}_seed{S}.json``
 (the realism summary: every target and margin, overall and by speed band).
 Resumable: a result that exists is skipped, a training whose folder holds its
@@ -85,9 +87,18 @@ def train(fold: str, recipe: str, seed: int) -> None:
 
 
 def score(fold: str, recipe: str, seed: int) -> None:
-    """Score one training on its fold's held-out set; write its JSON."""
+    """Score one training on its fold's held-out set; write its JSON.
+
+    Three brakes: the one the weights carry (trained with), the one fitted
+    to the fold's training windows (:func:`~avrisk.learning.guard_fit.
+    fit_brake_guard`), and none (the network alone; where the carried brake
+    would have acted is still counted).
+    """
     import torch
 
+    from avrisk.agents.drivers.store import load_driver_net
+    from avrisk.learning.guard_fit import fit_brake_guard
+    from avrisk.learning.training_data import training_windows
     from avrisk.realism.periods import score_summary
     from avrisk.realism.report import DriverFiles, RealismSettings, run_realism
 
@@ -95,18 +106,25 @@ def score(fold: str, recipe: str, seed: int) -> None:
     periods, held_out = FOLDS[fold]
     folder = _folder(fold, recipe, seed)
     report = json.loads((folder / "training_report.json").read_text())
+    own = load_driver_net(folder / "driver_net.npz").guard
+    fit = fit_brake_guard(training_windows(None, 150, periods))
     t0 = time.perf_counter()
     scored = {}
-    for brake in ("drivers", None):
+    for key, brake in (
+        ("with_brake", own),
+        ("fitted_brake", fit.guard),
+        ("network_alone", None),
+    ):
         settings = RealismSettings(held_out=held_out, guard=brake)
         result = run_realism(DriverFiles.in_folder(folder), settings)
-        scored["with_brake" if brake else "network_alone"] = score_summary(result)
+        scored[key] = score_summary(result, brake or own)
     out = {
         "fold": fold,
         "recipe": recipe,
         "seed": seed,
         "trained_on": periods or "all periods (train splits)",
         "held_out": held_out,
+        "brake_fit": fit.to_dict(),
         "training_seconds": report["seconds"],
         "config": report["config"],
         "environment": report["environment"],

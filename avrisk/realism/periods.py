@@ -24,8 +24,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from avrisk.agents.drivers.guard import BrakeGuard
+from avrisk.learning.guard_fit import engagements, guard_conditions
 from avrisk.learning.replay import CarFollowingWindows
-from avrisk.realism.car_following import PartA, summarise_part_a
+from avrisk.realism.car_following import PartA, recorded, summarise_part_a
+from avrisk.realism.metrics import event_rate
 from avrisk.realism.targets import KS_METRICS, part_a_targets
 from avrisk.sim import Road
 
@@ -36,6 +39,7 @@ __all__ = [
     "BANDS",
     "CONGESTED_BELOW",
     "band_summaries",
+    "brake_use",
     "periods_table",
     "score_summary",
     "window_bands",
@@ -90,6 +94,33 @@ def band_summaries(part: PartA, road: Road) -> dict[str, dict[str, Any]]:
     return out
 
 
+def brake_use(part: PartA, guard: BrakeGuard) -> dict[str, dict[str, Any]]:
+    """How often ``guard``'s condition holds, for the humans and every model.
+
+    Counted alike on the recorded followers and on the replays
+    (:func:`~avrisk.learning.guard_fit.guard_conditions`): whether the
+    replays drove with the brake or not, it is where it acts (or would).
+
+    Returns
+    -------
+    dict of str to dict
+        Per ``"human"`` and model name: ``onsets`` (episodes of the brake
+        acting, :func:`~avrisk.learning.guard_fit.engagements`) as
+        :func:`~avrisk.realism.metrics.event_rate` per vehicle-hour, and
+        ``share``, the share of alive steps in which it acts.
+    """
+    rows = {"human": (recorded(part.windows), part.human.hours)}
+    rows |= {n: (r, part.models[n].hours) for n, r in part.replays.items()}
+    out = {}
+    for name, (r, hours) in rows.items():
+        acting = guard_conditions(guard, r.gap, r.v, r.v_l)
+        out[name] = {
+            "onsets": event_rate(engagements(acting, r.alive), hours),
+            "share": float((acting & r.alive).sum() / max(r.alive.sum(), 1)),
+        }
+    return out
+
+
 def _compact(summary: dict[str, Any], targets: dict[str, list[dict]]) -> dict:
     """One set's figures for the seed study: sizes, KS, rates, targets."""
     human, models = summary["human"], summary["models"]
@@ -128,8 +159,17 @@ def _compact(summary: dict[str, Any], targets: dict[str, list[dict]]) -> dict:
     }
 
 
-def score_summary(result: RealismResult) -> dict[str, Any]:
+def score_summary(
+    result: RealismResult, brake: BrakeGuard | None = None
+) -> dict[str, Any]:
     """A realism report's figures in brief: the whole set and each band.
+
+    Parameters
+    ----------
+    result : RealismResult
+    brake : BrakeGuard, optional
+        Count where this brake acts (:func:`brake_use`) in each set; default
+        the one the report drove with (none if it drove without).
 
     Returns
     -------
@@ -137,26 +177,41 @@ def score_summary(result: RealismResult) -> dict[str, Any]:
         ``held_out``, ``guard`` (the brake driven with, or None), ``all`` and
         one entry per band of :attr:`RealismResult.bands`: windows,
         vehicle-hours, the humans' median speed, per model the KS statistics,
-        the 5th percentiles, the rates, and every target with its margin
-        (:attr:`~avrisk.realism.targets.TargetResult.margin`); ``lane_changes``:
-        part B's rates against the held-out humans'.
+        the 5th percentiles, the rates, every target with its margin
+        (:attr:`~avrisk.realism.targets.TargetResult.margin`) and, with a
+        brake, ``brake_use``; ``lane_changes``: part B's rates against the
+        held-out humans'.
     """
-    targets = {m: [t.to_dict() for t in ts] for m, ts in result.targets.items()}
     guard = result.settings.guard
-    b = result.summary_b
-    return {
+    brake = guard if brake is None else brake
+    part, road = result.part_a, Road()
+    targets = {m: [t.to_dict() for t in ts] for m, ts in result.targets.items()}
+    sets = {"all": (part, result.summary_a, targets)}
+    bands = window_bands(part.windows)
+    for band, v in result.bands.items():
+        sets[band] = (
+            part.take_windows(bands == band, road),
+            v["summary"],
+            v["targets"],
+        )
+    out: dict[str, Any] = {
         "held_out": result.settings.held_out,
         "guard": None if guard is None else guard.to_dict(),
-        "all": _compact(result.summary_a, targets),
-        **{
-            band: _compact(v["summary"], v["targets"])
-            for band, v in result.bands.items()
-        },
-        "lane_changes": {
-            "human_per_hour": b["human_held_out"]["per_hour"],
-            "models": {n: m["per_hour"] for n, m in b["models"].items()},
+        "brake_counted": None if brake is None else brake.to_dict(),
+    }
+    for name, (p, summary, t) in sets.items():
+        out[name] = _compact(summary, t)
+        if brake is not None:
+            out[name]["brake_use"] = brake_use(p, brake)
+    b = result.summary_b
+    out["lane_changes"] = {
+        "human_per_hour": b["human_held_out"]["rate"],
+        "models": {
+            n: {k: m[k] for k in ("rate", "vs_held_out", "target_met")}
+            for n, m in b["models"].items()
         },
     }
+    return out
 
 
 def _column_title(result: RealismResult, band: str) -> str:
