@@ -44,7 +44,7 @@ from avrisk.pipeline.provenance import (
 from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.pipeline.repeatability import NotRepeatableError, ReplayCheck
 from avrisk.pipeline.store import SAMPLES_FILE, estimated_row_bytes
-from avrisk.rare import InvalidOutputError
+from avrisk.rare import InvalidOutputError, Product
 from avrisk.rare.estimator import TooManyFailuresError, estimator_class
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import WorkerError
@@ -144,8 +144,10 @@ def execute(
     :class:`~avrisk.api.events.RunStarted`.
     """
     check_recorded(out)  # a damaged config or summary: one line, not a traceback
-    base = base_distribution(objective.simulator.spec)
-    run_dir = samples_directory(out, objective.simulator.spec, store_full=store_full)
+    base = objective.base_distribution()
+    run_dir = samples_directory(
+        out, objective.simulator.spec, store_full=store_full, base=base
+    )
     definition = objective.definition()
     plain = objective
     if failures and evaluator is None:
@@ -213,11 +215,17 @@ def plan(
 
 
 def samples_directory(
-    out: Path, spec: ScenarioSpec, *, store_full: bool = False
+    out: Path,
+    spec: ScenarioSpec,
+    *,
+    store_full: bool = False,
+    base: Product | None = None,
 ) -> RunDirectory:
     """A run directory of ``spec``: its units recorded, its large blocks regenerated.
 
-    See :class:`~avrisk.pipeline.RunDirectory` for ``store_full``.
+    See :class:`~avrisk.pipeline.RunDirectory` for ``store_full``; ``base``
+    is the ``P0`` its blocks are drawn again from (default the scenario's
+    with the shipped drivers' prior).
     """
     layout = param_layout(spec)
     units = {**layout.units(), "f": "s", "log_p0": "log density"}
@@ -225,7 +233,7 @@ def samples_directory(
         out,
         layout.columns,
         units,
-        base=base_distribution(spec),
+        base=base_distribution(spec) if base is None else base,
         store_full=store_full,
     )
 

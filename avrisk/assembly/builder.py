@@ -47,6 +47,7 @@ from avrisk.agents import (
 )
 from avrisk.agents.drivers import XI_DIM, DriverNet, load_driver_net, load_xi_prior
 from avrisk.agents.drivers.lane_change import LaneChangeParams, LaneChangingDriver
+from avrisk.assembly.traffic import TrafficDrivers
 from avrisk.rare import Product
 from avrisk.render import DEFAULT_VEHICLE_HEIGHT, CameraModel, RayCastCamera
 from avrisk.safety import get_safety_measure
@@ -171,8 +172,16 @@ def param_layout(spec: ScenarioSpec) -> ParamLayout:
     return ParamLayout.from_spec(spec, XI_DIM)
 
 
-def base_distribution(spec: ScenarioSpec) -> Product:
-    """``P0`` of a scenario, with the shipped ``xi`` prior for learned drivers.
+def base_distribution(
+    spec: ScenarioSpec, traffic: TrafficDrivers | None = None
+) -> Product:
+    """``P0`` of a scenario, with the learned drivers' ``xi`` prior.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+    traffic : TrafficDrivers, optional
+        Whose prior the ``xi`` block is (default: the shipped drivers').
 
     Returns
     -------
@@ -180,7 +189,9 @@ def base_distribution(spec: ScenarioSpec) -> Product:
         See :func:`avrisk.scenario.build_base_distribution`; ``dim`` equals
         ``param_layout(spec).dim``.
     """
-    prior = load_xi_prior() if spec.has_learned_drivers else None
+    prior = None
+    if spec.has_learned_drivers:
+        prior = load_xi_prior() if traffic is None else traffic.prior()
     return build_base_distribution(spec, prior)
 
 
@@ -330,6 +341,11 @@ class ScenarioSimulator:
     spec : ScenarioSpec
     device : str or torch.device, default="cpu"
     dtype : torch.dtype, default=torch.float32
+    allow_import : bool, default=False
+    traffic : TrafficDrivers, optional
+        Other learned traffic drivers (:mod:`avrisk.assembly.traffic`); the
+        ego keeps the shipped network. Default: the shipped drivers, the
+        same network as the ego's.
 
     Attributes
     ----------
@@ -341,7 +357,9 @@ class ScenarioSimulator:
     simulator : avrisk.sim.simulator.Simulator
     net : DriverNet or None
         The shipped driver network (on ``device``) when a learned driver or
-        the ``lidar_imitation`` ego needs it.
+        the ``lidar_imitation`` ego needs it (the traffic's too, unless
+        ``traffic`` names others).
+    traffic : TrafficDrivers or None
     ego_policy : Actor or None
         The ego policy when it is not IDM+MOBIL (then slot 0 of the IDM+MOBIL
         drivers); it controls slot 0.
@@ -357,8 +375,10 @@ class ScenarioSimulator:
         device: str | torch.device = "cpu",
         dtype: torch.dtype = torch.float32,
         allow_import: bool = False,
+        traffic: TrafficDrivers | None = None,
     ) -> None:
         self.spec = spec
+        self.traffic = traffic
         self.layout = param_layout(spec)
         self.road = road_from_spec(spec)
         self.config = sim_config_from_spec(spec)
@@ -392,9 +412,12 @@ class ScenarioSimulator:
         self.net: DriverNet | None = (
             load_driver_net().to(self.device) if needs_net else None
         )
+        traffic_net = self.net
+        if traffic is not None and self.net is not None:
+            traffic_net = traffic.net().to(self.device)
         self._learned_driver = (
-            learned_drivers(self.net, self._learned, spec, self.road)
-            if self.net is not None and bool(self._learned.any())
+            learned_drivers(traffic_net, self._learned, spec, self.road)
+            if traffic_net is not None and bool(self._learned.any())
             else None
         )
         self.ego_policy: Actor | None = (
