@@ -1,4 +1,4 @@
-"""Other traffic drivers in a scenario, the ego under test held at the shipped weights."""
+"""Other traffic drivers in a scenario, the ego held at the shipped weights."""
 
 import dataclasses
 import shutil
