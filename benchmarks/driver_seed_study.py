@@ -54,14 +54,30 @@ FOLDS = {
 def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
     """The :class:`~avrisk.learning.train_config.TrainConfig` of recipe ``name``.
 
-    ``shipped``: the defaults that made the shipped files.
+    ``shipped``: the defaults that made the shipped files. ``balanced``: the
+    closed loop's minibatches drawn half from congested windows
+    (``ClosedLoopConfig.congested_share = 0.5``). ``fitted_brake``: the brake
+    fitted to the fold's training windows
+    (:func:`~avrisk.learning.guard_fit.fit_brake_guard`), trained with as the
+    shipped recipe trains with its brake. Each is a rule on the training
+    windows alone.
     """
+    from avrisk.learning.guard_fit import fit_brake_guard
     from avrisk.learning.train_config import TrainConfig
+    from avrisk.learning.training_data import training_windows
 
-    recipes = {"shipped": TrainConfig()}
-    if name not in recipes:
-        raise SystemExit(f"unknown recipe {name!r}; known: {sorted(recipes)}")
-    return replace(recipes[name], periods=periods)
+    default = TrainConfig()
+    if name == "shipped":
+        config = default
+    elif name == "balanced":
+        balanced = replace(default.closed_loop, congested_share=0.5)
+        config = replace(default, closed_loop=balanced)
+    elif name == "fitted_brake":
+        windows = training_windows(None, default.closed_loop.window_steps, periods)
+        config = replace(default, guard=fit_brake_guard(windows).guard)
+    else:
+        raise SystemExit(f"unknown recipe {name!r}: shipped, balanced, fitted_brake")
+    return replace(config, periods=periods)
 
 
 def _folder(fold: str, recipe: str, seed: int) -> Path:

@@ -37,6 +37,8 @@ from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
 __all__ = [
+    "BANDS",
+    "CONGESTED_BELOW",
     "CarFollowingWindows",
     "ReplayLeader",
     "ReplayResult",
@@ -44,6 +46,7 @@ __all__ = [
     "replay",
     "replay_distances",
     "replay_setup",
+    "window_bands",
 ]
 
 DT = 0.1  # [s] NGSIM sampling period and simulator step
@@ -102,6 +105,27 @@ class CarFollowingWindows:
         """``n`` windows drawn at random without replacement, in their order."""
         pick = np.random.default_rng(seed).permutation(len(self))
         return self.take(np.sort(pick[:n]))
+
+
+#: A window whose recorded leader's mean speed is below this is congested [m/s].
+CONGESTED_BELOW = 5.0
+#: The speed bands, in the order of the tables.
+BANDS = ("congested", "flowing")
+
+
+def window_bands(windows: CarFollowingWindows) -> NDArray[np.str_]:
+    """Each window's speed band, by its recorded leader's mean speed.
+
+    The leader is replayed as recorded, so the band is the traffic the window
+    imposes, the same for the humans and every model driving it.
+
+    Returns
+    -------
+    ndarray of str, shape (W,)
+        ``"congested"`` below :data:`CONGESTED_BELOW`, else ``"flowing"``.
+    """
+    slow = windows.v_l.mean(axis=1) < CONGESTED_BELOW
+    return np.where(slow, BANDS[0], BANDS[1])
 
 
 def _cut(starts: NDArray[Any], ends: NDArray[Any], n_steps: int) -> Iterator[int]:

@@ -39,6 +39,14 @@ class ClosedLoopConfig:
     hard_brake_oversample : float, default=1.0
         Hard-braking windows are drawn this many times as often as the others
         into the minibatches (1: uniform draws).
+    congested_share : float or None, default=None
+        Share of the minibatch draws that come from congested windows
+        (:func:`~avrisk.learning.replay.window_bands`: leader's mean speed
+        below 5 m/s), each band's windows drawn alike within it (and
+        ``hard_brake_oversample`` within that); None: as the training windows
+        hold them (16% of the 16:00-16:15 windows, 48% of the 17:00-17:15
+        ones, 28% of both). A rule on the training windows' own records, for
+        traffic whose mix of bands is not the training period's.
     gap_margin : float, default=2.0
         Gap below which the safety barrier acts [m] (humans' 5th percentile
         of the gap in the training windows is about 2.6 m).
@@ -105,6 +113,7 @@ class ClosedLoopConfig:
     lr: float = 3e-4
     hard_brake_decel: float = -2.0
     hard_brake_oversample: float = 1.0
+    congested_share: float | None = None
     gap_margin: float = 2.0
     safety_weight: float = 1.0
     ttc_margin: float = 1.0
@@ -146,6 +155,9 @@ class ClosedLoopConfig:
                 "stress_windows must be >= 0 and stress_factor >= 1; got "
                 f"{self.stress_windows} and {self.stress_factor}"
             )
+        share = self.congested_share
+        if share is not None and not 0.0 < share < 1.0:
+            raise ValueError(f"congested_share must be in (0, 1); got {share}")
         if self.hard_brake_oversample < 1.0:
             raise ValueError(
                 f"hard_brake_oversample must be >= 1; got {self.hard_brake_oversample}"

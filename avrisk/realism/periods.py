@@ -9,7 +9,8 @@ window is *congested* when its recorded leader's mean speed is below
 band is a property of the window's record, so the humans and every model are
 compared on the same windows; a band's figures are those of the replays of its
 windows, taken from the same replays as the whole set's
-(:meth:`~avrisk.realism.car_following.PartA.take_windows`).
+(:meth:`~avrisk.realism.car_following.PartA.take_windows`). The bands are
+:func:`avrisk.learning.replay.window_bands`'s, which training can weigh too.
 
 :func:`band_summaries` gives each band's part-A summary and targets;
 :func:`score_summary` the compact JSON of one report (every target with its
@@ -21,12 +22,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
-
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.learning.guard_fit import engagements, guard_conditions
-from avrisk.learning.replay import CarFollowingWindows
+from avrisk.learning.replay import BANDS, CONGESTED_BELOW, window_bands
 from avrisk.realism.car_following import PartA, recorded, summarise_part_a
 from avrisk.realism.metrics import event_rate
 from avrisk.realism.targets import KS_METRICS, part_a_targets
@@ -44,23 +42,6 @@ __all__ = [
     "score_summary",
     "window_bands",
 ]
-
-#: A window whose recorded leader's mean speed is below this is congested [m/s].
-CONGESTED_BELOW = 5.0
-#: The bands, in the order of the tables.
-BANDS = ("congested", "flowing")
-
-
-def window_bands(windows: CarFollowingWindows) -> NDArray[np.str_]:
-    """Each window's speed band, by its recorded leader's mean speed.
-
-    Returns
-    -------
-    ndarray of str, shape (W,)
-        ``"congested"`` below :data:`CONGESTED_BELOW`, else ``"flowing"``.
-    """
-    slow = windows.v_l.mean(axis=1) < CONGESTED_BELOW
-    return np.where(slow, BANDS[0], BANDS[1])
 
 
 def band_summaries(part: PartA, road: Road) -> dict[str, dict[str, Any]]:
