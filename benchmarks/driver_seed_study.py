@@ -189,6 +189,58 @@ def _score_pending(jobs: list[tuple[str, str, int]]) -> None:
             _child("score", fold, recipe, str(seed))
 
 
+#: The learned model the tables show.
+MODEL = "learned xi~P0"
+
+
+def _target_cell(t: dict[str, Any], digits: int = 2) -> str:
+    mark = "" if t["passed"] else " **x**"
+    return f"{t['value']:.{digits}f} ({t['margin']:+.2f}){mark}"
+
+
+def table() -> str:
+    """Markdown tables of every result in :data:`RESULTS` (``xi ~ P0``)."""
+    rows = [json.loads(p.read_text()) for p in sorted(RESULTS.glob("*.json"))]
+    head = (
+        "| fold / recipe / seed | set (median speed) | collisions /veh-h: own "
+        "brake / fitted / none | accel p5 | gap p5 [m] | TTC p5 [s] | time stopped "
+        "| closer than IDM | TTC KS (IDM) | all targets | own brake acts /veh-h: "
+        "drivers / humans |"
+    )
+    lines = [head, "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        for band in ("all", "congested", "flowing"):
+            own = r["with_brake"][band]
+            t = own["targets"][MODEL]
+            coll = [
+                r[k][band]["models"][MODEL]["collisions_per_hour"]
+                for k in ("with_brake", "fitted_brake", "network_alone")
+            ]
+            use = own.get("brake_use", {})
+            acts = (
+                f"{use[MODEL]['onsets']['per_hour']:.0f} / "
+                f"{use['human']['onsets']['per_hour']:.0f}"
+                if use
+                else "-"
+            )
+            human = own["human"]["p5"]
+            ks = t["TTC KS below IDM's"]
+            ks_idm = own["models"]["IDM"]["ks"]["ttc"]
+            lines.append(
+                f"| {r['fold']} / {r['recipe']} / {r['seed']} | {r['held_out']} "
+                f"{band} ({own['windows']} windows, {own['human_median_speed']:.1f} "
+                f"m/s) | {' / '.join(f'{c:.2f}' for c in coll)} | "
+                f"{_target_cell(t['accel p5 within 15%'])} [h {human['accel']:.2f}] | "
+                f"{_target_cell(t['gap p5 within 10%'])} [h {human['gap']:.2f}] | "
+                f"{_target_cell(t['TTC p5 within 10%'])} [h {human['ttc']:.2f}] | "
+                f"{_target_cell(t['time stopped within 25%'], 3)} | "
+                f"{t['closer to humans than IDM (8 of the 9 metrics)']['value']:.0f} "
+                f"of 8 | {ks['value']:.3f} ({ks_idm:.3f}) | "
+                f"{'pass' if own['all_passed'][MODEL] else 'FAIL'} | {acts} |"
+            )
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -196,6 +248,7 @@ def main() -> None:
     p_run.add_argument("--folds", nargs="+", default=["A", "B"], choices=FOLDS)
     p_run.add_argument("--seeds", default="0-5", help="e.g. 0-5")
     p_run.add_argument("--recipes", nargs="+", default=["shipped"])
+    sub.add_parser("table", help="print the results as a markdown table")
     for name in ("train", "score"):
         p = sub.add_parser(name)
         p.add_argument("fold", choices=FOLDS)
@@ -204,6 +257,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.command == "run":
         run(args.folds, _seeds(args.seeds), args.recipes)
+    elif args.command == "table":
+        print(table())
     elif args.command == "train":
         train(args.fold, args.recipe, args.seed)
     else:
