@@ -1,9 +1,8 @@
 """Part A by speed band, and held-out periods side by side (issue 44).
 
-Periods of a day differ mostly in how congested they are: the I-80 periods
-shipped have median speeds of about 7 m/s (16:00-16:15) and 5.5 m/s
-(17:00-17:15). So that a left-out period's figures can be read against the
-regime it was recorded in, part A is also summarised by speed band: a held-out
+Periods of a day differ mostly in how congested they are (BENCHMARKS.md,
+"Drivers on a period they never saw"). So that a left-out period's figures
+can be read against the regime it was recorded in, part A is also summarised by speed band: a held-out
 window is *congested* when its recorded leader's mean speed is below
 :data:`CONGESTED_BELOW`, *flowing* otherwise (:func:`window_bands`). The
 band is a property of the window's record, so the humans and every model are
