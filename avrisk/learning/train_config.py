@@ -44,9 +44,9 @@ class ClosedLoopConfig:
         (:func:`~avrisk.learning.replay.window_bands`: leader's mean speed
         below 5 m/s), each band's windows drawn alike within it (and
         ``hard_brake_oversample`` within that); None: as the training windows
-        hold them (periods differ widely in that mix, BENCHMARKS.md). A rule
-        on the training windows' own records, for traffic whose mix of bands
-        is not the training period's.
+        hold them (periods differ widely in that mix: BENCHMARKS.md, "Drivers
+        on a period they never saw"). A rule on the training windows' own
+        records, for traffic whose mix of bands is not the training period's.
     gap_margin : float, default=2.0
         Gap below which the safety barrier acts [m] (humans' 5th percentile
         of the gap in the training windows is about 2.6 m).
