@@ -46,10 +46,10 @@ from avrisk.learning.ngsim_samples import (
 )
 
 __all__ = [
-    "LATERAL_PERIOD",
     "I80_FEET_COLUMNS",
     "I80_LATERAL_COLUMNS",
     "I80_PAIRS_COLUMNS",
+    "LATERAL_PERIOD",
     "lateral_pair_split",
     "load_i80_lateral",
     "load_i80_pairs",

@@ -2,9 +2,10 @@
 
 Periods of a day differ mostly in how congested they are (BENCHMARKS.md,
 "Drivers on a period they never saw"). So that a left-out period's figures
-can be read against the regime it was recorded in, part A is also summarised by speed band: a held-out
-window is *congested* when its recorded leader's mean speed is below
-:data:`CONGESTED_BELOW`, *flowing* otherwise (:func:`window_bands`). The
+can be read against the regime it was recorded in, part A is also summarised
+by speed band: a held-out window is *congested* when its recorded leader's
+mean speed is below :data:`CONGESTED_BELOW`, *flowing* otherwise
+(:func:`window_bands`). The
 band is a property of the window's record, so the humans and every model are
 compared on the same windows; a band's figures are those of the replays of its
 windows, taken from the same replays as the whole set's
