@@ -15,6 +15,7 @@ from typing import Any
 from avrisk.api.document import Runs, answer, result_document
 from avrisk.assembly import base_distribution, param_layout
 from avrisk.pipeline import RunDirectory
+from avrisk.rare import Product
 from avrisk.rare.estimator import estimator_class
 from avrisk.report.answer import Headline
 from avrisk.scenario import ScenarioSpec, load_spec, spec_from_dict
@@ -46,11 +47,14 @@ def samples_directory(
     *,
     store_full: bool = False,
     outputs: dict[str, str] | None = None,
+    base: Product | None = None,
 ) -> RunDirectory:
     """A run directory of ``spec``: its units recorded, its large blocks regenerated.
 
     See :class:`~avrisk.pipeline.RunDirectory` for ``store_full``;
-    ``outputs``: the units of outputs of ``f`` besides ``f`` [s] itself.
+    ``outputs``: the units of outputs of ``f`` besides ``f`` [s] itself;
+    ``base``: the ``P0`` its blocks are drawn again from (default the
+    scenario's, with the shipped drivers' prior).
     """
     layout = param_layout(spec)
     units = {**layout.units(), "f": "s", **(outputs or {}), "log_p0": "log density"}
@@ -58,7 +62,7 @@ def samples_directory(
         out,
         layout.columns,
         units,
-        base=base_distribution(spec),
+        base=base_distribution(spec) if base is None else base,
         store_full=store_full,
     )
 

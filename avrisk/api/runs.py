@@ -136,8 +136,10 @@ def execute(
     :class:`~avrisk.api.events.RunStarted`.
     """
     check_recorded(out)  # a damaged config or summary: one line, not a traceback
-    base = base_distribution(objective.simulator.spec)
-    run_dir = samples_directory(out, objective.simulator.spec, store_full=store_full)
+    base = objective.base_distribution()
+    run_dir = samples_directory(
+        out, objective.simulator.spec, store_full=store_full, base=base
+    )
     definition = objective.definition()
     plain = objective
     if failures and evaluator is None:

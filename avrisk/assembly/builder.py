@@ -47,6 +47,7 @@ from avrisk.assembly.parts import (
     safety_measure_from_spec,
     sim_config_from_spec,
 )
+from avrisk.assembly.traffic import TrafficDrivers
 from avrisk.scenario import ScenarioParams
 from avrisk.scenario.components import IDM_MOBIL
 from avrisk.scenario.spec import ScenarioSpec
@@ -74,6 +75,11 @@ class ScenarioSimulator:
     spec : ScenarioSpec
     device : str or torch.device, default="cpu"
     dtype : torch.dtype, default=torch.float32
+    allow_import : bool, default=False
+    traffic : TrafficDrivers, optional
+        Other learned traffic drivers (:mod:`avrisk.assembly.traffic`); the
+        ego keeps the shipped network. Default: the shipped drivers, the
+        same network as the ego's.
 
     Attributes
     ----------
@@ -85,7 +91,9 @@ class ScenarioSimulator:
     simulator : avrisk.sim.simulator.Simulator
     net : DriverNet or None
         The shipped driver network (on ``device``) when a learned driver or
-        the ``lidar_imitation`` ego needs it.
+        the ``lidar_imitation`` ego needs it (the traffic's too, unless
+        ``traffic`` names others).
+    traffic : TrafficDrivers or None
     ego_policy : Actor or None
         The ego policy when it is not IDM+MOBIL (then slot 0 of the IDM+MOBIL
         drivers); it controls slot 0.
@@ -101,8 +109,10 @@ class ScenarioSimulator:
         device: str | torch.device = "cpu",
         dtype: torch.dtype = torch.float32,
         allow_import: bool = False,
+        traffic: TrafficDrivers | None = None,
     ) -> None:
         self.spec = spec
+        self.traffic = traffic
         self.layout = param_layout(spec)
         self.road = road_from_spec(spec)
         self.config = sim_config_from_spec(spec)
@@ -125,9 +135,12 @@ class ScenarioSimulator:
         self.net: DriverNet | None = (
             load_driver_net().to(self.device) if needs_net else None
         )
+        traffic_net = self.net
+        if traffic is not None and self.net is not None:
+            traffic_net = traffic.net().to(self.device)
         self._learned_driver = (
-            learned_drivers(self.net, self._learned, spec, self.road)
-            if self.net is not None and bool(self._learned.any())
+            learned_drivers(traffic_net, self._learned, spec, self.road)
+            if traffic_net is not None and bool(self._learned.any())
             else None
         )
         self.ego_policy: Actor | None = (

@@ -20,9 +20,11 @@ from avrisk.agents.drivers.store import (
     XI_PRIOR_FILE,
     default_drivers_dir,
 )
-from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.builder import ScenarioSimulator, base_distribution
 from avrisk.assembly.traces import FailureRecorder
+from avrisk.assembly.traffic import TrafficDrivers
 from avrisk.fingerprint import sha256_file, sha256_json
+from avrisk.rare import Product
 from avrisk.scenario import ParamLayout, ScenarioSpec, spec_from_dict
 from avrisk.sim.collision import Contact
 from avrisk.sim.interfaces import weights_files
@@ -87,6 +89,10 @@ class SimulationObjective:
         (only for a spec given on the command line).
     dtype : torch.dtype, default=torch.float32
         Floating-point type of the simulation.
+    traffic : TrafficDrivers, optional
+        Other learned traffic drivers, the ego under test kept at the
+        shipped weights (:mod:`avrisk.assembly.traffic`); default the shipped
+        drivers.
 
     Attributes
     ----------
@@ -106,9 +112,10 @@ class SimulationObjective:
         device: str = "cpu",
         allow_import: bool = False,
         dtype: torch.dtype = torch.float32,
+        traffic: TrafficDrivers | None = None,
     ) -> None:
         self.simulator = ScenarioSimulator(
-            spec, device=device, dtype=dtype, allow_import=allow_import
+            spec, device=device, dtype=dtype, allow_import=allow_import, traffic=traffic
         )
         self.failures: FailureRecorder | None = None
 
@@ -121,7 +128,11 @@ class SimulationObjective:
             ``scenario_sha256``: the resolved spec's canonical JSON (its
             component names and params included); ``weights_sha256``: each
             learned-weights file the simulation uses (the drivers', and the
-            ego's own: ``weights_files``).
+            ego's own: ``weights_files``). With other traffic drivers
+            (:class:`~avrisk.assembly.traffic.TrafficDrivers`) their files are
+            ``traffic/driver_net.npz`` and ``traffic/xi_prior.npz`` (the
+            shipped network stays, the ego's), and ``traffic_guard`` is their
+            brake.
         """
         spec = self.simulator.spec
         drivers = default_drivers_dir()
@@ -130,12 +141,24 @@ class SimulationObjective:
             files.append(DRIVER_NET_FILE)
         if spec.has_learned_drivers:
             files.append(XI_PRIOR_FILE)
+        traffic = self.simulator.traffic
+        if traffic is not None:  # the ego's network is the shipped one
+            files = [f for f in files if f != XI_PRIOR_FILE]
         paths = {name: drivers / name for name in files}
+        if traffic is not None:
+            paths.update({f"traffic/{n}": p for n, p in traffic.files().items()})
         paths.update(weights_files(self.simulator.ego_policy))
-        return {
+        out = {
             "scenario_sha256": sha256_json(spec.model_dump(mode="json")),
             "weights_sha256": {name: sha256_file(path) for name, path in paths.items()},
         }
+        if traffic is not None:
+            out["traffic_guard"] = traffic.describe()["guard"]
+        return out
+
+    def base_distribution(self) -> Product:
+        """``P0`` of the scenario, with the ``xi`` prior of its traffic drivers."""
+        return base_distribution(self.simulator.spec, self.simulator.traffic)
 
     def computed_with(self) -> dict[str, Any]:
         """How this objective computes (device, precision, compiled or eager)."""
@@ -226,12 +249,15 @@ class ObjectiveFactory:
         line, and the workers can import the same components).
     dtype : str, default="float32"
         Name of the torch floating-point type.
+    traffic : TrafficDrivers, optional
+        Other learned traffic drivers, as for :class:`SimulationObjective`.
     """
 
     spec: dict[str, Any]
     device: str = "cpu"
     allow_import: bool = False
     dtype: str = "float32"
+    traffic: TrafficDrivers | None = None
 
     @classmethod
     def of(cls, objective: SimulationObjective, allow_import: bool) -> ObjectiveFactory:
@@ -242,6 +268,7 @@ class ObjectiveFactory:
             objective.device,
             allow_import,
             str(sim.dtype).removeprefix("torch."),
+            sim.traffic,
         )
 
     def __call__(self) -> SimulationObjective:
@@ -253,6 +280,7 @@ class ObjectiveFactory:
             device=self.device,
             allow_import=self.allow_import,
             dtype=getattr(torch, self.dtype),
+            traffic=self.traffic,
         )
 
 

@@ -33,6 +33,7 @@ from avrisk.agents import (
 )
 from avrisk.agents.drivers import XI_DIM, DriverNet, load_xi_prior
 from avrisk.agents.drivers.lane_change import LaneChangeParams, LaneChangingDriver
+from avrisk.assembly.traffic import TrafficDrivers
 from avrisk.rare import Product
 from avrisk.render import DEFAULT_VEHICLE_HEIGHT, CameraModel, RayCastCamera
 from avrisk.safety import get_safety_measure
@@ -168,8 +169,16 @@ def param_layout(spec: ScenarioSpec) -> ParamLayout:
     return ParamLayout.from_spec(spec, XI_DIM)
 
 
-def base_distribution(spec: ScenarioSpec) -> Product:
-    """``P0`` of a scenario, with the shipped ``xi`` prior for learned drivers.
+def base_distribution(
+    spec: ScenarioSpec, traffic: TrafficDrivers | None = None
+) -> Product:
+    """``P0`` of a scenario, with the learned drivers' ``xi`` prior.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+    traffic : TrafficDrivers, optional
+        Whose prior the ``xi`` block is (default: the shipped drivers').
 
     Returns
     -------
@@ -177,7 +186,9 @@ def base_distribution(spec: ScenarioSpec) -> Product:
         See :func:`avrisk.scenario.build_base_distribution`; ``dim`` equals
         ``param_layout(spec).dim``.
     """
-    prior = load_xi_prior() if spec.has_learned_drivers else None
+    prior = None
+    if spec.has_learned_drivers:
+        prior = load_xi_prior() if traffic is None else traffic.prior()
     return build_base_distribution(spec, prior)
 
 

@@ -213,6 +213,18 @@ def realism_command(
             "weights carry (the shipped drivers': 2,2,hold).",
         ),
     ] = None,
+    held_out: Annotated[
+        str,
+        typer.Option(
+            "--held-out",
+            metavar="test|PERIOD",
+            help="Part A's held-out I-80 windows: 'test', the test splits of "
+            "every period; or a recording period (0400pm-0415pm or "
+            "0500pm-0515pm), all of it, for drivers trained on the other "
+            "(train-drivers --period). The report also splits part A by speed "
+            "band (leader's mean speed below 5 m/s: congested).",
+        ),
+    ] = "test",
 ) -> None:
     """Compare the learned drivers with held-out human driving (issue 21).
 
@@ -224,8 +236,10 @@ def realism_command(
     """
     with user_errors(ValueError):
         guard = _brake_guard(brake_guard)
+        _check_held_out(held_out)
     with user_errors(OSError):
         files = driver_files(drivers)
+        _warn_trained_on(files, held_out)
         check_output_folder(out)
         import torch
 
@@ -238,6 +252,7 @@ def realism_command(
             windows=windows,
             scenes=scenes,
             guard=guard,
+            held_out=held_out,
         )
         t0 = time.perf_counter()
         with part_progress() as (progress_a, progress_b):
@@ -249,6 +264,39 @@ def realism_command(
         out_console.print(
             f"wrote {escape(names)} to {escape(str(out))} "
             f"({duration(time.perf_counter() - t0)})",
+            highlight=False,
+        )
+
+
+def _check_held_out(held_out: str) -> None:
+    """Raise ValueError for a ``--held-out`` that is neither test nor a period."""
+    from avrisk.realism.held_out import HELD_OUT_TEST, held_out_periods
+
+    periods = held_out_periods()
+    if held_out != HELD_OUT_TEST and held_out not in periods:
+        raise ValueError(
+            f"--held-out {held_out}: not {HELD_OUT_TEST} nor one of the periods "
+            f"{', '.join(periods)}"
+        )
+
+
+def _warn_trained_on(files: DriverFiles, held_out: str) -> None:
+    """Warn when the drivers' training report says they trained on ``held_out``."""
+    import json
+
+    from avrisk.realism.held_out import HELD_OUT_TEST
+
+    if held_out == HELD_OUT_TEST:
+        return
+    report = files.net.parent / "training_report.json"
+    try:
+        periods = json.loads(report.read_text())["config"].get("periods")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        periods = None  # no report: all periods, as the shipped drivers
+    if periods is None or held_out in periods:
+        err_console.print(
+            f"[yellow]warning:[/] these drivers were trained on {escape(held_out)} "
+            "(its train split): part A is not held out",
             highlight=False,
         )
 

@@ -219,8 +219,8 @@ def _print_selection(selection: dict) -> None:
     out_console.print(table)
 
 
-def _config(brake_guard: str | None) -> TrainConfig:
-    """The default recipe, with ``--brake-guard``'s brake if given.
+def _config(brake_guard: str | None, periods: list[str] | None = None) -> TrainConfig:
+    """The default recipe, with ``--brake-guard``'s brake and ``--period`` if given.
 
     Without a brake the closed loop trains the network alone.
     """
@@ -229,12 +229,26 @@ def _config(brake_guard: str | None) -> TrainConfig:
     from avrisk.agents.drivers.guard import parse_guard
     from avrisk.learning.train_config import TrainConfig
 
-    default = TrainConfig()
+    default = TrainConfig(periods=tuple(periods) if periods else None)
     if brake_guard is None:
         return default
     guard = parse_guard(brake_guard)
     closed_loop = replace(default.closed_loop, drive_with_guard=guard is not None)
     return replace(default, guard=guard, closed_loop=closed_loop)
+
+
+def _check_periods(folder: Path | None, periods: tuple[str, ...] | None) -> None:
+    """Raise ValueError, naming those there are, for a period the data lack."""
+    if periods is None:
+        return
+    from avrisk.learning.training_data import available_periods
+
+    there = available_periods(folder)
+    unknown = sorted(set(periods) - set(there))
+    if unknown:
+        raise ValueError(
+            f"--period {', '.join(unknown)}: the I-80 data hold {', '.join(there)}"
+        )
 
 
 def _number(value: float) -> str:
@@ -295,6 +309,17 @@ def train_drivers_command(
             "(the closed loop then trains the network alone). Default: 2,2,hold.",
         ),
     ] = None,
+    period: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--period",
+            metavar="PERIOD",
+            help="Train on this I-80 recording period only (repeatable; e.g. "
+            "0400pm-0415pm or 0500pm-0515pm), for leave-one-period-out "
+            "validation with avrisk realism --held-out; default every period. "
+            "The lateral file (16:00-16:15) is read only with its period.",
+        ),
+    ] = None,
 ) -> None:
     """Retrain the learned drivers and their xi prior from NGSIM data.
 
@@ -303,9 +328,11 @@ def train_drivers_command(
     crash very differently; --candidates N trains N and keeps the safest.
     """
     with user_errors(ValueError):
-        config = _config(brake_guard)
+        config = _config(brake_guard, period)
     with user_errors(OSError):
         folder = _data_folder(data_dir)
+        with user_errors(ValueError):
+            _check_periods(folder, config.periods)
         _check_writable(out)
         if os.path.samefile(out, default_drivers_dir()):
             err_console.print(

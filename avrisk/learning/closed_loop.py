@@ -69,7 +69,13 @@ from avrisk.agents.drivers.xi import pack_xi
 from avrisk.learning.gail import transition_features
 from avrisk.learning.mgail import Discriminator
 from avrisk.learning.ngsim_demonstrations import DEFAULT_WIDTH
-from avrisk.learning.replay import DT, CarFollowingWindows, replay_setup
+from avrisk.learning.replay import (
+    BANDS,
+    DT,
+    CarFollowingWindows,
+    replay_setup,
+    window_bands,
+)
 from avrisk.learning.train_config import ClosedLoopConfig, Progress, TrainEvent
 from avrisk.sim import Road
 
@@ -340,15 +346,24 @@ def _hard_braking(windows: CarFollowingWindows, config: ClosedLoopConfig) -> np.
 def _minibatch_weights(
     windows: CarFollowingWindows, config: ClosedLoopConfig
 ) -> np.ndarray | None:
-    """Draw probabilities of ``windows``: hard-braking ones oversampled.
+    """Draw probabilities of ``windows``: hard-braking ones oversampled, bands weighed.
 
     None (uniform draws, as ``rng.choice`` without ``p``) when
-    ``hard_brake_oversample`` is 1.
+    ``hard_brake_oversample`` is 1 and ``congested_share`` None. A band
+    without windows keeps its share at 0.
     """
-    if config.hard_brake_oversample == 1.0:
+    if config.hard_brake_oversample == 1.0 and config.congested_share is None:
         return None
     hard = _hard_braking(windows, config)
     weight = np.where(hard, config.hard_brake_oversample, 1.0)
+    if config.congested_share is not None:
+        congested = window_bands(windows) == BANDS[0]
+        for band, share in (
+            (congested, config.congested_share),
+            (~congested, 1.0 - config.congested_share),
+        ):
+            if band.any():
+                weight[band] *= share / weight[band].sum()
     return weight / weight.sum()
 
 

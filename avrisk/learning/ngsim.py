@@ -49,12 +49,17 @@ __all__ = [
     "I80_FEET_COLUMNS",
     "I80_LATERAL_COLUMNS",
     "I80_PAIRS_COLUMNS",
+    "LATERAL_PERIOD",
     "lateral_pair_split",
     "load_i80_lateral",
     "load_i80_pairs",
     "load_us101",
+    "periods_of",
     "read_i80_pairs_table",
 ]
+
+#: The recording period of the lateral file, as the pairs file names periods.
+LATERAL_PERIOD = "0400pm-0415pm"
 
 #: Columns of the I-80 pairs file that :func:`load_i80_pairs` reads, besides
 #: the ones in feet.
@@ -236,6 +241,11 @@ def load_us101(path: str | Path | None = None) -> VehicleTrajectories:
     )
 
 
+def periods_of(pairs: CarFollowingPairs) -> tuple[str, ...]:
+    """The recording periods of ``pairs``, sorted (e.g. ``"0400pm-0415pm"``)."""
+    return tuple(str(p) for p in np.unique(pairs.period))
+
+
 def lateral_pair_split(
     lateral: LateralPairs, pairs: CarFollowingPairs, test_fraction: float = 0.2
 ) -> NDArray[np.str_]:
@@ -258,7 +268,7 @@ def lateral_pair_split(
     ndarray of str, shape (N,)
         Per row of ``lateral``.
     """
-    in_period = np.char.startswith(pairs.period, "0400")
+    in_period = pairs.period == LATERAL_PERIOD
     test_ids = set(pairs.follower_id[in_period & (pairs.split == "test")].tolist())
     train_ids = set(pairs.follower_id[in_period & (pairs.split == "train")].tolist())
     out = np.full(len(lateral), "train", dtype="<U5")

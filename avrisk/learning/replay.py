@@ -37,6 +37,8 @@ from avrisk.sim.interfaces import Action
 from avrisk.sim.observation import Observation
 
 __all__ = [
+    "BANDS",
+    "CONGESTED_BELOW",
     "CarFollowingWindows",
     "ReplayLeader",
     "ReplayResult",
@@ -44,6 +46,7 @@ __all__ = [
     "replay",
     "replay_distances",
     "replay_setup",
+    "window_bands",
 ]
 
 DT = 0.1  # [s] NGSIM sampling period and simulator step
@@ -104,6 +107,27 @@ class CarFollowingWindows:
         return self.take(np.sort(pick[:n]))
 
 
+#: A window whose recorded leader's mean speed is below this is congested [m/s].
+CONGESTED_BELOW = 5.0
+#: The speed bands, in the order of the tables.
+BANDS = ("congested", "flowing")
+
+
+def window_bands(windows: CarFollowingWindows) -> NDArray[np.str_]:
+    """Each window's speed band, by its recorded leader's mean speed.
+
+    The leader is replayed as recorded, so the band is the traffic the window
+    imposes, the same for the humans and every model driving it.
+
+    Returns
+    -------
+    ndarray of str, shape (W,)
+        ``"congested"`` below :data:`CONGESTED_BELOW`, else ``"flowing"``.
+    """
+    slow = windows.v_l.mean(axis=1) < CONGESTED_BELOW
+    return np.where(slow, BANDS[0], BANDS[1])
+
+
 def _cut(starts: NDArray[Any], ends: NDArray[Any], n_steps: int) -> Iterator[int]:
     for s, e in zip(starts, ends, strict=True):
         yield from range(s, e - n_steps, n_steps)
@@ -112,7 +136,7 @@ def _cut(starts: NDArray[Any], ends: NDArray[Any], n_steps: int) -> Iterator[int
 def car_following_windows(
     pairs: CarFollowingPairs,
     lateral: LateralPairs,
-    centres: LaneCentres,
+    centres: LaneCentres | None,
     n_steps: int,
     road: Road,
 ) -> CarFollowingWindows:
@@ -124,8 +148,9 @@ def car_following_windows(
         Already restricted to the wanted split.
     lateral : LateralPairs
         Already restricted to the wanted split.
-    centres : LaneCentres
-        Lane centre lines (fitted on the training split).
+    centres : LaneCentres or None
+        Lane centre lines (fitted on the training split); None only without
+        lateral pairs.
     n_steps : int
         ``T``.
     road : Road
@@ -155,6 +180,8 @@ def car_following_windows(
         cols["lane"].append(min(I80_N_LANES - lane, road.n_lanes - 1) if ok else 2)
         cols["heading"].append(0.0)
     if len(lateral):
+        if centres is None:
+            raise ValueError("lateral pairs need lane centre lines")
         offset, heading, _ = lateral_tracks(lateral, centres)
         s, e = episode_bounds(lateral.pair_id)
         for w in _cut(s, e, n_steps):
@@ -233,6 +260,13 @@ class ReplayResult:
     alive: NDArray[np.bool_]
     crash: NDArray[np.bool_]
     offroad: NDArray[np.bool_]
+
+    def take(self, index: Any) -> ReplayResult:
+        """The replays ``index``."""
+        return dataclasses.replace(
+            self,
+            **{f.name: getattr(self, f.name)[index] for f in dataclasses.fields(self)},
+        )
 
 
 def replay_setup(

@@ -234,7 +234,9 @@ def _train_and_score(
     if threads is not None:
         torch.set_num_threads(threads)
     report = _train_drivers(seed, folder, data_dir, config, progress)
-    windows = training_windows(data_dir, config.closed_loop.window_steps)
+    windows = training_windows(
+        data_dir, config.closed_loop.window_steps, config.periods
+    )
     net = load_driver_net(folder / DRIVER_NET_FILE)
     prior = load_xi_prior(folder / XI_PRIOR_FILE)
     score = validation_crashes(
@@ -279,14 +281,18 @@ def _train_drivers(
 
     windows = None
     if config.calibration_windows > 0:
-        windows = training_windows(data_dir, config.calibration_steps).sample(
-            config.calibration_windows, seed
-        )
+        windows = training_windows(
+            data_dir, config.calibration_steps, config.periods
+        ).sample(config.calibration_windows, seed)
     # DAgger rollouts sample actions as the deployed drivers will.
     fit_sampling_noise(net, train, windows, seed, progress)
     stopwatch.lap("noise_before_dagger")
 
-    follow = training_windows(data_dir, 150) if config.dagger_windows > 0 else None
+    follow = (
+        training_windows(data_dir, 150, config.periods)
+        if config.dagger_windows > 0
+        else None
+    )
     train, dagger_history = dagger_rounds(
         net, train, val, config, seed, follow, progress
     )
@@ -300,7 +306,7 @@ def _train_drivers(
     if config.closed_loop.iterations > 0:
         closed_loop_history = closed_loop_finetune(
             net,
-            training_windows(data_dir, config.closed_loop.window_steps),
+            training_windows(data_dir, config.closed_loop.window_steps, config.periods),
             config.closed_loop,
             seed,
             progress,

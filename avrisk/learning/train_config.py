@@ -39,6 +39,14 @@ class ClosedLoopConfig:
     hard_brake_oversample : float, default=1.0
         Hard-braking windows are drawn this many times as often as the others
         into the minibatches (1: uniform draws).
+    congested_share : float or None, default=None
+        Share of the minibatch draws that come from congested windows
+        (:func:`~avrisk.learning.replay.window_bands`: leader's mean speed
+        below 5 m/s), each band's windows drawn alike within it (and
+        ``hard_brake_oversample`` within that); None: as the training windows
+        hold them (periods differ widely in that mix: BENCHMARKS.md, "Drivers
+        on a period they never saw"). A rule on the training windows' own
+        records, for traffic whose mix of bands is not the training period's.
     gap_margin : float, default=2.0
         Gap below which the safety barrier acts [m] (humans' 5th percentile
         of the gap in the training windows is about 2.6 m).
@@ -105,6 +113,7 @@ class ClosedLoopConfig:
     lr: float = 3e-4
     hard_brake_decel: float = -2.0
     hard_brake_oversample: float = 1.0
+    congested_share: float | None = None
     gap_margin: float = 2.0
     safety_weight: float = 1.0
     ttc_margin: float = 1.0
@@ -146,6 +155,9 @@ class ClosedLoopConfig:
                 "stress_windows must be >= 0 and stress_factor >= 1; got "
                 f"{self.stress_windows} and {self.stress_factor}"
             )
+        share = self.congested_share
+        if share is not None and not 0.0 < share < 1.0:
+            raise ValueError(f"congested_share must be in (0, 1); got {share}")
         if self.hard_brake_oversample < 1.0:
             raise ValueError(
                 f"hard_brake_oversample must be >= 1; got {self.hard_brake_oversample}"
@@ -231,6 +243,11 @@ class TrainConfig:
         that leaves the following gaps and times to collision to the network
         (BENCHMARKS.md, "Training on top of the brake"). None writes drivers
         without one.
+    periods : tuple of str or None, default=None
+        The I-80 recording periods trained on (the pairs file's ``period``
+        values, e.g. ``("0400pm-0415pm",)``); None: all. The lateral file
+        (16:00-16:15) is read only when its period is among them. For
+        leave-one-period-out validation (:mod:`avrisk.realism.held_out`).
     """
 
     n_members: int = 20
@@ -256,8 +273,11 @@ class TrainConfig:
     max_shift: float = 0.01
     closed_loop: ClosedLoopConfig = field(default_factory=ClosedLoopConfig)
     guard: BrakeGuard | None = BrakeGuard(2.0, 2.0, hold_floor=True)
+    periods: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.periods is not None and not self.periods:
+            raise ValueError("periods must name at least one period (None: all)")
         if self.n_members < 2:
             raise ValueError(f"n_members must be >= 2; got {self.n_members}")
         for name in ("trunk_epochs", "head_epochs", "batch_size", "head_batch_size"):

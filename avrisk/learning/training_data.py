@@ -10,7 +10,11 @@ them (:func:`~avrisk.learning.ngsim.lateral_pair_split` for the lateral file):
 * :func:`training_windows` -- car-following windows of the train splits, for
   the noise calibration and the replayed DAgger rounds.
 
-Only the train splits are trained or calibrated on.
+Only the train splits are trained or calibrated on. ``TrainConfig.periods``
+restricts both files to some recording periods (leave-one-period-out
+validation, :mod:`avrisk.realism.held_out`): the lateral file, which covers
+16:00-16:15 only (:data:`~avrisk.learning.ngsim.LATERAL_PERIOD`), is read
+only when that period is among them.
 """
 
 from __future__ import annotations
@@ -23,7 +27,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from avrisk.learning.demonstrations import Demonstrations
-from avrisk.learning.ngsim import lateral_pair_split, load_i80_lateral, load_i80_pairs
+from avrisk.learning.ngsim import (
+    LATERAL_PERIOD,
+    lateral_pair_split,
+    load_i80_lateral,
+    load_i80_pairs,
+    periods_of,
+)
 from avrisk.learning.ngsim_demonstrations import (
     i80_pair_demonstrations,
     lateral_pair_demonstrations,
@@ -36,7 +46,7 @@ from avrisk.learning.simulated_demonstrations import simulated_demonstrations
 from avrisk.learning.train_config import TrainConfig
 from avrisk.sim import Road
 
-__all__ = ["load_demonstrations", "training_windows"]
+__all__ = ["available_periods", "load_demonstrations", "training_windows"]
 
 
 class _I80(NamedTuple):
@@ -55,11 +65,43 @@ class _I80(NamedTuple):
         )
 
 
-def _load_i80(data_dir: str | Path | None) -> _I80:
+def _load_i80(
+    data_dir: str | Path | None, periods: tuple[str, ...] | None = None
+) -> _I80:
+    """Both I-80 files, restricted to ``periods`` (None: all).
+
+    The lateral pairs are split against all car-following pairs first, so
+    that a period's split does not depend on which periods are kept.
+
+    Raises
+    ------
+    ValueError
+        For a period the pairs file does not hold.
+    """
     files = (ngsim_file(I80_PAIRS, data_dir), ngsim_file(I80_LATERAL, data_dir))
     pairs = load_i80_pairs(files[0])
     lateral = load_i80_lateral(files[1])
-    return _I80(files, pairs, lateral, lateral_pair_split(lateral, pairs))
+    split = lateral_pair_split(lateral, pairs)
+    if periods is None:
+        return _I80(files, pairs, lateral, split)
+    unknown = sorted(set(periods) - set(periods_of(pairs)))
+    if unknown:
+        raise ValueError(
+            f"no I-80 period {unknown} in {files[0]}; it holds {periods_of(pairs)}"
+        )
+    keep = np.isin(pairs.period, periods)
+    rows = np.full(len(lateral), LATERAL_PERIOD in periods)
+    return _I80(files, pairs.take(keep), lateral.take(rows), split[rows])
+
+
+def available_periods(data_dir: str | Path | None) -> tuple[str, ...]:
+    """The recording periods of the I-80 pairs file in ``data_dir``, sorted."""
+    return periods_of(load_i80_pairs(ngsim_file(I80_PAIRS, data_dir)))
+
+
+def _lane_centres(lateral: LateralPairs) -> LaneCentres | None:
+    """Centre lines fitted to ``lateral`` (None without lateral pairs)."""
+    return LaneCentres.fit(lateral) if len(lateral) else None
 
 
 def _sha256(path: Path) -> str:
@@ -101,8 +143,8 @@ def load_demonstrations(
     """
     config = TrainConfig() if config is None else config
     road = Road() if road is None else road
-    data = _load_i80(data_dir)
-    centres = LaneCentres.fit(data.part("train")[1])
+    data = _load_i80(data_dir, config.periods)
+    centres = _lane_centres(data.part("train")[1])
     offsets = iter(range(0, 10_000_000, 1_000_000))
     parts: dict[str, list[Demonstrations]] = {"train": [], "test": []}
     for name in ("train", "test"):
@@ -110,11 +152,13 @@ def load_demonstrations(
         parts[name].append(
             i80_pair_demonstrations(pairs, road, episode_offset=next(offsets))
         )
-        parts[name].append(
-            lateral_pair_demonstrations(
-                lateral, road, centres=centres, episode_offset=next(offsets)
+        offset = next(offsets)
+        if centres is not None and len(lateral):
+            parts[name].append(
+                lateral_pair_demonstrations(
+                    lateral, road, centres=centres, episode_offset=offset
+                )
             )
-        )
     for name, n_rollouts, scene_seed in (
         ("train", config.n_sim_rollouts, seed),
         ("test", config.n_sim_val_rollouts, seed + 1),
@@ -132,20 +176,26 @@ def load_demonstrations(
     val = Demonstrations.concat(parts["test"])
     meta = {
         "files": {f.name: _sha256(f) for f in data.files},
-        "lane_centres_m": centres.to_dict(),
+        "periods": periods_of(data.pairs),
+        "lane_centres_m": None if centres is None else centres.to_dict(),
         "train": train.summary(),
         "val": val.summary(),
     }
     return train, val, meta
 
 
-def training_windows(data_dir: str | Path | None, n_steps: int) -> CarFollowingWindows:
+def training_windows(
+    data_dir: str | Path | None,
+    n_steps: int,
+    periods: tuple[str, ...] | None = None,
+) -> CarFollowingWindows:
     """Car-following windows of ``n_steps`` steps of the training splits.
 
-    For the noise calibration and the replayed DAgger rounds; the lane centres
-    are fitted to the training lateral pairs.
+    For the noise calibration, the replayed DAgger rounds and the closed
+    loop; the lane centres are fitted to the training lateral pairs.
+    ``periods`` keeps those recording periods only (None: all).
     """
-    pairs, lateral = _load_i80(data_dir).part("train")
+    pairs, lateral = _load_i80(data_dir, periods).part("train")
     return car_following_windows(
-        pairs, lateral, LaneCentres.fit(lateral), n_steps, Road()
+        pairs, lateral, _lane_centres(lateral), n_steps, Road()
     )

@@ -290,6 +290,9 @@ class PartA:
         The recorded followers.
     models : dict of str to Followers
         Per model, over ``W * replicates`` replays.
+    replays : dict of str to ReplayResult
+        Per model, the ``W * replicates`` replays themselves (window ``w``'s
+        replay ``r`` at row ``r W + w``), for :meth:`take_windows`.
     """
 
     windows: CarFollowingWindows
@@ -297,6 +300,28 @@ class PartA:
     replicates: int
     human: Followers
     models: dict[str, Followers]
+    replays: dict[str, ReplayResult]
+
+    def take_windows(self, keep: NDArray[np.bool_], road: Road) -> PartA:
+        """The same replays, of the windows ``keep`` (bool, shape (W,)) only.
+
+        ``road`` is the road they were replayed on.
+        """
+        rows = np.tile(keep, self.replicates)
+        windows, labels = self.windows.take(keep), self.labels[keep]
+        win = windows.take(np.tile(np.arange(len(windows)), self.replicates))
+        replays = {name: r.take(rows) for name, r in self.replays.items()}
+        return PartA(
+            windows=windows,
+            labels=labels,
+            replicates=self.replicates,
+            human=followers(windows, recorded(windows), road, labels),
+            models={
+                name: followers(win, r, road, labels[np.arange(len(win)) % len(labels)])
+                for name, r in replays.items()
+            },
+            replays=replays,
+        )
 
 
 def run_part_a(
@@ -347,17 +372,16 @@ def run_part_a(
         IDMParams.full((n, 2), **{**IDM_NORMAL, "lane_change_threshold": 1e3}),
         road,
     )
-    models = {}
+    models, replays = {}, {}
     for done, (name, drv) in enumerate(drivers.items()):
         if progress is not None:
             progress(name, done, len(drivers))
-        models[name] = followers(
-            win, replay(win, drv, road, seed=seed), road, win_labels
-        )
+        replays[name] = replay(win, drv, road, seed=seed)
+        models[name] = followers(win, replays[name], road, win_labels)
     if progress is not None:
         progress("", len(drivers), len(drivers))
     human = followers(windows, recorded(windows), road, labels)
-    return PartA(windows, labels, replicates, human, models)
+    return PartA(windows, labels, replicates, human, models, replays)
 
 
 def _figures(f: Followers) -> dict[str, Any]:

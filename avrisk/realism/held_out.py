@@ -8,6 +8,12 @@
   (:func:`~avrisk.learning.us101_lane_changes.us101_split`), as two small
   lane-change tables.
 
+Part A's windows can instead be those of one recording period
+(:func:`held_out_windows` with ``held_out`` a period name, both splits): for
+leave-one-period-out validation, drivers trained on the other period only
+(``avrisk train-drivers --period``) are scored on all of it. The lateral file
+covers 16:00-16:15 only, so its windows join that period's set alone.
+
 Only the files shipped in the package (``avrisk/data/ngsim/``,
 :func:`data_files`) are read, whatever ``$AVRISK_NGSIM_DIR`` says.
 """
@@ -19,7 +25,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from avrisk.learning.ngsim import lateral_pair_split, load_i80_lateral, load_i80_pairs
+from avrisk.learning.ngsim import (
+    LATERAL_PERIOD,
+    lateral_pair_split,
+    load_i80_lateral,
+    load_i80_pairs,
+    periods_of,
+)
 from avrisk.learning.ngsim_files import (
     I80_LATERAL,
     I80_PAIRS,
@@ -31,7 +43,16 @@ from avrisk.learning.replay import CarFollowingWindows, car_following_windows
 from avrisk.learning.us101_lane_changes import EVENTS_FILE, VEHICLES_FILE
 from avrisk.sim import Road
 
-__all__ = ["data_files", "held_out_windows", "select_windows"]
+__all__ = [
+    "HELD_OUT_TEST",
+    "data_files",
+    "held_out_periods",
+    "held_out_windows",
+    "select_windows",
+]
+
+#: ``held_out`` of the test splits of every period (the default report).
+HELD_OUT_TEST = "test"
 
 
 def data_files() -> dict[str, Path]:
@@ -52,8 +73,15 @@ def data_files() -> dict[str, Path]:
     }
 
 
-def held_out_windows(n_steps: int, road: Road) -> CarFollowingWindows:
-    """Windows of ``n_steps`` of the I-80 test splits (lane centres: training split).
+def held_out_periods() -> tuple[str, ...]:
+    """The I-80 recording periods shipped, sorted (e.g. ``"0400pm-0415pm"``)."""
+    return periods_of(load_i80_pairs(data_files()["i80_pairs"]))
+
+
+def held_out_windows(
+    n_steps: int, road: Road, held_out: str = HELD_OUT_TEST
+) -> CarFollowingWindows:
+    """Windows of ``n_steps`` of a held-out set (lane centres: training split).
 
     Parameters
     ----------
@@ -62,23 +90,39 @@ def held_out_windows(n_steps: int, road: Road) -> CarFollowingWindows:
         15 s).
     road : Road
         The road the windows are replayed on (lanes mapped onto it).
+    held_out : str, default=HELD_OUT_TEST
+        :data:`HELD_OUT_TEST`: the test splits of every period; a period
+        name (:func:`held_out_periods`): every pair of that period, both
+        splits, with the lateral file's pairs if it is 16:00-16:15.
 
     Returns
     -------
     CarFollowingWindows
-        ``W`` windows, those of the pairs file first (202 of 150 steps).
+        ``W`` windows, those of the pairs file first (202 of 150 steps for
+        the test splits).
+
+    Raises
+    ------
+    ValueError
+        For a ``held_out`` that is neither.
     """
     files = data_files()
     pairs = load_i80_pairs(files["i80_pairs"])
     lat = load_i80_lateral(files["i80_lateral"])
     split = lateral_pair_split(lat, pairs)
     centres = LaneCentres.fit(lat.take(split == "train"))
+    if held_out == HELD_OUT_TEST:
+        keep_pairs, keep_lat = pairs.split == "test", split == "test"
+    elif held_out in periods_of(pairs):
+        keep_pairs = pairs.period == held_out
+        keep_lat = np.full(len(lat), held_out == LATERAL_PERIOD)
+    else:
+        raise ValueError(
+            f"held-out set {held_out!r}: not {HELD_OUT_TEST!r} nor one of the "
+            f"periods {', '.join(periods_of(pairs))}"
+        )
     return car_following_windows(
-        pairs.take(pairs.split == "test"),
-        lat.take(split == "test"),
-        centres,
-        n_steps,
-        road,
+        pairs.take(keep_pairs), lat.take(keep_lat), centres, n_steps, road
     )
 
 

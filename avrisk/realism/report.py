@@ -48,7 +48,12 @@ from avrisk.realism.car_following import (
     summarise_part_a,
 )
 from avrisk.realism.figures import draw_lane_changes, draw_part_a
-from avrisk.realism.held_out import data_files, held_out_windows, select_windows
+from avrisk.realism.held_out import (
+    HELD_OUT_TEST,
+    data_files,
+    held_out_windows,
+    select_windows,
+)
 from avrisk.realism.lane_changes import (
     HORIZON,
     Scenes,
@@ -57,6 +62,7 @@ from avrisk.realism.lane_changes import (
     summarise_lane_changes,
 )
 from avrisk.realism.metrics import DT
+from avrisk.realism.periods import band_summaries, periods_table
 from avrisk.realism.tables import (
     collision_table,
     lane_change_table,
@@ -114,6 +120,12 @@ class RealismSettings:
         (:mod:`avrisk.agents.drivers.guard`): ``"drivers"`` the one their
         weights carry (:data:`DRIVERS_GUARD`), None the network alone.
         :func:`run_realism` records the one it drove with.
+    held_out : str, default="test"
+        Part A's held-out windows (:func:`~avrisk.realism.held_out.
+        held_out_windows`): ``"test"``, the test splits of every I-80
+        period; or a period's name (e.g. ``"0500pm-0515pm"``), all of that
+        period, for drivers trained on the other (``train-drivers
+        --period``).
     """
 
     seed: int = 2024
@@ -123,6 +135,7 @@ class RealismSettings:
     window_s: float = 15.0
     horizon: float = HORIZON
     guard: BrakeGuard | Literal["drivers"] | None = "drivers"
+    held_out: str = HELD_OUT_TEST
 
     def __post_init__(self) -> None:
         known = self.guard is None or isinstance(self.guard, BrakeGuard)
@@ -185,6 +198,9 @@ class RealismResult:
         Held-out windows there are (of which ``part_a`` drove a selection).
     seconds : dict of str to float
         Wall time of part A and part B [s].
+    bands : dict of str to dict
+        Part A per speed band
+        (:func:`~avrisk.realism.periods.band_summaries`).
     """
 
     settings: RealismSettings
@@ -197,6 +213,7 @@ class RealismResult:
     us101: LaneChangeTables
     windows_available: int
     seconds: dict[str, float]
+    bands: dict[str, dict[str, Any]]
 
 
 def run_realism(
@@ -225,7 +242,7 @@ def run_realism(
         s = replace(s, guard=net.guard)
     road = Road()
     t0 = time.perf_counter()
-    everything = held_out_windows(round(s.window_s / DT), road)
+    everything = held_out_windows(round(s.window_s / DT), road, s.held_out)
     windows, labels = select_windows(everything, s.windows, s.seed)
     part_a = run_part_a(
         net,
@@ -264,6 +281,7 @@ def run_realism(
         us101=tables,
         windows_available=len(everything),
         seconds={"part_a": t1 - t0, "part_b": time.perf_counter() - t1},
+        bands=band_summaries(part_a, road),
     )
 
 
@@ -289,10 +307,9 @@ def _provenance(result: RealismResult, command: str) -> dict[str, Any]:
         "data_sha256": {p.name: sha256_file(p) for p in data_files().values()},
         "held_out": {
             "part_a": {
-                "what": "NGSIM I-80 car-following episodes of the test split "
-                "(pairs file's split column; lateral file by "
-                "avrisk.learning.ngsim.lateral_pair_split), cut into "
-                f"non-overlapping {a['window_s']:g} s windows",
+                "what": _held_out_words(s.held_out)
+                + f", cut into non-overlapping {a['window_s']:g} s windows",
+                "held_out": s.held_out,
                 "windows_available": result.windows_available,
                 "windows": a["windows"],
                 # None: every window; else the held-out indices drawn.
@@ -319,6 +336,19 @@ def _provenance(result: RealismResult, command: str) -> dict[str, Any]:
     }
 
 
+def _held_out_words(held_out: str) -> str:
+    if held_out == HELD_OUT_TEST:
+        return (
+            "NGSIM I-80 car-following episodes of the test split (pairs file's "
+            "split column; lateral file by avrisk.learning.ngsim.lateral_pair_split)"
+        )
+    return (
+        f"every NGSIM I-80 car-following episode of the period {held_out} "
+        "(both splits; the lateral file's too for 0400pm-0415pm, the only "
+        "period it covers)"
+    )
+
+
 def markdown(result: RealismResult, command: str) -> str:
     """``realism.md``: the four tables and how they were made."""
     s = result.settings
@@ -329,9 +359,11 @@ def markdown(result: RealismResult, command: str) -> str:
     return "\n\n".join(
         [
             f"# Realism of the learned drivers against held-out human data\n\n"
-            f"Drivers: {drivers} ({hashes}){_guard_words(s.guard)}.",
+            f"Drivers: {drivers} ({hashes}){_guard_words(s.guard)}. "
+            f"Part A held out: {_held_out_words(s.held_out)}.",
             part_a_table(result.summary_a),
             targets_table(result.targets),
+            periods_table([result]),
             collision_table(result.summary_a),
             lane_change_table(result.summary_b, s.scenes, s.horizon, s.seed + 1),
             f"![part A]({FILES['part_a_figure']})\n\n"
@@ -372,6 +404,7 @@ def write_report(result: RealismResult, out: Path, command: str) -> list[Path]:
         "part_a_targets": {
             name: [t.to_dict() for t in rows] for name, rows in result.targets.items()
         },
+        "part_a_bands": result.bands,
         "part_b": result.summary_b,
     }
     paths["figures"].write_text(json.dumps(figures, indent=1, allow_nan=False) + "\n")

@@ -70,6 +70,7 @@ def test_the_report_is_written_whole_with_its_provenance(
         "window_s": 3.0,
         "horizon": 6.0,
         "guard": load_driver_net(drivers_copy / "driver_net.npz").guard.to_dict(),
+        "held_out": "test",
     }
     held_out = prov["held_out"]["part_a"]
     assert held_out["windows"] == 3 and len(held_out["indices"]) == 3
@@ -83,10 +84,12 @@ def test_the_report_is_written_whole_with_its_provenance(
         "learned xi~P0, mean actions",
         "IDM",
     }
-    assert len(figures["part_a_targets"]["learned mu0"]) == 7
+    assert len(figures["part_a_targets"]["learned mu0"]) == 8
+    assert set(figures["part_a_bands"]) <= {"congested", "flowing"}
     assert "IDM+MOBIL" in figures["part_b"]["models"]
     text = (out / "realism.md").read_text()
-    for title in ("**A. Car following", "**Targets of issue 21", "**Collisions of "):
+    titles = ("**A. Car following", "**Targets of issue 21", "**Part A by held-out")
+    for title in (*titles, "**Collisions of "):
         assert title in text
     assert "**B. Lane changes** (1 random six-lane scenes x 6 vehicles x 6 s" in text
     assert "--drivers" in text and "--seed 5" in text

@@ -154,3 +154,15 @@ def test_candidates_print_their_validation_crashes_and_the_one_kept(
 def test_fewer_than_one_candidate_is_refused(tmp_path):
     result = _train("--candidates", "0", "--out", str(tmp_path))
     assert result.exit_code == 2 and "--candidates" in result.output
+
+
+def test_period_trains_on_that_period_and_an_unknown_one_is_a_one_line_error(tmp_path):
+    from avrisk.cli.train_drivers import _config
+
+    assert _config(None).periods is None
+    assert _config(None, ["0500pm-0515pm"]).periods == ("0500pm-0515pm",)
+    result = _train("--period", "0515pm-0530pm", "--out", str(tmp_path / "d"))
+    assert result.exit_code != 0
+    assert result.output.startswith("error: ") and "0400pm-0415pm" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "d").exists()

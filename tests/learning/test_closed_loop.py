@@ -309,6 +309,25 @@ def test_hard_braking_windows_are_drawn_as_often_as_asked():
     np.testing.assert_allclose(_minibatch_weights(win, gentle), np.full(6, 1 / 6))
 
 
+def test_the_congested_share_of_the_draws_is_as_asked_whatever_the_windows_mix():
+    flowing = queue_windows(n=3, steps=10)
+    flowing = type(flowing)(**{**flowing.__dict__, "v_l": np.full((3, 11), 8.0)})
+    slow = type(flowing)(**{**flowing.__dict__, "v_l": np.full((3, 11), 2.0)})
+    win = type(flowing)(
+        **{
+            k: np.concatenate([getattr(flowing, k), getattr(slow, k)[:1]])
+            for k in flowing.__dict__
+        }
+    )  # three flowing windows, one congested
+    p = _minibatch_weights(win, ClosedLoopConfig(congested_share=0.5))
+    np.testing.assert_allclose(p, [1 / 6, 1 / 6, 1 / 6, 1 / 2])
+    only_flowing = win.take([0, 1, 2])
+    p = _minibatch_weights(only_flowing, ClosedLoopConfig(congested_share=0.5))
+    np.testing.assert_allclose(p, np.full(3, 1 / 3))
+    with pytest.raises(ValueError, match="congested_share"):
+        ClosedLoopConfig(congested_share=1.0)
+
+
 def test_stress_replays_get_noise_of_their_own_only_when_asked():
     config = ClosedLoopConfig(iterations=5, batch_windows=8, stress_windows=4)
     minibatch = {

@@ -105,6 +105,7 @@ def part(windows, **models):
         replicates=1,
         human=followers(windows, recorded(windows), road, labels),
         models={k: followers(windows, r, road, labels) for k, r in models.items()},
+        replays=models,
     )
 
 
@@ -144,7 +145,7 @@ def test_the_tables_show_every_model_and_the_collisions_window():
     assert "| learned | 1 | 1 (1: 1) | 4.4 |" in collision_table(summary)
     assert "| IDM | 0 | - |" in collision_table(summary)
     targets = targets_table(part_a_targets(summary))
-    assert targets.count("\n") == 3 + 7  # title, blank, header, rule; 7 targets
+    assert targets.count("\n") == 3 + 8  # title, blank, header, rule; 8 targets
     assert "| collisions <= 0.5 /veh-h | 1800.00 FAIL |" in targets
 
 
@@ -164,3 +165,27 @@ def test_collisions_are_summed_per_window_over_its_replays():
     replays.crash[2] = False
     sim = followers(windows.take(take), replays, Road(), np.array([40, 7, 40, 40]))
     np.testing.assert_array_equal(sim.collisions_by_window, [2, 0])
+
+
+def test_speed_bands_split_the_same_replays_and_margins_agree_with_verdicts():
+    from avrisk.realism.periods import band_summaries, window_bands
+
+    windows = two_windows()  # leaders at 10 m/s and braking from 5 to 0 m/s
+    assert window_bands(windows).tolist() == ["flowing", "congested"]
+    crashing = crash_in_second_window(windows)
+    whole = part(windows, learned=crashing, IDM=recorded(windows))
+    bands = band_summaries(whole, Road())
+    assert set(bands) == {"flowing", "congested"}
+    congested = bands["congested"]["summary"]
+    assert congested["windows"] == 1
+    assert congested["models"]["learned"]["collisions"]["count"] == 1
+    assert bands["flowing"]["summary"]["models"]["learned"]["collisions"]["count"] == 0
+    assert (
+        congested["human"]["speed"]
+        == summarise_part_a(
+            part(windows.take([1]), learned=crashing.take([1]), IDM=crashing.take([1]))
+        )["human"]["speed"]
+    )
+    for band in bands.values():
+        for t in band["targets"]["learned"]:
+            assert t["margin"] is None or (t["margin"] >= 0) == t["passed"]

@@ -1,6 +1,7 @@
 """The held-out windows: the shipped test split only, and subsets of them."""
 
 import numpy as np
+import pytest
 
 from avrisk.learning.ngsim import load_i80_pairs
 from avrisk.realism.held_out import data_files, held_out_windows, select_windows
@@ -33,3 +34,27 @@ def test_a_subset_is_a_sorted_draw_named_by_held_out_index():
     again, same = select_windows(windows, 5, seed=3)
     assert same.tolist() == labels.tolist()
     assert len(select_windows(windows, 10**6, seed=3)[0]) == len(windows)
+
+
+def test_each_period_is_held_out_whole_and_the_lateral_file_joins_its_own_only():
+    from avrisk.learning.ngsim import LATERAL_PERIOD
+    from avrisk.learning.training_data import training_windows
+    from avrisk.realism.held_out import held_out_periods
+
+    road = Road()
+    periods = held_out_periods()
+    assert periods == ("0400pm-0415pm", "0500pm-0515pm")
+    by_period = {p: held_out_windows(150, road, p) for p in periods}
+    for p, windows in by_period.items():
+        assert windows.has_lateral.any() == (p == LATERAL_PERIOD)
+        # a period's windows are its training windows and its test windows
+        trained = training_windows(None, 150, (p,))
+        assert len(windows) > len(trained) > 0
+    # every period, both splits = the training windows and the test windows
+    everything = len(training_windows(None, 150)) + len(held_out_windows(150, road))
+    assert sum(len(w) for w in by_period.values()) == everything
+
+
+def test_an_unknown_held_out_set_is_refused():
+    with pytest.raises(ValueError, match="0400pm-0415pm"):
+        held_out_windows(150, Road(), "0515pm-0530pm")

@@ -98,13 +98,52 @@ class BrakeGuard:
         """
         gap = range_ahead - 0.5 * length
         closing = torch.clamp_min(-rate_ahead, 0.0)
+        needed = self.needed_decel(gap, closing)
+        engaged = (hit_ahead >= 0) & self.acts(gap, closing, needed)
+        return torch.where(engaged, torch.minimum(accel, -needed), accel)
+
+    def needed_decel(self, gap: Tensor, closing: Tensor) -> Tensor:
+        """The constant deceleration that ends the closing ``gap_floor`` short [m/s^2].
+
+        Parameters
+        ----------
+        gap : Tensor
+            Bumper gap to the vehicle ahead [m].
+        closing : Tensor
+            Closing speed, ``>= 0`` [m/s]; the same shape.
+
+        Returns
+        -------
+        Tensor
+            ``closing^2 / (2 max(gap - gap_floor, 0.1 m))``.
+        """
         room = torch.clamp_min(gap - self.gap_floor, _MIN_ROOM)
-        needed = closing * closing / (2.0 * room)
+        return closing * closing / (2.0 * room)
+
+    def acts(
+        self, gap: Tensor, closing: Tensor, needed: Tensor | None = None
+    ) -> Tensor:
+        """Where the brake acts on a vehicle ahead at ``gap`` closing at ``closing``.
+
+        Parameters
+        ----------
+        gap, closing : Tensor
+            As :meth:`needed_decel`'s.
+        needed : Tensor, optional
+            :meth:`needed_decel` of them, if already computed.
+
+        Returns
+        -------
+        Tensor of bool
+            The needed deceleration exceeds ``engage_decel`` or, with
+            ``hold_floor``, the gap is inside the floor and closing.
+        """
+        if needed is None:
+            needed = self.needed_decel(gap, closing)
         acts = needed > self.engage_decel
         if self.hold_floor:
             acts = acts | ((gap < self.gap_floor) & (closing > 0.0))
-        engaged = (hit_ahead >= 0) & acts
-        return torch.where(engaged, torch.minimum(accel, -needed), accel)
+        return acts
 
     def to_dict(self) -> dict[str, float | bool]:
         """The settings as JSON values (see :meth:`from_dict`).
