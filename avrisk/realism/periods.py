@@ -20,7 +20,7 @@ column per held-out set and band.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.learning.guard_fit import engagements, guard_conditions
@@ -29,9 +29,6 @@ from avrisk.realism.car_following import PartA, recorded, summarise_part_a
 from avrisk.realism.metrics import event_rate
 from avrisk.realism.targets import KS_METRICS, part_a_targets
 from avrisk.sim import Road
-
-if TYPE_CHECKING:
-    from avrisk.realism.report import RealismResult
 
 __all__ = [
     "BANDS",
@@ -42,6 +39,27 @@ __all__ = [
     "score_summary",
     "window_bands",
 ]
+
+
+class RealismResult(Protocol):
+    """What the tables read of :class:`avrisk.realism.report.RealismResult`.
+
+    A protocol, so that this module (which the report imports) does not
+    import the report back.
+    """
+
+    @property
+    def settings(self) -> Any: ...  # noqa: D102
+    @property
+    def part_a(self) -> PartA: ...  # noqa: D102
+    @property
+    def targets(self) -> dict[str, Any]: ...  # noqa: D102
+    @property
+    def bands(self) -> dict[str, Any]: ...  # noqa: D102
+    @property
+    def summary_a(self) -> dict[str, Any]: ...  # noqa: D102
+    @property
+    def summary_b(self) -> dict[str, Any]: ...  # noqa: D102
 
 
 def band_summaries(part: PartA, road: Road) -> dict[str, dict[str, Any]]:
