@@ -9,6 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
+from tests.interrupts import ctrl_c_at_chunk
 from tests.scenario_files import shortened_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -125,24 +126,12 @@ def test_the_bundled_lidar_pair_runs_on_the_same_draws(tmp_path):
 def test_ctrl_c_says_how_to_resume_and_the_resume_gives_the_same_answer(
     short, tmp_path, monkeypatch
 ):
-    from avrisk.pipeline.chunks import ChunkFiles
-
     args = ("ab", short, "--ego-b", HOLD_FAST, "--out", tmp_path / "ab", *SMALL)
     whole = invoke(*args[:4], "--out", tmp_path / "whole", *SMALL, "--json")
-    record = ChunkFiles.record
-    calls = []
-
-    def interrupted(self, batch):
-        calls.append(1)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return record(self, batch)
-
-    monkeypatch.setattr(ChunkFiles, "record", interrupted)
-    stopped = invoke(*args)
+    with ctrl_c_at_chunk(monkeypatch, 3):
+        stopped = invoke(*args)
     assert stopped.exit_code == 130
     assert "Resume with: avrisk ab" in " ".join(stopped.output.split())
-    monkeypatch.setattr(ChunkFiles, "record", record)
     resumed = invoke(*args, "--json")
     assert resumed.exit_code == whole.exit_code == 1
     a, b = json.loads(resumed.stdout), json.loads(whole.stdout)

@@ -11,8 +11,8 @@ import sys
 
 import pytest
 
-from avrisk.pipeline.chunks import ChunkFiles
 from tests.cli.test_bad_input import SMALL, invoke, one_error
+from tests.interrupts import ctrl_c_at_chunk
 from tests.scenario_files import shortened_scenario
 
 ARGS = ("--method", "naive", "--n-final", 10, "--failures", 0)
@@ -103,17 +103,7 @@ def test_a_folder_of_the_users_given_as_out_is_refused_and_left_as_found(tmp_pat
 def test_an_unfinished_run_whose_chunks_were_deleted_is_one_line(tmp_path, monkeypatch):
     scenario, out = _with_ego(tmp_path, {"policy": "idm_mobil"}), tmp_path / "run"
     args = ("run", scenario, "--out", out, *SMALL)  # three chunks
-    record = ChunkFiles.record
-    calls = []
-
-    def interrupted(self, batch):
-        calls.append(1)
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return record(self, batch)
-
-    monkeypatch.setattr(ChunkFiles, "record", interrupted)
-    assert invoke(*args).exit_code == 130
-    monkeypatch.setattr(ChunkFiles, "record", record)
+    with ctrl_c_at_chunk(monkeypatch, 2):
+        assert invoke(*args).exit_code == 130
     shutil.rmtree(out / "chunks")
     one_error(invoke(*args), "unfinished run whose chunks/ folder", f"delete {out}")

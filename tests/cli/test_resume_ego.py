@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
-from avrisk.pipeline.chunks import ChunkFiles
+from tests.interrupts import ctrl_c_at_chunk
 from tests.scenario_files import shortened_scenario
 
 pytest.importorskip("zmq")  # tests.cli.ego_servers needs the external extra
@@ -39,18 +39,8 @@ def in_process(tmp_path_factory):
 
 def interrupted(monkeypatch, *args):
     """``avrisk run ARGS`` stopped by Ctrl-C once its first chunk is recorded."""
-    record = ChunkFiles.record
-    calls = []
-
-    def stopped(self, batch):
-        calls.append(1)
-        if len(calls) == 2:
-            raise KeyboardInterrupt
-        return record(self, batch)
-
-    monkeypatch.setattr(ChunkFiles, "record", stopped)
-    assert invoke("run", *args).exit_code == 130
-    monkeypatch.setattr(ChunkFiles, "record", record)
+    with ctrl_c_at_chunk(monkeypatch, 2):
+        assert invoke("run", *args).exit_code == 130
 
 
 def test_a_python_ego_edited_between_sessions_is_refused(

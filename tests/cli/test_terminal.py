@@ -15,9 +15,9 @@ from avrisk.cli.app import COMMANDS, app, docstring
 from avrisk.cli.demo import analytic_table
 from avrisk.cli.estimator_options import estimator_options
 from avrisk.cli.run import COMPARE_DEFAULTS, compare
-from avrisk.pipeline.chunks import ChunkFiles
 from avrisk.rare import cross_entropy, get_estimator, naive_mc
 from avrisk.testing import beta_sum_problem, gaussian_linear_problem
+from tests.interrupts import ctrl_c_at_chunk
 from tests.scenario_files import shortened_scenario
 
 
@@ -285,17 +285,8 @@ def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(
     short_scenario, tmp_path, monkeypatch
 ):
     out = tmp_path / "run"
-    record = ChunkFiles.record
-    calls = []
-
-    def interrupted(self, batch):
-        calls.append(1)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return record(self, batch)
-
-    monkeypatch.setattr(ChunkFiles, "record", interrupted)
-    result = invoke("run", short_scenario, "--out", out, *RUN_ARGS)
+    with ctrl_c_at_chunk(monkeypatch, 3):
+        result = invoke("run", short_scenario, "--out", out, *RUN_ARGS)
     assert result.exit_code == 130
     assert "Traceback" not in result.output and "Aborted" not in result.output
     (line,) = [ln for ln in result.stderr.splitlines() if "Resume with:" in ln]
@@ -304,7 +295,6 @@ def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(
     assert command[2] == str(short_scenario) and str(out) in command
     assert "--n-per-iter" in command and "--gamma-test" in command
 
-    monkeypatch.setattr(ChunkFiles, "record", record)
     resumed = invoke(*command[1:])
     assert resumed.exit_code == 0, resumed.output
     assert "resumed: 120 rollouts reused from the earlier session, 100 simulated" in (
