@@ -49,7 +49,7 @@ import torch
 
 #: Settings of each preset: the estimator and its settings, at 20,000 rollouts
 #: (search included; splitting's cost depends on its number of levels).
-PRESETS: dict[str, tuple[str, dict[str, Any]]] = {
+PRESETS: dict[str, tuple[str | None, dict[str, Any]]] = {
     "ce": ("ce", dict(rho=0.1, alpha=0.8, n_per_iter=2000, n_iter=5, n_final=10_000)),
     "defensive": (
         "defensive",
@@ -62,6 +62,8 @@ PRESETS: dict[str, tuple[str, dict[str, Any]]] = {
     "splitting": ("splitting", dict(n_particles=4000, p0=0.1)),
     "splitting_is": ("splitting_is", dict(n_particles=2000, p0=0.1, n_final=10_000)),
     "naive": ("naive", dict(n_final=20_000)),
+    # what ``avrisk run SCENARIO`` does: the default method at its own defaults
+    "default": (None, {}),
 }
 
 
@@ -98,6 +100,9 @@ def run(args: argparse.Namespace) -> None:
     """Run one preset for the seeds not yet in ``args.out``."""
     from avrisk.assembly import SimulationObjective, base_distribution
     from avrisk.rare import estimate as estimate_p
+    from avrisk.rare.estimator import DEFAULT_METHOD, estimator_class
+    from avrisk.rare.trust import estimate_trust
+    from avrisk.report.answer import SCENARIO_WORDING
     from avrisk.scenario import load_spec
 
     torch.set_num_threads(args.threads)
@@ -105,6 +110,7 @@ def run(args: argparse.Namespace) -> None:
     objective = SimulationObjective(spec, device=args.device)
     base = base_distribution(spec)
     method, settings = PRESETS[args.preset]
+    method = method or DEFAULT_METHOD
     overrides = dict(_assignment(text) for text in args.set)
     settings = {**settings, **overrides}
     preset = args.preset + "".join(f" {k}={v}" for k, v in overrides.items())
@@ -129,6 +135,13 @@ def run(args: argparse.Namespace) -> None:
                 **settings,
             )
         seconds = time.perf_counter() - start
+        as_dict = estimate.to_dict()
+        trust = {  # the CLI's label at every threshold
+            f"{g['gamma']:g}": str(
+                estimate_trust(estimator_class(method), as_dict, g, SCENARIO_WORDING)
+            )
+            for g in as_dict["by_gamma"]
+        }
         record = {
             "preset": preset,
             "method": method,
@@ -138,6 +151,7 @@ def run(args: argparse.Namespace) -> None:
             "n_evals": estimate.n_evals,
             "seconds": seconds,
             "by_gamma": [g.to_dict() for g in estimate.by_gamma.values()],
+            "trust": trust,
             # the proposal's choices, where the estimator makes some
             "fit": {
                 key: estimate.details[key]

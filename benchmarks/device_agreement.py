@@ -42,11 +42,15 @@ import numpy as np
 import torch
 
 from avrisk.assembly import ScenarioSimulator, SimulationObjective, base_distribution
+from avrisk.pipeline.provenance import stamp
+from avrisk.rare.intervals import clopper_pearson
 from avrisk.rare.problem import chunk_rng, sample_seeds
 from avrisk.scenario import load_spec
 
 #: Thresholds [s] counted.
 GAMMAS = (0.1, 0.3, 0.5, 1.0)
+#: Names of the simulator's contact codes (``RolloutResult.contact``).
+MECHANISMS = ("no_contact", "rear_end", "hit_from_behind", "side")
 SCHEMA = "avrisk.device_agreement/1"
 
 
@@ -274,6 +278,137 @@ def compare(args: argparse.Namespace) -> None:
         )
 
 
+def near_draws(
+    spec, chunks: dict[int, dict], below: float, n_rows: int
+) -> tuple[list[tuple[float, int, int]], np.ndarray, np.ndarray]:
+    """X and seeds of up to ``n_rows`` recorded rows with ``f <= below``.
+
+    The rows are spread evenly over their sorted recorded ``f`` (all of them
+    when there are no more than ``n_rows``). Returns the picked ``(f, chunk,
+    row)`` triples, X (R, D) and int64 seeds (R,).
+    """
+    first = next(iter(chunks.values()))
+    near = sorted(
+        (f, record["chunk"], row)
+        for record in chunks.values()
+        for row, (f, _) in _near_rows(record).items()
+        if f <= below
+    )
+    spread = np.unique(np.linspace(0, len(near) - 1, n_rows).round().astype(int))
+    picked = [near[i] for i in spread] if near else []
+    x, seeds = [], []
+    for chunk in sorted({c for _, c, _ in picked}):  # each chunk drawn once
+        rows = [r for _, c, r in picked if c == chunk]
+        chunk_x, chunk_seeds = chunk_draws(
+            spec, first["seed"], chunk, first["chunk_size"]
+        )
+        x.extend(chunk_x[rows])
+        seeds.extend(chunk_seeds[rows])
+    picked = sorted(picked, key=lambda item: (item[1], item[2]))  # as drawn
+    return picked, np.array(x), np.array(seeds, dtype=np.int64)
+
+
+def recheck(args: argparse.Namespace) -> None:
+    """Simulate a folder's near rows again on this device and compare ``f``.
+
+    Every recorded row with ``f <= --below`` (a GPU run's hits, say) is drawn
+    again from its chunk and simulated here; prints how many keep their ``f``
+    bit for bit, the largest difference, and the hits at each threshold on
+    both sides. Rows that were not near on the recording device are not
+    simulated, so this checks that its hits are hits here, not the reverse
+    (``compare`` on whole chunks does both).
+    """
+    chunks = read_chunks(args.source)
+    first = next(iter(chunks.values()))
+    spec = load_spec(first["scenario"])
+    objective = SimulationObjective(spec, device=args.device)
+    if objective.definition() != first["defines_p"]:
+        sys.exit(f"{args.source} was simulated for another definition of p")
+    picked, x, seeds = near_draws(spec, chunks, args.below, 10**9)
+    f_then = np.array([f for f, _, _ in picked])
+    f_now = simulate_rows(objective.simulator, x, seeds, args.sub_batch)["f"]
+    diff = np.abs(f_now - f_then)
+    summary = {
+        "source": str(args.source),
+        "then": first["computed_with"],
+        "now": objective.computed_with(),
+        "rows": len(picked),
+        "rows_identical": int(np.sum(f_now == f_then)),
+        "max_abs_f_diff_s": float(diff.max(initial=0.0)),
+        "hits_then_now": {
+            f"{g:g}": [int(np.sum(f_then <= g)), int(np.sum(f_now <= g))]
+            for g in GAMMAS
+            if g <= args.below
+        },
+    }
+    print(json.dumps(summary))
+
+
+def pooled_reference(args: argparse.Namespace) -> None:
+    """A naive reference pooled from folders of simulated chunks.
+
+    Each folder holds one seed's chunks (``simulate``'s ``--out``); seeds
+    differ, so the draws are independent and the chunks pool into one naive
+    sample. Any set of whole chunks counts: which chunks a process finished
+    before its time ran out does not depend on their outcomes. Hits come
+    from the recorded near rows, so thresholds above the folders' ``--near``
+    are left out. Writes ``avrisk.reference/1`` (as ``reference.py
+    --summarize`` does: per threshold the hits, ``p``, its standard error, the
+    exact 95% interval and the hits by contact), readable by
+    ``coverage.py table``.
+    """
+    records = [r for path in args.folders for r in read_chunks(path).values()]
+    seeds = sorted({r["seed"] for r in records})
+    if len(seeds) != len(args.folders):
+        sys.exit("each folder must hold one seed, and no seed two folders")
+    definitions = {json.dumps(r["defines_p"], sort_keys=True) for r in records}
+    if len({r["scenario"] for r in records}) != 1 or len(definitions) != 1:
+        sys.exit("the folders were simulated for different definitions of p")
+    near = min(r["near_threshold"] for r in records)
+    n = sum(r["n"] for r in records)
+    by_gamma = []
+    for g in sorted(g for g in args.gammas if g <= near):
+        mech = dict.fromkeys(MECHANISMS, 0)
+        for r in records:
+            for f, contact in zip(r["near"]["f"], r["near"]["contact"], strict=True):
+                if f <= g:
+                    mech[MECHANISMS[contact]] += 1
+        k = sum(mech.values())
+        by_gamma.append(
+            {
+                "gamma": g,
+                "n_hits": k,
+                "p": k / n,
+                "stderr": math.sqrt(k / n * (1 - k / n) / n),
+                "ci": list(clopper_pearson(k, n)),
+                "hits_by_contact": mech,
+            }
+        )
+    computed = sorted({json.dumps(r["computed_with"], sort_keys=True) for r in records})
+    summary = {
+        "schema": "avrisk.reference/1",
+        "scenario": records[0]["scenario"],
+        "command": "benchmarks/device_agreement.py simulate "
+        f"{records[0]['scenario']} --seed S (S = {', '.join(map(str, seeds))}), "
+        f"pooled by device_agreement.py reference",
+        "seed": "+".join(map(str, seeds)),
+        "n": n,
+        "n_failed": sum(r["failed"] for r in records),
+        "chunks": len(records),
+        "crashes": sum(r["crashes"] for r in records),
+        "by_gamma": by_gamma,
+        "provenance": stamp(records[0]["defines_p"], json.loads(computed[0])),
+        "computed_with_all": [json.loads(c) for c in computed],
+    }
+    args.out.write_text(json.dumps(summary, indent=2) + "\n")
+    main = by_gamma[0]
+    print(
+        f"{summary['scenario']}: {n:,} rollouts, p({main['gamma']:g} s) = "
+        f"{main['p']:.3e} [{main['ci'][0]:.3e}, {main['ci'][1]:.3e}] "
+        f"({main['n_hits']} hits); wrote {args.out}"
+    )
+
+
 def fixture(args: argparse.Namespace) -> None:
     """Write the replay test's rows: near rows, simulated again here.
 
@@ -285,20 +420,7 @@ def fixture(args: argparse.Namespace) -> None:
     first = next(iter(chunks.values()))
     spec = load_spec(first["scenario"])
     objective = SimulationObjective(spec, device=args.device)
-    near = sorted(
-        (f, record["chunk"], row)
-        for record in chunks.values()
-        for row, (f, _) in _near_rows(record).items()
-        if f <= args.below
-    )
-    spread = np.unique(np.linspace(0, len(near) - 1, args.rows).round().astype(int))
-    picked = [near[i] for i in spread]
-    draws = {  # each chunk drawn once, however many of its rows are picked
-        c: chunk_draws(spec, first["seed"], c, first["chunk_size"])
-        for c in sorted({c for _, c, _ in picked})
-    }
-    x = np.array([draws[c][0][row] for _, c, row in picked])
-    seeds = np.array([draws[c][1][row] for _, c, row in picked], dtype=np.int64)
+    picked, x, seeds = near_draws(spec, chunks, args.below, args.rows)
     rows = simulate_rows(objective.simulator, x, seeds, len(x))
     args.out.write_text(
         json.dumps(
@@ -383,6 +505,24 @@ def main(argv: list[str] | None = None) -> None:
     )
     ref.add_argument("folder", type=Path, help="Chunks of --chunk-size 8192.")
     ref.add_argument("lines", type=Path, nargs="+", help="OUT.shard*.chunks.jsonl")
+    chk = sub.add_parser(
+        "recheck", help="Simulate a folder's near rows again here; compare f."
+    )
+    chk.add_argument("source", type=Path, help="A folder of simulated chunks.")
+    chk.add_argument("--below", type=float, default=0.5, help="Rows with f <= this.")
+    chk.add_argument("--sub-batch", type=int, default=8192)
+    chk.add_argument("--device", default="cpu")
+    pool = sub.add_parser(
+        "reference", help="A naive reference pooled from folders of seeds."
+    )
+    pool.add_argument("folders", type=Path, nargs="+", help="One seed each.")
+    pool.add_argument(
+        "--gammas",
+        type=lambda text: [float(g) for g in text.split(",")],
+        default=[0.1, 0.14, 0.2, 0.3, 0.5],
+        help="Thresholds [s], comma-separated.",
+    )
+    pool.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
     torch.set_num_threads(getattr(args, "threads", 1))
     commands = {
@@ -390,6 +530,8 @@ def main(argv: list[str] | None = None) -> None:
         "compare": compare,
         "fixture": fixture,
         "against-reference": against_reference,
+        "recheck": recheck,
+        "reference": pooled_reference,
     }
     commands[args.command](args)
 
