@@ -295,7 +295,9 @@ def near_draws(
         if f <= below
     )
     spread = np.unique(np.linspace(0, len(near) - 1, n_rows).round().astype(int))
-    picked = [near[i] for i in spread] if near else []
+    picked = sorted(  # in the order drawn: chunk by chunk, row by row
+        (near[i] for i in spread) if near else [], key=lambda item: item[1:]
+    )
     x, seeds = [], []
     for chunk in sorted({c for _, c, _ in picked}):  # each chunk drawn once
         rows = [r for _, c, r in picked if c == chunk]
@@ -304,7 +306,6 @@ def near_draws(
         )
         x.extend(chunk_x[rows])
         seeds.extend(chunk_seeds[rows])
-    picked = sorted(picked, key=lambda item: (item[1], item[2]))  # as drawn
     return picked, np.array(x), np.array(seeds, dtype=np.int64)
 
 
