@@ -101,6 +101,7 @@ def run(args: argparse.Namespace) -> None:
     from avrisk.assembly import SimulationObjective, base_distribution
     from avrisk.rare import estimate as estimate_p
     from avrisk.rare.estimator import DEFAULT_METHOD, estimator_class
+    from avrisk.rare.splitting import SplittingError
     from avrisk.rare.trust import estimate_trust
     from avrisk.report.answer import SCENARIO_WORDING
     from avrisk.scenario import load_spec
@@ -124,16 +125,21 @@ def run(args: argparse.Namespace) -> None:
         start = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # low-hit runs warn; recorded below
-            estimate = estimate_p(
-                method,
-                objective,
-                base,
-                args.gamma,
-                seed=seed,
-                gamma_test=gamma_test,
-                batch_size=args.batch_size,
-                **settings,
-            )
+            try:
+                estimate = estimate_p(
+                    method,
+                    objective,
+                    base,
+                    args.gamma,
+                    seed=seed,
+                    gamma_test=gamma_test,
+                    batch_size=args.batch_size,
+                    **settings,
+                )
+            except SplittingError as err:  # the levels ran out: the user's error
+                _record(args.out, {"preset": preset, "seed": seed, "error": str(err)})
+                print(f"{args.scenario} {preset} seed {seed}: {err}", file=sys.stderr)
+                continue
         seconds = time.perf_counter() - start
         as_dict = estimate.to_dict()
         trust = {  # the CLI's label at every threshold
@@ -155,21 +161,31 @@ def run(args: argparse.Namespace) -> None:
             # the proposal's choices, where the estimator makes some
             "fit": {
                 key: estimate.details[key]
-                for key in ("informative_threshold", "along_slope", "n_components")
+                for key in (
+                    "informative_threshold",
+                    "along_slope",
+                    "n_components",
+                    "answer",
+                )
                 if key in (estimate.details or {})
             },
             "defines_p": objective.definition(),
             "computed_with": objective.computed_with(),
             "commit": commit,
         }
-        with args.out.open("a") as stream:
-            stream.write(json.dumps(record) + "\n")
+        _record(args.out, record)
         print(
             f"{args.scenario} {preset} seed {seed}: p={estimate.p:.3g} "
             f"+-{estimate.stderr:.2g} n={estimate.n_evals:,} ({seconds:.0f} s)",
             file=sys.stderr,
             flush=True,
         )
+
+
+def _record(out: Path, record: dict[str, Any]) -> None:
+    """Append one run's JSON line."""
+    with out.open("a") as stream:
+        stream.write(json.dumps(record) + "\n")
 
 
 def widened(
@@ -193,6 +209,35 @@ def widened(
     """
     widen = (1.96 * se_ref) ** 2
     return p - np.sqrt((p - lo) ** 2 + widen), p + np.sqrt((hi - p) ** 2 + widen)
+
+
+def labels(
+    runs: list[dict[str, Any]],
+    gamma: float,
+    p: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    p_ref: float,
+    se_ref: float,
+) -> dict[str, int | None]:
+    """How the CLI's trust label judged the runs at one threshold.
+
+    Runs labelled ``ok``; of them, those covering the reference (widened by
+    its error, as :func:`judge` counts) and those off by more than 2 times
+    either way. None where the runs recorded no label.
+    """
+    words = [(r.get("trust") or {}).get(f"{gamma:g}") for r in runs]
+    if any(w is None for w in words):
+        return {"ok": None, "ok_covering": None, "ok_off_2x": None}
+    ok = np.array([w == "ok" for w in words])
+    low, high = widened(p, lo, hi, se_ref)
+    covering = (low <= p_ref) & (p_ref <= high)
+    off = (p > 2 * p_ref) | (p < p_ref / 2)
+    return {
+        "ok": int(ok.sum()),
+        "ok_covering": int((ok & covering).sum()),
+        "ok_off_2x": int((ok & off).sum()),
+    }
 
 
 def judge(
@@ -247,6 +292,8 @@ def table(args: argparse.Namespace) -> None:
         for line in path.read_text().splitlines()
         if line
     ]
+    raised = [r for r in records if "error" in r]
+    records = [r for r in records if "error" not in r]
     for record in records:
         if record["defines_p"] != reference["provenance"]["defines_p"]:
             sys.exit(
@@ -263,9 +310,10 @@ def table(args: argparse.Namespace) -> None:
     print(
         "| estimator | gamma [s] | p reference | seeds | rollouts/run | "
         "mean rel. bias +- se | covered (unwidened) | runs above / below | "
-        "calibration | variance ratio | median Pareto k | s/run |"
+        "calibration | variance ratio | median Pareto k | s/run | raised | "
+        "labelled ok (covering) | ok and off 2x |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     rows = []
     for preset in presets:
         runs = sorted(
@@ -285,6 +333,8 @@ def table(args: argparse.Namespace) -> None:
             hi = np.array([e["ci"][1] for e in per_run])
             pk = [e["pareto_k"] for e in per_run if e["pareto_k"] is not None]
             figures = judge(p, lo, hi, ref[g]["p"], ref[g]["stderr"], n)
+            figures |= labels(runs, g, p, lo, hi, ref[g]["p"], ref[g]["stderr"])
+            figures["raised"] = sum(r["preset"] == preset for r in raised)
             row = {
                 "preset": preset,
                 "gamma": g,
@@ -302,7 +352,9 @@ def table(args: argparse.Namespace) -> None:
                 f"| {figures['above']} / {figures['below']} "
                 f"| {figures['calibration']:.2f} "
                 f"| {figures['variance_ratio']:.0f}x "
-                f"| {row['median_pareto_k']:.2f} | {seconds:.0f} |"
+                f"| {row['median_pareto_k']:.2f} | {seconds:.0f} "
+                f"| {figures['raised']} | {figures['ok']} ({figures['ok_covering']}) "
+                f"| {figures['ok_off_2x']} |"
             )
     if args.json:
         args.json.write_text(json.dumps({"reference": reference, "rows": rows}))

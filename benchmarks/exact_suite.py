@@ -161,6 +161,8 @@ def _run_engine(problem: Any, method: str, seed: int, settings: dict) -> dict:
         "pareto_k": getattr(main, "pareto_k", None),
         "trust": trust.word,
         "reasons": list(trust.reasons),
+        # which of its estimates answered, where a method has two
+        "answer": (estimate.details or {}).get("answer"),
     }
 
 

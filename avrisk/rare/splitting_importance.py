@@ -96,14 +96,25 @@ a region no replicate reached. A replicate whose ``max_levels`` sets end above
 left out of the fit and the run says caution; only when none reaches
 ``gamma`` is it subset simulation's error.
 
-The estimate is that of the importance-sampling stage alone: the proposal is
-fixed before its samples are drawn, so it is unbiased whatever the particles,
-and its standard error is the weighted mean's (the usual CLT interval, trusted
-while the hits' weights have Pareto ``k <= 0.7``). The splitting estimate of
-the same run is kept beside it in ``details`` (``splitting``) as a cross-check
-from the same budget (the replicates' mean, and each replicate's in
-``details["replicates"]``); the two are not independent (the run's particles
-made the proposal) but have different errors.
+The answer
+----------
+The importance-sampling estimate: the proposal is fixed before its samples
+are drawn, so it is unbiased whatever the particles, and its standard error
+is the weighted mean's (the usual CLT interval, trusted while the hits'
+weights have Pareto ``k <= 0.7``). Unless the particles say beforehand that
+the levels' own product (the replicates' mean) will be more precise
+(:func:`levels_more_precise`): the particles' weights under fits to the
+other folds of the chains predict the importance sample's error, both the
+share of ``p`` it will miss (where its proposal is no denser than ``P0``)
+and its variance on the rest, and a proposal that cannot hold what they
+found (many regions with few particles each in many dimensions; a set that
+narrows ``P0``'s spread rather than shifting it) predicts a large one.
+``details["answer"]`` says which (``"importance_sampling"`` or
+``"splitting"``); both estimates are kept in
+``details`` (``importance_sampling``, ``splitting``, each replicate's in
+``details["replicates"]``) as a cross-check from the same budget: the two
+are not independent (the run's particles made the proposal) but have
+different errors.
 
 :class:`SplittingImportanceSampling` is registered as ``"splitting_is"``;
 :func:`splitting_is` is the top-level function.
@@ -120,6 +131,8 @@ using Gaussian densities revisited." Structural Safety 76, 2019.
 from __future__ import annotations
 
 import dataclasses
+import math
+import warnings
 from collections.abc import Sequence
 from typing import Any, Literal, NamedTuple
 
@@ -135,9 +148,13 @@ from avrisk.rare.estimator import (
 )
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
-from avrisk.rare.particle_fit import particle_proposal, slope_direction
+from avrisk.rare.particle_fit import (
+    HeldOutWeights,
+    particle_proposal,
+    slope_direction,
+)
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
-from avrisk.rare.results import Estimate
+from avrisk.rare.results import Estimate, GammaEstimate
 from avrisk.rare.splitting import (
     Z_CONFIDENCE,
     SplittingInfo,
@@ -170,6 +187,10 @@ ADVICE = Advice(
 #: they disagree (*Replicates*): two-sided 0.3% for normal errors, as subset
 #: simulation's own errors are somewhat optimistic.
 DISAGREEMENT_Z = 3.0
+
+#: What ``details["importance_sampling"]`` keeps of the sample's estimate at
+#: each threshold (the answer's may be the levels').
+SAMPLED_KEYS = ("p", "stderr", "ci", "n_hits", "ess", "pareto_k")
 
 #: Extra key of the fit's generator (k-means++ seeding), so that it draws no
 #: chunk's stream.
@@ -300,15 +321,17 @@ class SplittingImportanceSampling(SubsetSimulation):
 
     @staticmethod
     def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
-        """Replicates that ran out of levels, or an estimate no replicate bears out.
+        """Replicates that ran out of levels, or an answer the other estimate belies.
 
         Few particles at a level do not bias the importance-sampling stage
         (its weights' diagnostics speak for it), nor do replicates that ended
         in different places: the proposal holds what either found
-        (*Replicates*). But an importance-sampling estimate far from every
+        (*Replicates*). But an importance-sampling answer far from every
         replicate's own estimate, beyond both errors, says the proposal misses
         where the particles were (a shift fitted on too few coordinates, a
-        region dropped), which its weights alone may not show.
+        region dropped), which its weights alone may not show. When the levels
+        answer (*The answer*), their own doubts count (a level held by a
+        handful of particles), and so does an importance sample far from them.
         """
         details = estimate.get("details") or {}
         main = next(
@@ -318,6 +341,20 @@ class SplittingImportanceSampling(SubsetSimulation):
         if gamma != estimate.get("gamma") or main is None or not own:
             return ()
         reasons = []
+        if details.get("answer") == "splitting":  # the levels' own doubts
+            for survivors in details.get("survivors") or []:  # per replicate
+                one = {"details": {"survivors": survivors}}
+                reasons.extend(SubsetSimulation.doubts(one, gamma)[:1])
+            reasons = list(dict.fromkeys(reasons))
+            sampled = (details.get("importance_sampling") or {}).get(str(gamma))
+            if sampled and "stderr" in sampled and estimates_disagree(sampled, main):
+                reasons.append(
+                    f"the levels found p = {main['p']:.2g} but importance sampling "
+                    f"from their particles {sampled['p']:.2g}, further apart than "
+                    "their errors allow: the levels may have lost part of the "
+                    "failure set (compare runs with other seeds, or raise "
+                    "n_particles)"
+                )
         exhausted = details.get("replicates_exhausted") or 0
         if exhausted:
             reasons.append(
@@ -326,7 +363,9 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "mechanism that does not end in the event): the answer rests on "
                 "the others (compare runs with other seeds, or raise max_levels)"
             )
-        if all(estimates_disagree(main, r) for r in own):
+        if details.get("answer") != "splitting" and all(
+            estimates_disagree(main, r) for r in own
+        ):
             levels = ", ".join(f"{r['p']:.2g}" for r in own)
             reasons.append(
                 f"importance sampling found p = {main['p']:.2g} but the levels of "
@@ -399,6 +438,9 @@ class SplittingImportanceSampling(SubsetSimulation):
         if "splitting" not in details:
             return levels
         by_gamma = sorted(estimate["by_gamma"], key=lambda g: g["gamma"])
+        sampled = details.get("importance_sampling")
+        if sampled:  # the sample's own estimates, whichever is the answer
+            by_gamma = [{**g, **sampled[str(g["gamma"])]} for g in by_gamma]
         main = next(g for g in by_gamma if g["gamma"] == estimate["gamma"])
         fit = (
             details["n_components"],
@@ -440,11 +482,19 @@ class SplittingImportanceSampling(SubsetSimulation):
                     for g, s in zip(by_gamma, own, strict=True)
                 ],
                 note=(
-                    "A cross-check from the same run: the answer (importance "
-                    "sampling) beside the product of the levels' shares. The two "
-                    "are not independent (the levels made the proposal) but err "
+                    "A cross-check from the same run: importance sampling beside "
+                    "the product of the levels' shares. The two are not "
+                    "independent (the levels made the proposal) but err "
                     "differently: intervals far apart say one of them missed part "
-                    "of the event."
+                    "of the event. "
+                    + (
+                        "The answer is the levels' product: before the final "
+                        "samples were drawn, the particles predicted a larger "
+                        "variance for them (the proposal cannot hold everything "
+                        "the levels found)."
+                        if details.get("answer") == "splitting"
+                        else "The answer is importance sampling's."
+                    )
                 ),
             ),
         ]
@@ -502,11 +552,24 @@ class SplittingImportanceSampling(SubsetSimulation):
         stage = context.stage(
             problem, proposal, s.n_final, FINAL_STAGE, final_after=n_evals
         )
-        by_gamma = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            sampled = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
+        from_levels = levels_more_precise(
+            fitted.held_out, combined.by_gamma[problem.gamma], s.n_final
+        )
+        if not from_levels:  # the sample's doubts are the answer's
+            for caught_warning in caught:
+                warnings.warn_explicit(
+                    caught_warning.message,
+                    caught_warning.category,
+                    caught_warning.filename,
+                    caught_warning.lineno,
+                )
         return Estimate(
             method="splitting_is",
             gamma=problem.gamma,
-            by_gamma=by_gamma,
+            by_gamma=dict(combined.by_gamma) if from_levels else sampled,
             n_evals=n_evals + stage.values.size,
             proposal=proposal,
             stopped_by=stage.stopped_by or "budget",
@@ -528,6 +591,13 @@ class SplittingImportanceSampling(SubsetSimulation):
                     str(g): {"p": e.p, "ci": list(e.ci)}
                     for g, e in combined.by_gamma.items()
                 },
+                "importance_sampling": {
+                    str(g): {k: e.to_dict()[k] for k in SAMPLED_KEYS}
+                    for g, e in sampled.items()
+                },
+                "answer": "splitting" if from_levels else "importance_sampling",
+                "held_out_uncovered": fitted.held_out.uncovered,
+                "held_out_covered_weight": fitted.held_out.covered_mean_weight,
                 "replicates": [
                     {"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own
                 ],
@@ -535,6 +605,34 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "replicates_exhausted": n_exhausted,
             },
         )
+
+
+def levels_more_precise(
+    held_out: HeldOutWeights, levels: GammaEstimate, n_final: int
+) -> bool:
+    """Whether the levels' estimate is expected to be nearer ``p`` than the IS stage's.
+
+    Decided before the importance sample is drawn, from the particles'
+    held-out weights (:class:`~avrisk.rare.particle_fit.HeldOutWeights`):
+    the importance sample misses the share ``s`` of ``p`` where its proposal
+    is no denser than ``P0``, and on the rest its ``n_final`` draws have
+    relative variance ``(E[w 1{w < 1} | F] / p - (1 - s)^2) / n_final``, so
+    its expected squared relative error is ``s^2`` plus that; the levels'
+    is ``(stderr / p)^2``, with ``p`` the levels' estimate. Where the
+    proposal cannot hold what the particles found (many regions with few
+    particles each in many dimensions; a set that narrows ``P0``'s spread
+    rather than shifting it) the levels' product is the better answer; where
+    it can, the importance sample's. The decision uses the particles only,
+    never the importance sample, so it selects no draw of it. It does use the
+    levels' ``p``: a low one favours the levels, but only near the break-even
+    point, where the two are about equally precise.
+    """
+    p, stderr = levels.p, levels.stderr
+    s, covered = held_out
+    if not (math.isfinite(s) and p > 0 and math.isfinite(stderr)):
+        return False
+    sampled = max(covered / p - (1.0 - s) ** 2, 0.0) / n_final
+    return s**2 + sampled > (stderr / p) ** 2
 
 
 def replicates_disagree(own: Sequence[Estimate]) -> bool:

@@ -18,12 +18,21 @@ from avrisk.rare import (
 )
 from avrisk.rare.cross_entropy import SEARCH_ADVICE, CESettings
 from avrisk.rare.estimator import estimator_class
-from avrisk.rare.particle_fit import particle_proposal, slope_direction
+from avrisk.rare.families.standard_space import StandardSpaceShift
+from avrisk.rare.particle_fit import (
+    PREDICTION_FOLDS,
+    HeldOutWeights,
+    held_out_weights,
+    particle_proposal,
+    slope_direction,
+)
+from avrisk.rare.results import GammaEstimate
 from avrisk.rare.splitting import SubsetSimulation
 from avrisk.rare.splitting_importance import (
     ADVICE,
     SplittingImportanceSampling,
     SplittingISSettings,
+    levels_more_precise,
 )
 from avrisk.rare.trust import estimate_trust
 from avrisk.report.plots import table_cells
@@ -33,6 +42,7 @@ from avrisk.testing import (
     four_branch_problem,
     gaussian_linear_problem,
 )
+from avrisk.testing.suite import suite_problem
 
 
 def sis(problem, seed=0, **kw):
@@ -84,6 +94,70 @@ def test_one_region_in_high_dimension_is_one_component():
     q = particle_proposal(z, chain, base, SplittingISSettings(), rng).proposal
     assert q.n_components == 1
     assert q.components[0].mean[0] == pytest.approx(4.0, abs=0.2)
+
+
+def _mean_shift_fitter(base, scale=1.0):
+    """A fitter of one shift, the mean of the points it is given (times scale)."""
+
+    def fitter(points, point_chain):
+        shift = StandardSpaceShift(base, scale * points.mean(axis=0))
+        return [shift], np.ones(1), np.ones(base.dim, dtype=bool)
+
+    return fitter
+
+
+def test_held_out_weights_are_the_particles_p0_over_q():
+    # particles N(m, 0.3^2) around m = (3, 0); a shift to their mean m has
+    # q / p0 = exp(m.z - |m|^2 / 2), so each weighs 1 / (lam + (1 - lam) q /
+    # p0) < 1, and the mean of that under fits to the other folds is about
+    # its value at the true m
+    d, lam = 2, 0.1
+    base = FixedCovNormal(np.zeros(d), cov=np.eye(d))
+    rng = np.random.default_rng(3)
+    m = np.array([3.0, 0.0])
+    z = rng.normal(m, 0.3, (2000, d))
+    chain = np.repeat(np.arange(200), 10)
+    held_out = held_out_weights(z, chain, _mean_shift_fitter(base), base, lam, rng)
+    expected = np.mean(1.0 / (lam + (1 - lam) * np.exp(z @ m - m @ m / 2)))
+    assert held_out.uncovered == 0.0
+    assert held_out.covered_mean_weight == pytest.approx(expected, rel=0.05)
+    # a fit that stays at P0 (its shift zero) covers none of them: w = 1
+    at_p0 = held_out_weights(z, chain, _mean_shift_fitter(base, 0.0), base, lam, rng)
+    assert at_p0 == (1.0, 0.0)
+    # fewer chains than folds: nothing to hold out
+    few = np.arange(len(z)) % (PREDICTION_FOLDS - 1)
+    assert np.isnan(
+        held_out_weights(z, few, _mean_shift_fitter(base), base, lam, rng).uncovered
+    )
+
+
+def test_the_levels_answer_when_the_particles_predict_them_more_precise():
+    levels = GammaEstimate(0.0, 1e-6, 2e-7, (6e-7, 1.4e-6), 50, 50.0, 4000)
+    # the sample's relative variance per draw 1e-4 / 1e-6 - 1 = 99; over
+    # 10,000 draws 0.0099 < 0.04 = (0.2)^2: importance sampling; with 10
+    # times the weight 0.0999 > 0.04: the levels
+    assert not levels_more_precise(HeldOutWeights(0.0, 1e-4), levels, 10_000)
+    assert levels_more_precise(HeldOutWeights(0.0, 1e-3), levels, 10_000)
+    # a share of p the sample will miss counts as its error squared: 10%
+    # (0.01) no, 25% (0.0625) more than the levels' 0.04
+    assert not levels_more_precise(HeldOutWeights(0.1, 1e-5), levels, 10_000)
+    assert levels_more_precise(HeldOutWeights(0.25, 1e-5), levels, 10_000)
+    nan = float("nan")
+    assert not levels_more_precise(HeldOutWeights(nan, nan), levels, 10_000)
+
+
+def test_five_regions_in_fifty_dimensions_are_answered_by_the_levels():
+    # five half-space regions of unequal mass in d = 50: a few mean shifts
+    # cannot hold them all (the importance sample came out 18% low, 8 of 20
+    # covered); the particles predict it, and the levels' product answers
+    problem = suite_problem("kregions_k5_d50_p1e-06")
+    est = sis(problem, seed=0, n_particles=4000, n_final=20_000)
+    assert est.details["answer"] == "splitting"
+    levels = est.details["splitting"][str(problem.gamma)]
+    assert est.p == levels["p"] and list(est.ci) == levels["ci"]
+    assert est.ci[0] <= problem.p_exact <= est.ci[1]
+    sampled = est.details["importance_sampling"][str(problem.gamma)]
+    assert sampled["p"] != est.p  # the sample is kept beside it
 
 
 def test_a_weak_shift_of_every_coordinate_is_kept_and_noise_is_dropped():

@@ -113,3 +113,31 @@ def test_importance_sampling_far_from_its_own_levels_says_caution():
     assert estimate_trust(
         estimator_class("splitting_is"), as_dict, as_dict["by_gamma"][0]
     ).ok
+
+
+def test_levels_that_answer_far_from_their_own_importance_sample_say_caution():
+    levels = {"gamma": 0.0, "p": 1e-6, "stderr": 2e-7, "ci": [6.7e-7, 1.5e-6]}
+    sampled = {"p": 1e-7, "stderr": 1e-8, "ci": [8e-8, 1.2e-7], "n_hits": 500}
+    as_dict = {
+        "gamma": 0.0,
+        "by_gamma": [{**levels, "n_hits": 300, "ess": 300.0, "pareto_k": None}],
+        "details": {
+            "answer": "splitting",
+            "replicates": [levels, levels],
+            "survivors": [[200, 200, 150], [200, 200, 150]],
+            "importance_sampling": {"0.0": sampled},
+        },
+    }
+
+    def trust():
+        return estimate_trust(
+            estimator_class("splitting_is"), as_dict, as_dict["by_gamma"][0]
+        )
+
+    assert "the levels found p = 1e-06 but importance sampling" in str(trust())
+    # a sample that bears the levels out: no doubt
+    as_dict["details"]["importance_sampling"]["0.0"] = sampled | {"p": 9e-7}
+    assert trust().ok
+    # a level of the levels held by a handful of particles: their own doubt
+    as_dict["details"]["survivors"][1] = [200, 3, 150]
+    assert "held only 3 particles" in str(trust())
