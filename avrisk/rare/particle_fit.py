@@ -19,6 +19,7 @@ import numpy as np
 from scipy import stats
 from scipy.special import logsumexp
 
+from avrisk.rare.chain_moments import block_means, informative_by_moments, moment_errors
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.mixture import (
@@ -32,14 +33,13 @@ from avrisk.rare.mixture import (
 __all__ = [
     "LIGHT_REGION_SHARE",
     "MIN_REGION_PARTICLES",
-    "N_BLOCKS",
     "OUTLIER_TAIL",
+    "PREDICTION_FOLDS",
     "THRESHOLDS",
+    "HeldOutWeights",
     "ParticleFit",
     "ProposalSettings",
-    "block_means",
-    "informative_coordinates",
-    "moment_errors",
+    "held_out_weights",
     "particle_proposal",
     "shrink",
     "slope_direction",
@@ -51,8 +51,6 @@ __all__ = [
 #: docstring), the sparsest first (ties of the held-out score go to it); 0
 #: keeps every coordinate.
 THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
-#: Blocks of chains whose means give those standard errors.
-N_BLOCKS = 20
 
 #: A particle farther from every fitted shift than a draw of it is with this
 #: probability lies in a region of its own (:func:`with_light_regions`).
@@ -252,7 +250,7 @@ def particle_proposal(
     ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
         """Shifts of the informative coordinates, ``k`` components, shrunk."""
         moments = moment_errors(points, point_chain)
-        shifted = allowed & _informative(moments, threshold)
+        shifted = allowed & informative_by_moments(moments, threshold)
         structure = StandardSpaceShift(base, searched=shifted)
         masked = np.where(shifted, points, 0.0)  # the others play no part in it
         weights = np.full(len(points), 1.0 / len(points))
@@ -473,86 +471,3 @@ def shrink(
         return component
     scale = max(0.0, 1.0 - noise / (share * size))
     return component.with_natural_params(scale * component.mean)
-
-
-def block_means(z: FloatArray, chain: np.ndarray) -> tuple[FloatArray, FloatArray]:
-    """Mean of each coordinate and its standard error, from blocks of chains.
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        Particles (or any per-particle quantity).
-    chain : ndarray of int, shape (n,)
-        Their chains, numbered in the order of their ancestors (any integers
-        in that order).
-
-    Returns
-    -------
-    mean, stderr : ndarray of shape (D,)
-        ``stderr`` from the spread of the means of ``N_BLOCKS`` blocks of
-        consecutive chains (fewer blocks with fewer chains); NaN with fewer
-        than 4 chains (then nothing is shrunk).
-    """
-    _, order = np.unique(chain, return_inverse=True)
-    n_chains = int(order.max()) + 1
-    if n_chains < 4:
-        return z.mean(axis=0), np.full(z.shape[1], np.nan)
-    blocks = min(N_BLOCKS, n_chains)
-    block = order * blocks // n_chains
-    means = np.stack([z[block == b].mean(axis=0) for b in range(blocks)])
-    return z.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(blocks)
-
-
-def moment_errors(
-    z: FloatArray, chain: np.ndarray
-) -> tuple[tuple[FloatArray, FloatArray], tuple[FloatArray, FloatArray]]:
-    """:func:`block_means` of the particles ``z`` and of ``z^2 - 1``, in that order.
-
-    Under ``N(0, 1)`` both moments are 0: what :func:`informative_coordinates`
-    tests, and the first one's standard errors are the noise of a fitted
-    shift (:func:`shrink`).
-    """
-    return block_means(z, chain), block_means(z * z - 1.0, chain)
-
-
-def _informative(
-    moments: tuple[tuple[FloatArray, FloatArray], ...], threshold: float
-) -> np.ndarray:
-    """Coordinates where a moment is off 0 by more than ``threshold`` errors."""
-    few_chains = np.isnan(moments[0][1]).all()  # no standard errors: keep all
-    informative = np.full(moments[0][0].shape, threshold == 0.0 or few_chains)
-    for mean, stderr in moments:
-        informative |= np.abs(mean) > threshold * stderr
-    return informative
-
-
-def informative_coordinates(
-    z: FloatArray, chain: np.ndarray, threshold: float
-) -> np.ndarray:
-    """Coordinates whose particle mean or mean square is off ``N(0, 1)``'s (step 3).
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        Particles in standard-normal space.
-    chain : ndarray of int, shape (n,)
-        Their chains, numbered in the order of their ancestors (any integers
-        in that order).
-    threshold : float
-        Standard errors.
-
-    Returns
-    -------
-    ndarray of bool, shape (D,)
-        True where ``|mean(z_i)|`` or ``|mean(z_i^2) - 1|`` exceeds
-        ``threshold`` standard errors (:func:`block_means`); every
-        coordinate with fewer than 4 chains or ``threshold`` 0.
-
-    Examples
-    --------
-    >>> rng = np.random.default_rng(0)
-    >>> z = rng.standard_normal((2000, 4)) * [1.0, 1.0, 3.0, 1.0] + [0.0, 2.0, 0.0, 0.0]
-    >>> informative_coordinates(z, np.arange(2000) // 10, 3.0).tolist()
-    [False, True, True, False]
-    """
-    return _informative(moment_errors(z, chain), threshold)

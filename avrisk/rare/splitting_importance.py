@@ -442,38 +442,10 @@ class SplittingImportanceSampling(SubsetSimulation):
         if sampled:  # the sample's own estimates, whichever is the answer
             by_gamma = [{**g, **sampled[str(g["gamma"])]} for g in by_gamma]
         main = next(g for g in by_gamma if g["gamma"] == estimate["gamma"])
-        fit = (
-            details["n_components"],
-            "slope" if details.get("along_slope") else "coords",
-            details["n_shifted"],
-            details["informative_threshold"],
-            details["fit_acceptance"],
-            main["n_hits"],
-            main["ess"],
-            main["pareto_k"],
-        )
-        columns = ("components", "shift", "shifted coordinates", "threshold [SE]")
-        columns += ("acceptance at gamma", "hits", "ESS", "Pareto k")
         own = [details["splitting"].get(str(g["gamma"]), {}) for g in by_gamma]
         return [
             *levels,
-            DiagnosticTable(
-                "Importance-sampling proposal",
-                columns,
-                [fit],
-                note=(
-                    "The distribution the final samples were drawn from, fitted "
-                    "to the dangerous samples the levels found (moved once more, "
-                    "at gamma, after the last set: the moves at gamma): its components "
-                    "(regions), its shift (coords: coordinate by coordinate; "
-                    "slope: along f's average slope), how many of P0's "
-                    "coordinates it shifts (those the dangerous samples differ "
-                    "on by more than the threshold, in standard errors; the rest "
-                    "stay as in P0), and the share of moves accepted at gamma "
-                    "when those samples were made. Hits, ESS and Pareto k are "
-                    "its samples' at gamma."
-                ),
-            ),
+            _proposal_table(details, main),
             DiagnosticTable(
                 "Importance sampling vs subset simulation's own estimate",
                 ("gamma", "p", "95% CI", "p, subset simulation", "its 95% CI"),
@@ -489,9 +461,9 @@ class SplittingImportanceSampling(SubsetSimulation):
                     "of the event. "
                     + (
                         "The answer is the levels' product: before the final "
-                        "samples were drawn, the particles predicted a larger "
-                        "variance for them (the proposal cannot hold everything "
-                        "the levels found)."
+                        "samples were drawn, the particles predicted them further "
+                        "from p (the proposal cannot hold everything the levels "
+                        "found)."
                         if details.get("answer") == "splitting"
                         else "The answer is importance sampling's."
                     )
@@ -633,6 +605,39 @@ def levels_more_precise(
         return False
     sampled = max(covered / p - (1.0 - s) ** 2, 0.0) / n_final
     return s**2 + sampled > (stderr / p) ** 2
+
+
+def _proposal_table(details: dict[str, Any], main: dict[str, Any]) -> DiagnosticTable:
+    """The fitted proposal's choices and its sample's diagnostics at ``gamma``."""
+    fit = (
+        details["n_components"],
+        "slope" if details.get("along_slope") else "coords",
+        details["n_shifted"],
+        details["informative_threshold"],
+        details["fit_acceptance"],
+        main["n_hits"],
+        main["ess"],
+        main["pareto_k"],
+    )
+    columns = ("components", "shift", "shifted coordinates", "threshold [SE]")
+    columns += ("acceptance at gamma", "hits", "ESS", "Pareto k")
+    return DiagnosticTable(
+        "Importance-sampling proposal",
+        columns,
+        [fit],
+        note=(
+            "The distribution the final samples were drawn from, fitted "
+            "to the dangerous samples the levels found (moved once more, "
+            "at gamma, after the last set: the moves at gamma): its components "
+            "(regions), its shift (coords: coordinate by coordinate; "
+            "slope: along f's average slope), how many of P0's "
+            "coordinates it shifts (those the dangerous samples differ "
+            "on by more than the threshold, in standard errors; the rest "
+            "stay as in P0), and the share of moves accepted at gamma "
+            "when those samples were made. Hits, ESS and Pareto k are "
+            "its samples' at gamma."
+        ),
+    )
 
 
 def replicates_disagree(own: Sequence[Estimate]) -> bool:
