@@ -207,6 +207,9 @@ def compare_egos(
     batch_size: int = 4096,
     failures: int = 3,
     device: str = "cpu",
+    workers: int | None = None,
+    backend: str = "local",
+    address: str | None = None,
     progress: Progress = ignore,
     **options: Any,
 ) -> ABResult:
@@ -239,6 +242,9 @@ def compare_egos(
     failures : int, default=3
         Regressions (and fixes) the report ``ab_report.html`` animates, each
         with both egos on the same situation, the most realistic first.
+    workers, backend, address
+        As for :func:`estimate`: each worker simulates both egos on its
+        chunks; the result is the same bit for bit wherever they run.
     **options
         ``splitting_is``'s settings by name (``n_final=20000``).
 
@@ -264,6 +270,7 @@ def compare_egos(
         max_ratio=max_ratio,
         failures=failures,
         device=device,
+        backend=(backend, workers, address),
         progress=progress,
     )
 

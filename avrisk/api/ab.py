@@ -23,11 +23,18 @@ from typing import Any
 
 import numpy as np
 
+from avrisk.api.backends import open_evaluator
 from avrisk.api.errors import UserError, write_failures
 from avrisk.api.events import Progress, ignore, run_events
 from avrisk.api.readback import check_recorded
 from avrisk.api.result import samples_directory
-from avrisk.api.runs import check_thresholds, plan, planned
+from avrisk.api.runs import (
+    IN_PROCESS,
+    BackendChoice,
+    check_thresholds,
+    plan,
+    planned,
+)
 from avrisk.assembly import (
     MECHANISMS,
     ScenarioSimulator,
@@ -41,6 +48,7 @@ from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
 from avrisk.pipeline.files import write_json
 from avrisk.pipeline.provenance import stamp
 from avrisk.pipeline.repeatability import ReplayCheck
+from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.paired import (
     PAIR_COLUMNS,
     UNION_METHOD,
@@ -160,6 +168,7 @@ def compare_specs(
     max_ratio: float = 1.0,
     failures: int = 3,
     device: str = "cpu",
+    backend: BackendChoice = IN_PROCESS,
     progress: Progress = ignore,
 ) -> ABResult:
     """Run (or resume, or read back) the comparison of two egos into ``out``.
@@ -181,6 +190,11 @@ def compare_specs(
     failures : int, default=3
         Regressions and fixes animated in the report (each, 0: none).
     device : str, default="cpu"
+    backend : BackendChoice, default: in this process
+        Where the rollout pairs are simulated
+        (:func:`avrisk.api.backends.open_evaluator`): each worker builds both
+        egos and evaluates a chunk as this process would, so the result is
+        the same bit for bit on every backend.
     progress : callable, optional
         The plan, then the run's events (:mod:`avrisk.api.events`).
     """
@@ -192,32 +206,9 @@ def compare_specs(
         SimulationObjective(spec_b, device=device, allow_import=True),
     )
     progress(plan(spec_a, [planned(LABEL, run_settings)]))
-    check_recorded(out)
-    run_dir = samples_directory(out, spec_a, outputs={"f_a": "s", "f_b": "s"})
-    f = MinOfPair(objective)
-    definition = objective.definition()
+    with open_evaluator(objective, *backend) as evaluator:
+        run_dir, summary = run_pairs(out, objective, run_settings, evaluator, progress)
     egos = (spec_a.ego.model_dump(mode="json"), spec_b.ego.model_dump(mode="json"))
-    resume = "what was recorded is kept: free space and rerun the same command"
-    with write_failures(out, resume), run_events(LABEL, out, progress) as monitor:
-        summary = run_estimation(
-            run_dir,
-            base_distribution(spec_a),
-            f,
-            run_settings,
-            context={
-                "scenario": spec_a.model_dump(mode="json"),
-                "ego_a": egos[0],
-                "ego_b": egos[1],
-                "defines_p": definition,
-            },
-            monitor=monitor,
-            provenance=stamp(definition, objective.computed_with()),
-            replay_check=ReplayCheck(
-                f,
-                fresh=not objective.deterministic,
-                tolerance=objective.replay_tolerance,
-            ),
-        )
     paired = paired_estimate(
         final_sample(run_dir), run_settings.gamma, summary["estimate"], SCENARIO_WORDING
     )
@@ -237,6 +228,48 @@ def compare_specs(
         write_json(out / AB_FILE, result.document())
         write_ab_report(out, result.document(), jsonable(animated))
     return result
+
+
+def run_pairs(
+    out: Path,
+    objective: PairedObjective,
+    run_settings: RunSettings,
+    evaluator: Evaluator | None,
+    progress: Progress,
+) -> tuple[RunDirectory, dict[str, Any]]:
+    """Run (or resume, or read back) the paired search into ``out``; its summary.
+
+    ``evaluator``: where the chunks are simulated (None: this process). A
+    resume replays recorded pairs in this process (both egos checked).
+    """
+    spec_a, spec_b = (o.simulator.spec for o in objective.objectives)
+    check_recorded(out)
+    run_dir = samples_directory(out, spec_a, outputs={"f_a": "s", "f_b": "s"})
+    f = MinOfPair(objective)
+    definition = objective.definition()
+    resume = "what was recorded is kept: free space and rerun the same command"
+    with write_failures(out, resume), run_events(LABEL, out, progress) as monitor:
+        summary = run_estimation(
+            run_dir,
+            base_distribution(spec_a),
+            f,
+            run_settings,
+            context={
+                "scenario": spec_a.model_dump(mode="json"),
+                "ego_a": spec_a.ego.model_dump(mode="json"),
+                "ego_b": spec_b.ego.model_dump(mode="json"),
+                "defines_p": definition,
+            },
+            monitor=monitor,
+            evaluator=evaluator,
+            provenance=stamp(definition, objective.computed_with()),
+            replay_check=ReplayCheck(
+                f,
+                fresh=not objective.deterministic,
+                tolerance=objective.replay_tolerance,
+            ),
+        )
+    return run_dir, summary
 
 
 def ranked_discordant(

@@ -26,6 +26,8 @@ from typing import Annotated, Any
 import typer
 import yaml
 
+from avrisk.api.backends import DEFAULT_BACKEND
+from avrisk.cli.backends import Address, BackendOption, Workers
 from avrisk.cli.common import (
     CliError,
     Device,
@@ -125,6 +127,9 @@ def ab(
         ),
     ] = 3,
     device: Device = "cpu",
+    workers: Workers = None,
+    backend: BackendOption = DEFAULT_BACKEND,
+    address: Address = None,
     as_json: Json = False,
 ) -> None:
     """Is ego B at most --max-ratio times as risky as ego A? Pass, fail or inconclusive.
@@ -158,6 +163,9 @@ def ab(
             batch_size=batch_size,
             failures=failures,
             device=device,
+            workers=workers,
+            backend=backend,
+            address=address,
             progress=RichProgress(err_console),
             **options,
         )

@@ -72,6 +72,16 @@ def test_an_ego_that_is_not_a_mapping_is_one_line(short, tmp_path):
     assert "--ego-b must hold a mapping with 'policy'" in result.output
 
 
+def test_backend_options_reach_the_comparison(short, tmp_path):
+    out = tmp_path / "ab"
+    result = invoke("ab", short, "--ego-b", HOLD_FAST, "--out", out, *SMALL,
+                    "--address", "10.0.0.1:6379")  # fmt: skip
+    assert result.exit_code == 2
+    message = " ".join(result.output.split()).replace("│", "")
+    assert "--address joins a Ray cluster: add --backend ray" in message
+    assert "Traceback" not in result.output and not out.exists()
+
+
 def free_address():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
