@@ -306,18 +306,21 @@ def simulate(
 def write_report(
     run_dir: str | Path,
     *,
-    failures: int = 6,
+    failures: int | None = None,
     scenario: Scenario | None = None,
     device: str = "cpu",
 ) -> Path:
     """The HTML report of a finished run or comparison, written again; its path.
 
-    Failures are animated from the traces recorded during the run; a
-    scenario that names user code must be given again (``scenario``) only to
-    animate failures without recorded traces.
+    Failures are animated from the traces recorded during the run (``failures``
+    of them, default 6); a scenario that names user code must be given again
+    (``scenario``) only to animate failures without recorded traces. Of an
+    A/B comparison (:func:`compare_egos`), ``ab_report.html`` and ``ab.json``
+    are written again as it wrote them, with ``failures`` regressions and
+    fixes animated each (default: as many as it animated).
     """
-    from avrisk.api.reports import rebuild_report
+    from avrisk.api.rebuild import rebuild
 
-    path = rebuild_report(Path(run_dir), failures, scenario, device).report
+    path = rebuild(Path(run_dir), failures, scenario, device).report
     assert path is not None
     return path

@@ -65,12 +65,22 @@ from avrisk.report.animate import animate_samples
 from avrisk.report.answer import SCENARIO_WORDING
 from avrisk.scenario import ScenarioSpec
 
-__all__ = ["AB_FILE", "AB_SCHEMA", "ABResult", "compare_specs", "final_sample"]
+__all__ = [
+    "AB_FILE",
+    "AB_SCHEMA",
+    "PAIR_UNITS",
+    "ABResult",
+    "compare_specs",
+    "conclude",
+    "final_sample",
+]
 
 #: The paired estimate and the verdict, in the run directory.
 AB_FILE = "ab.json"
 #: Schema of ``ab.json`` and of ``avrisk ab --json``.
 AB_SCHEMA = "avrisk.ab/1"
+#: The units of the outputs an A/B run records beside ``f``.
+PAIR_UNITS = {"f_a": "s", "f_b": "s"}
 #: The run's label in progress events.
 LABEL = "A/B (both egos per rollout)"
 
@@ -94,6 +104,8 @@ class ABResult:
     discordant : dict
         ``"regressions"`` and ``"fixes"``: the final stage's discordant
         rollouts, the most realistic first (:func:`ranked_discordant`).
+    animated : int
+        Regressions and fixes (each) the report animates.
     report : Path or None
         The HTML report.
     """
@@ -104,6 +116,7 @@ class ABResult:
     verdict: Verdict
     path: Path
     discordant: dict[str, list[dict[str, Any]]]
+    animated: int
     report: Path | None = None
 
     def line(self) -> str:
@@ -134,6 +147,7 @@ class ABResult:
             "line": self.line(),
             "paired": self.paired.to_dict(),
             "discordant": jsonable(self.discordant),
+            "animated": self.animated,
             "path": str(self.path),
             "report": None if self.report is None else str(self.report),
         }
@@ -208,21 +222,49 @@ def compare_specs(
     progress(plan(spec_a, [planned(LABEL, run_settings)]))
     with open_evaluator(objective, *backend) as evaluator:
         run_dir, summary = run_pairs(out, objective, run_settings, evaluator, progress)
-    egos = (spec_a.ego.model_dump(mode="json"), spec_b.ego.model_dump(mode="json"))
-    paired = paired_estimate(
-        final_sample(run_dir), run_settings.gamma, summary["estimate"], SCENARIO_WORDING
+    return conclude(
+        run_dir,
+        (spec_a, spec_b),
+        summary["estimate"],
+        max_ratio,
+        failures,
+        _simulators(objective),
     )
-    discordant = ranked_discordant(run_dir, spec_a, run_settings.gamma)
+
+
+def conclude(
+    run_dir: RunDirectory,
+    specs: tuple[ScenarioSpec, ScenarioSpec],
+    estimate: dict[str, Any],
+    max_ratio: float,
+    failures: int,
+    simulators: tuple[ScenarioSimulator | None, ScenarioSimulator | None],
+) -> ABResult:
+    """The comparison in a finished paired run directory: ``ab.json``, the report.
+
+    What ``avrisk ab`` writes after its run, and ``avrisk report`` again from
+    the directory alone (:func:`avrisk.api.rebuild.rebuild_ab_report`): the
+    paired estimate of the final stage, with the union's ``estimate`` (the
+    run summary's; its ``gamma`` both egos'), the gate at ``max_ratio``, the
+    discordant rollouts ranked, and the first ``failures`` of each kind
+    animated by each ego's simulator (``specs`` and ``simulators``: A's,
+    B's; an animation not made yet is left out where its simulator is None).
+    """
+    out, gamma = run_dir.path, float(estimate["gamma"])
+    paired = paired_estimate(final_sample(run_dir), gamma, estimate, SCENARIO_WORDING)
+    discordant = ranked_discordant(run_dir, specs[0], gamma)
+    egos = [spec.ego.model_dump(mode="json") for spec in specs]
     then = "the comparison is complete: free space and rerun"
     with write_failures(out, then):
-        animated = animate_discordant(out, objective, run_dir, discordant, failures)
+        animated = animate_discordant(run_dir, simulators, discordant, failures)
         result = ABResult(
-            spec_a.name,
-            egos,
+            specs[0].name,
+            (egos[0], egos[1]),
             paired,
             gate(paired, max_ratio),
-            run_dir.path,
+            out,
             discordant,
+            failures,
             out / AB_REPORT_FILE,
         )
         write_json(out / AB_FILE, result.document())
@@ -244,7 +286,7 @@ def run_pairs(
     """
     spec_a, spec_b = (o.simulator.spec for o in objective.objectives)
     check_recorded(out)
-    run_dir = samples_directory(out, spec_a, outputs={"f_a": "s", "f_b": "s"})
+    run_dir = samples_directory(out, spec_a, outputs=PAIR_UNITS)
     f = MinOfPair(objective)
     definition = objective.definition()
     resume = "what was recorded is kept: free space and rerun the same command"
@@ -335,35 +377,41 @@ def ranked_discordant(
 
 
 def animate_discordant(
-    out: Path,
-    objective: PairedObjective,
     run_dir: RunDirectory,
+    simulators: tuple[ScenarioSimulator | None, ScenarioSimulator | None],
     discordant: dict[str, list[dict[str, Any]]],
     n: int,
 ) -> dict[str, list[dict[str, Any]]]:
     """The first ``n`` of each kind, with each ego's animation on the same row.
 
-    GIFs go to ``out/ab/<kind><i>_<a|b>.gif`` (kept when there already: a
-    read-back does not simulate them again); the rows get their paths,
-    relative to ``out``, as ``animation_a`` and ``animation_b``.
+    GIFs go to ``<run_dir>/ab/<kind><i>_<a|b>.gif`` (kept when there already:
+    a read-back does not simulate them again), made by ``simulators`` (A's,
+    B's); the rows get their paths, relative to the run directory, as
+    ``animation_a`` and ``animation_b`` (None for one not there that its
+    simulator, None, cannot make).
     """
-    columns = list(param_layout(objective.a.simulator.spec).columns)
+    out = run_dir.path
+    columns = list(run_dir.param_names)
     shown: dict[str, list[dict[str, Any]]] = {}
     for kind, rows in discordant.items():
         shown[kind] = []
         for i, row in enumerate(rows[:n], start=1):
             x = run_dir.samples(columns, rows=[row["row"]]).to_pylist()[0]
             sample = {**x, "seed": row["seed"]}
-            paths = {}
-            for side, sim in zip("ab", _simulators(objective), strict=True):
+            paths: dict[str, str | None] = {}
+            for side, sim in zip("ab", simulators, strict=True):
                 path = out / "ab" / f"{kind}{i}_{side}.gif"
-                if not path.is_file():
+                if not path.is_file() and sim is not None:
                     animate_samples(sim, [sample], path)
-                paths[f"animation_{side}"] = str(path.relative_to(out))
+                paths[f"animation_{side}"] = (
+                    str(path.relative_to(out)) if path.is_file() else None
+                )
             shown[kind].append({**row, **paths})
     return shown
 
 
-def _simulators(objective: PairedObjective) -> tuple[ScenarioSimulator, ...]:
+def _simulators(
+    objective: PairedObjective,
+) -> tuple[ScenarioSimulator, ScenarioSimulator]:
     """Each ego's simulator."""
-    return tuple(o.simulator for o in objective.objectives)
+    return objective.a.simulator, objective.b.simulator

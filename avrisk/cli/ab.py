@@ -33,12 +33,11 @@ from avrisk.cli.common import (
     Device,
     check_output_folder,
     err_console,
-    out_console,
     resumable,
     user_errors,
 )
 from avrisk.cli.progress import RichProgress
-from avrisk.cli.results import print_json
+from avrisk.cli.results import show_comparison
 from avrisk.cli.run import Gamma, Scenario, Seed, Set, estimator_options
 from avrisk.rare.paired import UNION_METHOD
 from avrisk.scenario import load_spec
@@ -169,8 +168,5 @@ def ab(
             progress=RichProgress(err_console),
             **options,
         )
-    if as_json:
-        print_json(result.document())
-    else:
-        out_console.print(result.line(), highlight=False, soft_wrap=True)
+    show_comparison(result, as_json)
     raise typer.Exit(code=EXIT_CODES[result.verdict.outcome])

@@ -65,10 +65,13 @@ def test_two_egos_are_compared_written_and_read_back(tmp_path):
         HOLD,
         out=tmp_path,
         progress=again.append,
-        **SMALL,
+        **{**SMALL, "failures": 1},
     )
     assert not any(isinstance(e, events.RunStarted) for e in again)
     assert same.document() == result.document()
+    result.report.unlink()  # written again, as compare_egos wrote it
+    assert avrisk.write_report(tmp_path) == result.report
+    assert result.report.read_text() == html
 
 
 def test_a_resume_with_another_ego_is_refused(tmp_path):
