@@ -207,6 +207,9 @@ def compare_egos(
     batch_size: int = 4096,
     failures: int = 3,
     device: str = "cpu",
+    workers: int | None = None,
+    backend: str = "local",
+    address: str | None = None,
     progress: Progress = ignore,
     **options: Any,
 ) -> ABResult:
@@ -239,6 +242,9 @@ def compare_egos(
     failures : int, default=3
         Regressions (and fixes) the report ``ab_report.html`` animates, each
         with both egos on the same situation, the most realistic first.
+    workers, backend, address
+        As for :func:`estimate`: each worker simulates both egos on its
+        chunks; the result is the same bit for bit wherever they run.
     **options
         ``splitting_is``'s settings by name (``n_final=20000``).
 
@@ -264,6 +270,7 @@ def compare_egos(
         max_ratio=max_ratio,
         failures=failures,
         device=device,
+        backend=(backend, workers, address),
         progress=progress,
     )
 
@@ -299,18 +306,21 @@ def simulate(
 def write_report(
     run_dir: str | Path,
     *,
-    failures: int = 6,
+    failures: int | None = None,
     scenario: Scenario | None = None,
     device: str = "cpu",
 ) -> Path:
     """The HTML report of a finished run or comparison, written again; its path.
 
-    Failures are animated from the traces recorded during the run; a
-    scenario that names user code must be given again (``scenario``) only to
-    animate failures without recorded traces.
+    Failures are animated from the traces recorded during the run (``failures``
+    of them, default 6); a scenario that names user code must be given again
+    (``scenario``) only to animate failures without recorded traces. Of an
+    A/B comparison (:func:`compare_egos`), ``ab_report.html`` and ``ab.json``
+    are written again as it wrote them, with ``failures`` regressions and
+    fixes animated each (default: as many as it animated).
     """
-    from avrisk.api.reports import rebuild_report
+    from avrisk.api.rebuild import rebuild
 
-    path = rebuild_report(Path(run_dir), failures, scenario, device).report
+    path = rebuild(Path(run_dir), failures, scenario, device).report
     assert path is not None
     return path

@@ -23,11 +23,18 @@ from typing import Any
 
 import numpy as np
 
+from avrisk.api.backends import open_evaluator
 from avrisk.api.errors import UserError, write_failures
 from avrisk.api.events import Progress, ignore, run_events
 from avrisk.api.readback import check_recorded
 from avrisk.api.result import samples_directory
-from avrisk.api.runs import check_thresholds, plan, planned
+from avrisk.api.runs import (
+    IN_PROCESS,
+    BackendChoice,
+    check_thresholds,
+    plan,
+    planned,
+)
 from avrisk.assembly import (
     MECHANISMS,
     ScenarioSimulator,
@@ -41,6 +48,7 @@ from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
 from avrisk.pipeline.files import write_json
 from avrisk.pipeline.provenance import stamp
 from avrisk.pipeline.repeatability import ReplayCheck
+from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.paired import (
     PAIR_COLUMNS,
     UNION_METHOD,
@@ -57,12 +65,22 @@ from avrisk.report.animate import animate_samples
 from avrisk.report.answer import SCENARIO_WORDING
 from avrisk.scenario import ScenarioSpec
 
-__all__ = ["AB_FILE", "AB_SCHEMA", "ABResult", "compare_specs", "final_sample"]
+__all__ = [
+    "AB_FILE",
+    "AB_SCHEMA",
+    "PAIR_UNITS",
+    "ABResult",
+    "compare_specs",
+    "conclude",
+    "final_sample",
+]
 
 #: The paired estimate and the verdict, in the run directory.
 AB_FILE = "ab.json"
 #: Schema of ``ab.json`` and of ``avrisk ab --json``.
 AB_SCHEMA = "avrisk.ab/1"
+#: The units of the outputs an A/B run records beside ``f``.
+PAIR_UNITS = {"f_a": "s", "f_b": "s"}
 #: The run's label in progress events.
 LABEL = "A/B (both egos per rollout)"
 
@@ -86,6 +104,8 @@ class ABResult:
     discordant : dict
         ``"regressions"`` and ``"fixes"``: the final stage's discordant
         rollouts, the most realistic first (:func:`ranked_discordant`).
+    animated : int
+        Regressions and fixes (each) the report animates.
     report : Path or None
         The HTML report.
     """
@@ -96,6 +116,7 @@ class ABResult:
     verdict: Verdict
     path: Path
     discordant: dict[str, list[dict[str, Any]]]
+    animated: int
     report: Path | None = None
 
     def line(self) -> str:
@@ -126,6 +147,7 @@ class ABResult:
             "line": self.line(),
             "paired": self.paired.to_dict(),
             "discordant": jsonable(self.discordant),
+            "animated": self.animated,
             "path": str(self.path),
             "report": None if self.report is None else str(self.report),
         }
@@ -160,6 +182,7 @@ def compare_specs(
     max_ratio: float = 1.0,
     failures: int = 3,
     device: str = "cpu",
+    backend: BackendChoice = IN_PROCESS,
     progress: Progress = ignore,
 ) -> ABResult:
     """Run (or resume, or read back) the comparison of two egos into ``out``.
@@ -181,6 +204,11 @@ def compare_specs(
     failures : int, default=3
         Regressions and fixes animated in the report (each, 0: none).
     device : str, default="cpu"
+    backend : BackendChoice, default: in this process
+        Where the rollout pairs are simulated
+        (:func:`avrisk.api.backends.open_evaluator`): each worker builds both
+        egos and evaluates a chunk as this process would, so the result is
+        the same bit for bit on every backend.
     progress : callable, optional
         The plan, then the run's events (:mod:`avrisk.api.events`).
     """
@@ -192,11 +220,75 @@ def compare_specs(
         SimulationObjective(spec_b, device=device, allow_import=True),
     )
     progress(plan(spec_a, [planned(LABEL, run_settings)]))
+    with open_evaluator(objective, *backend) as evaluator:
+        run_dir, summary = run_pairs(out, objective, run_settings, evaluator, progress)
+    return conclude(
+        run_dir,
+        (spec_a, spec_b),
+        summary["estimate"],
+        max_ratio,
+        failures,
+        _simulators(objective),
+    )
+
+
+def conclude(
+    run_dir: RunDirectory,
+    specs: tuple[ScenarioSpec, ScenarioSpec],
+    estimate: dict[str, Any],
+    max_ratio: float,
+    failures: int,
+    simulators: tuple[ScenarioSimulator | None, ScenarioSimulator | None],
+) -> ABResult:
+    """The comparison in a finished paired run directory: ``ab.json``, the report.
+
+    What ``avrisk ab`` writes after its run, and ``avrisk report`` again from
+    the directory alone (:func:`avrisk.api.rebuild.rebuild_ab_report`): the
+    paired estimate of the final stage, with the union's ``estimate`` (the
+    run summary's; its ``gamma`` both egos'), the gate at ``max_ratio``, the
+    discordant rollouts ranked, and the first ``failures`` of each kind
+    animated by each ego's simulator (``specs`` and ``simulators``: A's,
+    B's; an animation not made yet is left out where its simulator is None).
+    """
+    out, gamma = run_dir.path, float(estimate["gamma"])
+    paired = paired_estimate(final_sample(run_dir), gamma, estimate, SCENARIO_WORDING)
+    discordant = ranked_discordant(run_dir, specs[0], gamma)
+    egos = [spec.ego.model_dump(mode="json") for spec in specs]
+    then = "the comparison is complete: free space and rerun"
+    with write_failures(out, then):
+        animated = animate_discordant(run_dir, simulators, discordant, failures)
+        result = ABResult(
+            specs[0].name,
+            (egos[0], egos[1]),
+            paired,
+            gate(paired, max_ratio),
+            out,
+            discordant,
+            failures,
+            out / AB_REPORT_FILE,
+        )
+        write_json(out / AB_FILE, result.document())
+        write_ab_report(out, result.document(), jsonable(animated))
+    return result
+
+
+def run_pairs(
+    out: Path,
+    objective: PairedObjective,
+    run_settings: RunSettings,
+    evaluator: Evaluator | None,
+    progress: Progress,
+) -> tuple[RunDirectory, dict[str, Any]]:
+    """Run (or resume, or read back) the paired search into ``out``; its summary.
+
+    ``evaluator``: where the chunks are simulated (None: this process). A
+    resume replays recorded pairs in this process (both egos checked).
+    """
+    spec_a, spec_b = (o.simulator.spec for o in objective.objectives)
     check_recorded(out)
-    run_dir = samples_directory(out, spec_a, outputs={"f_a": "s", "f_b": "s"})
+    run_dir = samples_directory(out, spec_a, outputs=PAIR_UNITS)
     f = MinOfPair(objective)
     definition = objective.definition()
-    egos = (spec_a.ego.model_dump(mode="json"), spec_b.ego.model_dump(mode="json"))
     resume = "what was recorded is kept: free space and rerun the same command"
     with write_failures(out, resume), run_events(LABEL, out, progress) as monitor:
         summary = run_estimation(
@@ -206,11 +298,12 @@ def compare_specs(
             run_settings,
             context={
                 "scenario": spec_a.model_dump(mode="json"),
-                "ego_a": egos[0],
-                "ego_b": egos[1],
+                "ego_a": spec_a.ego.model_dump(mode="json"),
+                "ego_b": spec_b.ego.model_dump(mode="json"),
                 "defines_p": definition,
             },
             monitor=monitor,
+            evaluator=evaluator,
             provenance=stamp(definition, objective.computed_with()),
             replay_check=ReplayCheck(
                 f,
@@ -218,25 +311,7 @@ def compare_specs(
                 tolerance=objective.replay_tolerance,
             ),
         )
-    paired = paired_estimate(
-        final_sample(run_dir), run_settings.gamma, summary["estimate"], SCENARIO_WORDING
-    )
-    discordant = ranked_discordant(run_dir, spec_a, run_settings.gamma)
-    then = "the comparison is complete: free space and rerun"
-    with write_failures(out, then):
-        animated = animate_discordant(out, objective, run_dir, discordant, failures)
-        result = ABResult(
-            spec_a.name,
-            egos,
-            paired,
-            gate(paired, max_ratio),
-            run_dir.path,
-            discordant,
-            out / AB_REPORT_FILE,
-        )
-        write_json(out / AB_FILE, result.document())
-        write_ab_report(out, result.document(), jsonable(animated))
-    return result
+    return run_dir, summary
 
 
 def ranked_discordant(
@@ -302,35 +377,41 @@ def ranked_discordant(
 
 
 def animate_discordant(
-    out: Path,
-    objective: PairedObjective,
     run_dir: RunDirectory,
+    simulators: tuple[ScenarioSimulator | None, ScenarioSimulator | None],
     discordant: dict[str, list[dict[str, Any]]],
     n: int,
 ) -> dict[str, list[dict[str, Any]]]:
     """The first ``n`` of each kind, with each ego's animation on the same row.
 
-    GIFs go to ``out/ab/<kind><i>_<a|b>.gif`` (kept when there already: a
-    read-back does not simulate them again); the rows get their paths,
-    relative to ``out``, as ``animation_a`` and ``animation_b``.
+    GIFs go to ``<run_dir>/ab/<kind><i>_<a|b>.gif`` (kept when there already:
+    a read-back does not simulate them again), made by ``simulators`` (A's,
+    B's); the rows get their paths, relative to the run directory, as
+    ``animation_a`` and ``animation_b`` (None for one not there that its
+    simulator, None, cannot make).
     """
-    columns = list(param_layout(objective.a.simulator.spec).columns)
+    out = run_dir.path
+    columns = list(run_dir.param_names)
     shown: dict[str, list[dict[str, Any]]] = {}
     for kind, rows in discordant.items():
         shown[kind] = []
         for i, row in enumerate(rows[:n], start=1):
             x = run_dir.samples(columns, rows=[row["row"]]).to_pylist()[0]
             sample = {**x, "seed": row["seed"]}
-            paths = {}
-            for side, sim in zip("ab", _simulators(objective), strict=True):
+            paths: dict[str, str | None] = {}
+            for side, sim in zip("ab", simulators, strict=True):
                 path = out / "ab" / f"{kind}{i}_{side}.gif"
-                if not path.is_file():
+                if not path.is_file() and sim is not None:
                     animate_samples(sim, [sample], path)
-                paths[f"animation_{side}"] = str(path.relative_to(out))
+                paths[f"animation_{side}"] = (
+                    str(path.relative_to(out)) if path.is_file() else None
+                )
             shown[kind].append({**row, **paths})
     return shown
 
 
-def _simulators(objective: PairedObjective) -> tuple[ScenarioSimulator, ...]:
+def _simulators(
+    objective: PairedObjective,
+) -> tuple[ScenarioSimulator, ScenarioSimulator]:
     """Each ego's simulator."""
-    return tuple(o.simulator for o in objective.objectives)
+    return objective.a.simulator, objective.b.simulator

@@ -7,7 +7,9 @@ run's resolved scenario, sent as data (:func:`worker_factory`); the estimate
 is the same bit for bit on every backend.
 
 A backend is an *opener*, registered with :func:`register_backend`: called
-with the objective and the command's ``workers`` and ``address``, it returns
+with the objective (a scenario's, or an A/B comparison's
+:class:`~avrisk.assembly.paired.PairedObjective`, whose workers build both
+egos) and the command's ``workers`` and ``address``, it returns
 a context manager that yields the :class:`~avrisk.rare.evaluation.Evaluator`
 (None: this process) and closes it on exit. The command line's ``--backend``
 offers the registered names. Its errors name the command's options
@@ -22,17 +24,21 @@ from typing import TYPE_CHECKING
 
 from avrisk.api.errors import UserError
 from avrisk.rare.evaluation import Evaluator
-from avrisk.rare.parallel import ProcessPoolEvaluator
+from avrisk.rare.parallel import Factory, ProcessPoolEvaluator
 from avrisk.rare.ray_evaluator import RayEvaluator
 from avrisk.registry import Registry
 
 if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
-    from avrisk.assembly import ObjectiveFactory, SimulationObjective
+    from avrisk.assembly import SimulationObjective
+    from avrisk.assembly.paired import PairedObjective
+
+    #: What a backend simulates: a scenario's objective, or an A/B comparison's.
+    Objective = SimulationObjective | PairedObjective
 
 #: ``opener(objective, workers, address)``: yields the evaluator (None: this
 #: process) and closes it on exit.
 Opener = Callable[
-    ["SimulationObjective", int | None, str | None],
+    ["Objective", int | None, str | None],
     AbstractContextManager[Evaluator | None],
 ]
 
@@ -48,7 +54,7 @@ backend_descriptions = BACKENDS.descriptions
 
 
 def open_evaluator(
-    objective: SimulationObjective,
+    objective: Objective,
     backend: str,
     workers: int | None,
     address: str | None,
@@ -63,20 +69,27 @@ def open_evaluator(
     return BACKENDS.get(backend)(objective, workers, address)
 
 
-def worker_factory(objective: SimulationObjective) -> ObjectiveFactory:
-    """What a worker builds ``objective`` from: its resolved scenario, as data.
+def worker_factory(objective: Objective) -> Factory:
+    """What a worker builds ``objective`` from: its resolved scenario(s), as data.
 
-    The workers may import the components the scenario names: it was given by
-    the caller, not read back from a run directory.
+    A scenario's objective is built again as it is
+    (:class:`~avrisk.assembly.ObjectiveFactory`); a paired one as the
+    ``min(f_A, f_B)`` box its run evaluates
+    (:class:`~avrisk.assembly.paired.PairedFactory`). The workers may import
+    the components the scenarios name: they were given by the caller, not
+    read back from a run directory.
     """
     from avrisk.assembly import ObjectiveFactory
+    from avrisk.assembly.paired import PairedFactory, PairedObjective
 
+    if isinstance(objective, PairedObjective):
+        return PairedFactory.of(objective, allow_import=True)
     return ObjectiveFactory.of(objective, allow_import=True)
 
 
 @contextmanager
 def _local(
-    objective: SimulationObjective, workers: int | None, address: str | None
+    objective: Objective, workers: int | None, address: str | None
 ) -> Iterator[Evaluator | None]:
     """In this process, or in ``workers`` worker processes on this machine.
 
@@ -98,7 +111,7 @@ def _local(
 
 @contextmanager
 def _ray(
-    objective: SimulationObjective, workers: int | None, address: str | None
+    objective: Objective, workers: int | None, address: str | None
 ) -> Iterator[Evaluator | None]:
     """A Ray cluster: ``address``, else the one joined already or a new local one.
 

@@ -13,18 +13,23 @@ Its output is the engine's paired black box
 minimum TTC [s], and every per-rollout outcome of each ego as a column of its
 own (``crash_a``, ``contact_b`` ...), with ``status`` non-zero where either
 rollout failed.
+
+:class:`PairedFactory` is what a worker process or a Ray task builds that
+black box from (:mod:`avrisk.rare.parallel`): each ego's scenario as data.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from avrisk.assembly.objective import SimulationObjective
+from avrisk.assembly.objective import ObjectiveFactory, SimulationObjective
+from avrisk.rare.paired import MinOfPair
 from avrisk.rare.problem import STATUS
 
-__all__ = ["PairedObjective"]
+__all__ = ["PairedFactory", "PairedObjective"]
 
 #: The suffix of each ego's columns, A's first.
 SUFFIXES = ("_a", "_b")
@@ -59,6 +64,11 @@ class PairedObjective:
     def objectives(self) -> tuple[SimulationObjective, SimulationObjective]:
         """``(a, b)``."""
         return self.a, self.b
+
+    @property
+    def device(self) -> str:
+        """Torch device both egos simulate on (``A``'s)."""
+        return self.a.device
 
     @property
     def deterministic(self) -> bool:
@@ -101,3 +111,35 @@ class PairedObjective:
                 if name != "f"
             )
         return merged
+
+
+@dataclass(frozen=True)
+class PairedFactory:
+    """Builds the paired black box ``MinOfPair(PairedObjective(A, B))`` in a worker.
+
+    What a worker receives instead of the two simulators: each ego's
+    :class:`~avrisk.assembly.objective.ObjectiveFactory` (its resolved
+    scenario as data). The box it builds evaluates a chunk as the run's own
+    does in this process (:class:`~avrisk.rare.paired.MinOfPair`): ``f`` the
+    lower minimum TTC [s], ``f_a``, ``f_b`` and each ego's outcome columns.
+
+    Parameters
+    ----------
+    a, b : ObjectiveFactory
+        Ego ``A``'s and ego ``B``'s.
+    """
+
+    a: ObjectiveFactory
+    b: ObjectiveFactory
+
+    @classmethod
+    def of(cls, objective: PairedObjective, allow_import: bool) -> PairedFactory:
+        """The factory that builds ``objective``'s box again (specs, device, dtype)."""
+        return cls(
+            ObjectiveFactory.of(objective.a, allow_import),
+            ObjectiveFactory.of(objective.b, allow_import),
+        )
+
+    def __call__(self) -> MinOfPair:
+        """A new box: both egos' objectives, each on one torch thread."""
+        return MinOfPair(PairedObjective(self.a(), self.b()))

@@ -26,17 +26,18 @@ from typing import Annotated, Any
 import typer
 import yaml
 
+from avrisk.api.backends import DEFAULT_BACKEND
+from avrisk.cli.backends import Address, BackendOption, Workers
 from avrisk.cli.common import (
     CliError,
     Device,
     check_output_folder,
     err_console,
-    out_console,
     resumable,
     user_errors,
 )
 from avrisk.cli.progress import RichProgress
-from avrisk.cli.results import print_json
+from avrisk.cli.results import show_comparison
 from avrisk.cli.run import Gamma, Scenario, Seed, Set, estimator_options
 from avrisk.rare.paired import UNION_METHOD
 from avrisk.scenario import load_spec
@@ -125,6 +126,9 @@ def ab(
         ),
     ] = 3,
     device: Device = "cpu",
+    workers: Workers = None,
+    backend: BackendOption = DEFAULT_BACKEND,
+    address: Address = None,
     as_json: Json = False,
 ) -> None:
     """Is ego B at most --max-ratio times as risky as ego A? Pass, fail or inconclusive.
@@ -158,11 +162,11 @@ def ab(
             batch_size=batch_size,
             failures=failures,
             device=device,
+            workers=workers,
+            backend=backend,
+            address=address,
             progress=RichProgress(err_console),
             **options,
         )
-    if as_json:
-        print_json(result.document())
-    else:
-        out_console.print(result.line(), highlight=False, soft_wrap=True)
+    show_comparison(result, as_json)
     raise typer.Exit(code=EXIT_CODES[result.verdict.outcome])

@@ -1,6 +1,6 @@
 """``--workers``, ``--backend`` and ``--address``: where the rollouts are simulated.
 
-The options of ``run`` and ``compare``; :mod:`avrisk.api.backends` opens
+The options of ``run``, ``compare`` and ``ab``; :mod:`avrisk.api.backends` opens
 what they name, and registers the backends ``--backend`` offers.
 """
 

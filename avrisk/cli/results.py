@@ -1,18 +1,19 @@
-"""What ``run``, ``compare`` and ``report`` print: the answer, tables, or JSON.
+"""What ``run``, ``compare``, ``ab`` and ``report`` print: the answer, tables, or JSON.
 
 The terminal gets the one answer first (:func:`avrisk.report.answer.headline`,
 the same as the report's), then a table per run that fits 80 columns (Rich
 wraps the text cells of a narrower terminal). With ``--json``, stdout gets one
 JSON document instead (:func:`avrisk.api.document.result_document`, schema
 ``avrisk.result/1``);
-progress, warnings and notes stay on stderr, so stdout parses.
+progress, warnings and notes stay on stderr, so stdout parses. An A/B
+comparison prints its one line (or its ``avrisk.ab/1`` document).
 """
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.markup import escape
 
@@ -24,6 +25,9 @@ from avrisk.rare.estimator import estimator_class
 from avrisk.report.answer import run_trust, search_sentence, threshold_trust
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, table_cells
 from avrisk.scenario import ScenarioSpec
+
+if TYPE_CHECKING:  # the comparison's module loads the simulator (torch)
+    from avrisk.api.ab import ABResult
 
 
 def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
@@ -220,9 +224,24 @@ def show_results(
             print_ratios(runs[0][0], est["n_evals"], ratios, has_reference)
     print_failed(runs)
     if report is not None:
-        err_console.print(  # a path is never broken
-            f"report: {escape(str(report))}", highlight=False, soft_wrap=True
-        )
+        name_report(report)
+
+
+def show_comparison(result: ABResult, as_json: bool) -> None:
+    """An A/B comparison: its line on stdout, or its document; its report named."""
+    if as_json:
+        print_json(result.document())
+    else:
+        out_console.print(result.line(), highlight=False, soft_wrap=True)
+    if result.report is not None:
+        name_report(result.report)
+
+
+def name_report(report: Path) -> None:
+    """The report's path, on stderr."""
+    err_console.print(  # a path is never broken
+        f"report: {escape(str(report))}", highlight=False, soft_wrap=True
+    )
 
 
 def print_json(doc: dict[str, Any]) -> None:

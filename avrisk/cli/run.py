@@ -41,7 +41,7 @@ from avrisk.cli.estimator_options import (
     setting_option,
 )
 from avrisk.cli.progress import RichProgress
-from avrisk.cli.results import show_results
+from avrisk.cli.results import show_comparison, show_results
 from avrisk.pipeline import RunSettings
 from avrisk.rare import estimator_names
 from avrisk.rare.estimator import DEFAULT_METHOD
@@ -347,9 +347,17 @@ def compare(
 
 def report(
     run_dir: Annotated[
-        Path, typer.Argument(help="A directory made by run or compare.")
+        Path, typer.Argument(help="A directory made by run, compare or ab.")
     ],
-    failures: Failures = 6,
+    failures: Annotated[
+        int | None,
+        typer.Option(
+            min=0,
+            help="Dangerous rollouts the report shows and animates, the most "
+            "realistic first [default: 6; of an ab directory: the regressions and "
+            "fixes ab animated, each].",
+        ),
+    ] = None,
     scenario: Annotated[
         str | None,
         typer.Option(
@@ -360,19 +368,32 @@ def report(
         ),
     ] = None,
     device: Device = "cpu",
-    as_json: Json = False,
+    as_json: Annotated[
+        bool,
+        typer.Option(
+            "--json",
+            help="Print the results as one JSON document on stdout (schema "
+            "avrisk.result/1; of an ab directory avrisk.ab/1) instead of tables.",
+        ),
+    ] = False,
 ) -> None:
-    """Rebuild the report of a finished run or comparison.
+    """Rebuild the report of a finished run, comparison or A/B comparison.
 
     Failures are animated from the traces recorded during the run; the run
-    directory alone suffices (it never makes avrisk import code).
+    directory alone suffices (it never makes avrisk import code). Of an ab
+    directory, ab_report.html and ab.json are written again as ab wrote them,
+    and its line printed.
     """
-    from avrisk.api.reports import rebuild_report
+    from avrisk.api.ab import ABResult
+    from avrisk.api.rebuild import rebuild
     from avrisk.api.runs import EXPECTED
 
     with user_errors(*EXPECTED):
-        result = rebuild_report(run_dir, failures, scenario, device)
-        show_outcome(result, as_json)
+        result = rebuild(run_dir, failures, scenario, device)
+        if isinstance(result, ABResult):
+            show_comparison(result, as_json)
+        else:
+            show_outcome(result, as_json)
 
 
 def show_outcome(result: EstimationResult, as_json: bool) -> None:

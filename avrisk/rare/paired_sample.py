@@ -60,11 +60,18 @@ class MinOfPair:
     dict
         ``f``: ``min(f_A, f_B)`` (NaN where either is), ``f_a``, ``f_b``,
         and the pair's other outputs.
+
+    Attributes
+    ----------
+    device : str or None
+        The pair's ``device``, if it has one (a worker names it in
+        :data:`~avrisk.rare.parallel.EVALUATED_BY`).
     """
 
     def __init__(self, pair: BatchFunction) -> None:
         self.pair = pair
         self.needs_seeds = bool(getattr(pair, "needs_seeds", False))
+        self.device: str | None = getattr(pair, "device", None)
 
     def __call__(
         self, x: FloatArray, seeds: np.ndarray | None = None

@@ -3,12 +3,14 @@
 import json
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 import avrisk
 from avrisk.api import events
 from avrisk.api.runs import scenario_spec
 from avrisk.pipeline import RunDirectoryError
+from avrisk.rare.parallel import EVALUATED_BY
 
 #: A short, not-rare comparison: a few hundred rollout pairs.
 SMALL = dict(gamma=2.0, n_particles=100, n_final=200, batch_size=200, failures=0)
@@ -63,10 +65,13 @@ def test_two_egos_are_compared_written_and_read_back(tmp_path):
         HOLD,
         out=tmp_path,
         progress=again.append,
-        **SMALL,
+        **{**SMALL, "failures": 1},
     )
     assert not any(isinstance(e, events.RunStarted) for e in again)
     assert same.document() == result.document()
+    result.report.unlink()  # written again, as compare_egos wrote it
+    assert avrisk.write_report(tmp_path) == result.report
+    assert result.report.read_text() == html
 
 
 def test_a_resume_with_another_ego_is_refused(tmp_path):
@@ -74,6 +79,29 @@ def test_a_resume_with_another_ego_is_refused(tmp_path):
     other = {**HOLD, "params": {"speed": 20}}
     with pytest.raises(RunDirectoryError):
         avrisk.compare_egos(short_scenario(), "idm_mobil", other, out=tmp_path, **SMALL)
+
+
+def test_two_local_workers_give_the_in_process_comparison_bit_for_bit(tmp_path):
+    runs = {}
+    for name, where in {"here": {}, "workers": {"workers": 2}}.items():
+        out = tmp_path / name
+        result = avrisk.compare_egos(
+            short_scenario(), "idm_mobil", HOLD, out=out, **SMALL, **where
+        )
+        runs[name] = result, pq.read_table(out / "samples.parquet")
+    (here, here_table), (there, there_table) = runs["here"], runs["workers"]
+    assert here.paired.regressions.n_hits > 0  # the egos differ somewhere
+    assert (there.paired.a.p, there.paired.b.p) == (here.paired.a.p, here.paired.b.p)
+    without_time = [r.paired.to_dict() for r in (here, there)]
+    for paired in without_time:
+        paired["union"].pop("wall_time_s")
+    assert without_time[0] == without_time[1]
+    assert there.verdict == here.verdict
+    assert there.discordant == here.discordant
+    assert EVALUATED_BY not in here_table.column_names
+    assert there_table.drop([EVALUATED_BY]).equals(here_table)
+    labels = there_table[EVALUATED_BY].to_pylist()
+    assert all(s.startswith("processes ") and s.endswith(" cpu") for s in labels)
 
 
 def test_the_same_ego_twice_has_no_discordant_pair(tmp_path):

@@ -147,3 +147,26 @@ def test_avrisk_run_on_ray_gives_the_in_process_numbers(cluster, tmp_path):
     assert ray_estimate | {"wall_time_s": 0} == here_estimate | {"wall_time_s": 0}
     assert on_ray.drop([EVALUATED_BY]).equals(here)
     assert all(s.startswith("ray ") for s in on_ray[EVALUATED_BY].to_pylist())
+
+
+def test_an_ab_comparison_on_ray_gives_the_in_process_numbers(cluster, tmp_path):
+    import avrisk  # not at the top: Ray workers import this module
+
+    text = resources.files("avrisk.data.scenarios").joinpath("highway_idm.yaml")
+    spec = yaml.safe_load(text.read_text())
+    spec["simulation"]["horizon"] = 4.0
+    holds_speed = {"policy": "constant", "params": {"accel": 0.0}}
+    small = dict(gamma=2.0, n_particles=100, n_final=200, batch_size=200, failures=0)
+    runs = {}
+    for name, backend in {"here": {}, "ray": {"backend": "ray"}}.items():
+        out = tmp_path / name
+        result = avrisk.compare_egos(
+            spec, "idm_mobil", holds_speed, out=out, **small, **backend
+        )
+        runs[name] = result, pq.read_table(out / "samples.parquet")
+    (here, here_table), (on_ray, ray_table) = runs["here"], runs["ray"]
+    assert (on_ray.paired.a.p, on_ray.paired.b.p) == (here.paired.a.p, here.paired.b.p)
+    assert on_ray.paired.difference == here.paired.difference
+    assert on_ray.paired.ratio == here.paired.ratio
+    assert ray_table.drop([EVALUATED_BY]).equals(here_table)
+    assert all(s.startswith("ray ") for s in ray_table[EVALUATED_BY].to_pylist())
