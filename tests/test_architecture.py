@@ -56,7 +56,7 @@ MODULES_NOT_YET_SPLIT = {
         "the CE update, its settings and both CE estimators; split with the "
         "rest of rare/"
     ),
-    "avrisk/learning/gail.py": (
+    "avrisk/learning/imitation/gail.py": (
         "the discriminator pieces MGAIL and closed-loop training share, and a "
         "PPO fine-tune that is not shipped; learning/ is reorganised by stage "
         "later"
@@ -71,19 +71,19 @@ FUNCTIONS_NOT_YET_SPLIT = {
     "avrisk/rare/splitting_importance.py:SplittingImportanceSampling.finalize": (
         "the IS stage and its diagnostics; split with rare/"
     ),
-    "avrisk/learning/train.py:_train_drivers": (
+    "avrisk/learning/training/train.py:_train_drivers": (
         "the driver training recipe end to end; learning/ is reorganised later"
     ),
-    "avrisk/learning/gail.py:gail_finetune": (
+    "avrisk/learning/imitation/gail.py:gail_finetune": (
         "the unshipped PPO fine-tune, to leave the package"
     ),
     "avrisk/learning/vision.py:_train_vision": (
         "the vision ego's training recipe; learning/ is reorganised later"
     ),
-    "avrisk/learning/closed_loop.py:closed_loop_finetune": (
+    "avrisk/learning/training/closed_loop.py:closed_loop_finetune": (
         "the closed-loop training loop; learning/ is reorganised later"
     ),
-    "avrisk/learning/glasso.py:fit_sparse_gaussian": (
+    "avrisk/learning/prior/glasso.py:fit_sparse_gaussian": (
         "the graphical-lasso fit with its checks; learning/ is reorganised later"
     ),
 }

@@ -42,7 +42,7 @@ from avrisk.agents.vision import PilotNet, PilotNetEgo
 from avrisk.agents.vision.store import PILOTNET_FILE
 from avrisk.assembly.builder import ScenarioSimulator, base_distribution
 from avrisk.learning.train_config import Progress, TrainEvent
-from avrisk.learning.training_report import training_environment
+from avrisk.learning.training.report import training_environment
 from avrisk.scenario import load_spec
 from avrisk.scenario.components import EgoSpec
 from avrisk.scenario.sensors import CameraSpec

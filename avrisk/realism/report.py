@@ -33,7 +33,7 @@ from avrisk.agents.drivers.store import (
     load_xi_prior,
 )
 from avrisk.fingerprint import sha256_file
-from avrisk.learning.us101_lane_changes import (
+from avrisk.learning.ngsim.us101_lane_changes import (
     HELD_OUT_FRACTION,
     SPLIT_SEED,
     LaneChangeTables,

@@ -4,7 +4,7 @@ import torch
 
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
-from avrisk.learning.gail import (
+from avrisk.learning.imitation.gail import (
     GailConfig,
     PPOBatch,
     accel_log_prob,

@@ -41,8 +41,8 @@ This is model-free GAIL with PPO, on car following only (no lane changes, no
 multi-vehicle traffic). Model-based GAIL (the paper's MGAIL, Baram et al.
 2017), whose policy gradient is the discriminator's reward differentiated
 through the dynamics, reuses :func:`transition_features` and
-:func:`train_discriminator` in :mod:`avrisk.learning.mgail` and
-:mod:`avrisk.learning.closed_loop`, through the simulator's own step.
+:func:`train_discriminator` in :mod:`avrisk.learning.imitation.mgail` and
+:mod:`avrisk.learning.training.closed_loop`, through the simulator's own step.
 """
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ def mlp(n_in: int, hidden: int, n_out: int = 1) -> nn.Sequential:
 def transition_features(v: Tensor, v_l: Tensor, gap: Tensor) -> Tensor:
     """Discriminator inputs of every step of car-following tracks.
 
-    Differentiable: MGAIL (:mod:`avrisk.learning.mgail`) back-propagates the
+    Differentiable: MGAIL (:mod:`avrisk.learning.imitation.mgail`) back-propagates the
     discriminator's reward through them into a simulated follower.
 
     Parameters

@@ -9,7 +9,7 @@ does: replaying the closed-loop stage's own validation windows (the share
 ``validation_fraction`` of the training windows that the stage held out, drawn
 with the training's seed) :data:`REPLICATES` times each with ``xi ~ P0`` and
 sampled actions, the leaders' speed changes made :data:`STRESS` times as large
-(:func:`~avrisk.learning.closed_loop.stressed`). Over 15 trainings its crash
+(:func:`~avrisk.learning.training.closed_loop.stressed`). Over 15 trainings its crash
 count ranked the held-out collisions with Spearman 0.76 (p = 0.0009).
 
 :func:`validation_crashes` scores one training; :func:`choose` keeps the one
@@ -38,9 +38,9 @@ from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import XiPrior
-from avrisk.learning.closed_loop import split_windows, stressed
 from avrisk.learning.replay import CarFollowingWindows, replay
 from avrisk.learning.train_config import ClosedLoopConfig
+from avrisk.learning.training.closed_loop import split_windows, stressed
 from avrisk.scenario.base_distribution import xi_base_family
 from avrisk.sim import Road
 

@@ -1,41 +1,45 @@
 """Training the learned drivers and ``P0(xi)`` from data: the stages in order.
 
-Pipeline of :func:`train_drivers` (DESIGN.md §4), one module a stage::
+Pipeline of :func:`train_drivers` (DESIGN.md §4), one module of
+:mod:`avrisk.learning` a stage::
 
     demonstrations  = NGSIM I-80 pairs (train split)           longitudinal
                     + NGSIM I-80 lateral pairs (train split)    + lane keeping
                     + IDM+MOBIL in our simulator                neighbours
-                                                        (training_data.py)
+                                                    (training/data.py)
     trunk + head    = argmin weighted Gaussian NLL  (Adam)      behaviour cloning
-                                                        (behaviour_cloning.py)
+                                                    (imitation/behaviour_cloning.py)
     sampling noise  = AR(1) from human residuals, scale by replays
-                                                        (sampling_noise.py)
+                                                    (training/sampling_noise.py)
     DAgger x K      = learner drives, IDM+MOBIL labels the       covariate shift
-                      visited states; refit on the aggregate    (dagger.py)
+                      visited states; refit on the aggregate
+                                                    (imitation/dagger.py)
     sampling noise  = again, for the final network
     closed loop     = back-propagation through replays of       closed-loop
                       training windows: imitation + MGAIL        realism
                       reward + gap and TTC barriers, and
                       hard-braking windows with their leaders
                       braking harder, under the barriers
-                                              (closed_loop.py, mgail.py)
+                                                    (training/closed_loop.py,
+                                                     imitation/mgail.py)
     heads 1..m      = the head refitted on m bootstrap resamples of the
                       episodes (trunk frozen, so the heads are comparable),
                       then moved together so that their mean is the
-                      closed-loop head                 (bootstrap_heads.py)
+                      closed-loop head              (prior/bootstrap_heads.py)
     mu0, Sigma0^-1  = ensemble mean, Ledoit-Wolf + graphical lasso
-                                                        (xi_prior_fit.py)
+                                                    (prior/xi_prior_fit.py)
     files, report   = driver_net.npz (with the emergency brake
                       TrainConfig.guard, which training itself never
                       drives with), xi_prior.npz, training_report.json
-                                                        (training_report.py)
+                                                    (training/report.py)
 
-The settings of every stage are one :class:`~avrisk.learning.train_config.TrainConfig`.
-With ``candidates > 1`` the recipe is trained with as many seeds and the
-training whose drivers (with their emergency brake) crash least on their own
-closed-loop validation windows is kept (:mod:`avrisk.learning.selection`;
-training data only): trainings of one recipe differ widely in how often their
-drivers crash.
+The settings of every stage are one
+:class:`~avrisk.learning.train_config.TrainConfig`. With ``candidates > 1``
+the recipe is trained with as many seeds and the training whose drivers (with
+their emergency brake) crash least on their own closed-loop validation
+windows is kept (:mod:`avrisk.learning.training.selection`; training data
+only): trainings of one recipe differ widely in how often their drivers
+crash.
 The shipped files are ``driver_net.npz`` (trunk + shared head) and
 ``xi_prior.npz`` (``mu0``, sparse precision, members); see
 :mod:`avrisk.agents.drivers.store`. The run is seeded: the same seed, data
@@ -67,27 +71,27 @@ from avrisk.agents.drivers.store import (
     load_driver_net,
     load_xi_prior,
 )
-from avrisk.learning.behaviour_cloning import fit_driver_net
-from avrisk.learning.bootstrap_heads import bootstrap_heads, centre_heads
-from avrisk.learning.closed_loop import closed_loop_finetune
-from avrisk.learning.dagger import dagger_rounds
-from avrisk.learning.sampling_noise import fit_sampling_noise
-from avrisk.learning.selection import (
+from avrisk.learning.imitation.behaviour_cloning import fit_driver_net
+from avrisk.learning.imitation.dagger import dagger_rounds
+from avrisk.learning.prior.bootstrap_heads import bootstrap_heads, centre_heads
+from avrisk.learning.prior.xi_prior_fit import fit_xi_prior, validation_nll
+from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
+from avrisk.learning.training.closed_loop import closed_loop_finetune
+from avrisk.learning.training.data import load_demonstrations, training_windows
+from avrisk.learning.training.report import (
+    TRAINING_REPORT_FILE,
+    TrainingReport,
+    training_environment,
+    write_training_outputs,
+)
+from avrisk.learning.training.sampling_noise import fit_sampling_noise
+from avrisk.learning.training.selection import (
     REPLICATES,
     STRESS,
     CandidateScore,
     choose,
     validation_crashes,
 )
-from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
-from avrisk.learning.training_data import load_demonstrations, training_windows
-from avrisk.learning.training_report import (
-    TRAINING_REPORT_FILE,
-    TrainingReport,
-    training_environment,
-    write_training_outputs,
-)
-from avrisk.learning.xi_prior_fit import fit_xi_prior, validation_nll
 
 __all__ = ["CANDIDATES_DIR", "train_drivers"]
 
@@ -118,7 +122,7 @@ def train_drivers(
         ``training_report.json`` (created if missing).
     data_dir : str or Path, optional
         NGSIM folder; default ``$AVRISK_NGSIM_DIR``, else the data shipped
-        with the package (:func:`avrisk.learning.ngsim_files.ngsim_dir`).
+        with the package (:func:`avrisk.learning.ngsim.files.ngsim_dir`).
     config : TrainConfig, optional
         Default ``TrainConfig()``, the settings of the shipped files.
     progress : callable, optional
@@ -133,7 +137,7 @@ def train_drivers(
         Trainings of the recipe, with seeds ``seed, seed + 1, ...``. With
         more than one, each is written to ``out_dir/candidates/seed-S/`` and
         scored by its drivers' crashes on its own closed-loop validation
-        windows (:func:`~avrisk.learning.selection.validation_crashes`), and
+        windows (:func:`~avrisk.learning.training.selection.validation_crashes`), and
         the one with the fewest is copied to ``out_dir``; its report's
         ``selection`` lists every candidate's score. A candidate's files are
         those of ``train_drivers(seed + k)``.

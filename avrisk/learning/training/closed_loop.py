@@ -26,7 +26,7 @@ and as differentiable-simulation imitation does (e.g. Scheel et al. 2021,
             short
         adversarial (MGAIL, if adversarial_weight > 0): the mean reward
             -log(1 - D(x_t)) of a discriminator D of human vs simulated
-            transitions x_t (:mod:`avrisk.learning.mgail`), updated on the
+            transitions x_t (:mod:`avrisk.learning.imitation.mgail`), updated on the
             same minibatch just before; its gradient flows through the
             simulated transitions into the policy, as in model-based GAIL
             (Baram et al. 2017) with the simulator as the model, and the
@@ -66,9 +66,9 @@ from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import pack_xi
-from avrisk.learning.gail import transition_features
-from avrisk.learning.mgail import Discriminator
-from avrisk.learning.ngsim_demonstrations import DEFAULT_WIDTH
+from avrisk.learning.imitation.gail import transition_features
+from avrisk.learning.imitation.mgail import Discriminator
+from avrisk.learning.ngsim.samples import DEFAULT_WIDTH
 from avrisk.learning.replay import (
     BANDS,
     DT,
@@ -193,7 +193,8 @@ def simulated_transitions(
     Returns
     -------
     x : Tensor of shape (W, T - 1, 5)
-        :func:`~avrisk.learning.gail.transition_features` of steps ``1 .. T-1``.
+        :func:`~avrisk.learning.imitation.gail.transition_features` of steps
+        ``1 .. T-1``.
     valid : Tensor of bool, shape (W, T - 1)
         The step was simulated (its first state had not crashed).
     """
