@@ -56,11 +56,6 @@ MODULES_NOT_YET_SPLIT = {
         "the CE update, its settings and both CE estimators; split with the "
         "rest of rare/"
     ),
-    "avrisk/learning/imitation/gail.py": (
-        "the discriminator pieces MGAIL and closed-loop training share, and a "
-        "PPO fine-tune that is not shipped; learning/ is reorganised by stage "
-        "later"
-    ),
 }
 
 #: Functions over FUNCTION_CODE_LINES lines of code not yet split, and why.
@@ -73,9 +68,6 @@ FUNCTIONS_NOT_YET_SPLIT = {
     ),
     "avrisk/learning/training/train.py:_train_drivers": (
         "the driver training recipe end to end; learning/ is reorganised later"
-    ),
-    "avrisk/learning/imitation/gail.py:gail_finetune": (
-        "the unshipped PPO fine-tune, to leave the package"
     ),
     "avrisk/learning/vision.py:_train_vision": (
         "the vision ego's training recipe; learning/ is reorganised later"

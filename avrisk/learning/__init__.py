@@ -26,10 +26,9 @@ here imports anything heavy on load):
   the humans' closing-in;
 * :mod:`avrisk.learning.vision` -- PilotNet's training on rendered images.
 
-:mod:`~avrisk.learning.imitation.gail` (GAIL with PPO: fine-tunes the
-acceleration head of a trained network in replays of human car following) is
-not part of :func:`~avrisk.learning.training.train.train_drivers` and not used
-by the shipped weights.
+GAIL with PPO (fine-tuning the acceleration head of a trained network in
+replays of human car following) was tried and is not shipped: it lives beside
+its benchmark, in ``benchmarks/gail_ppo.py``.
 
 What the data can and cannot teach
 ----------------------------------
@@ -63,8 +62,8 @@ imitation (the default ``ClosedLoopConfig``): on held-out windows that had
 fewer rear-end collisions than imitation or MGAIL with the same barriers, and
 with the stressed replays none at all, at the cost of longer gaps
 (BENCHMARKS.md, "Learned drivers"). Model-free GAIL with PPO
-(:func:`~avrisk.learning.imitation.gail.gail_finetune`, the acceleration rows
-of the shared head only) is not run by ``train_drivers``; it did not reduce the
+(``benchmarks/gail_ppo.py``, the acceleration rows of the shared head only) is
+not run by ``train_drivers``; it did not reduce the
 rear-end collisions. The ensemble is one trunk with ``m`` bootstrap heads
 (DESIGN.md §4), not ``m`` independently trained generators.
 """

@@ -7,7 +7,7 @@ import torch
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.store import load_driver_net
-from avrisk.learning.imitation.gail import human_transitions
+from avrisk.learning.imitation.discriminator import human_transitions
 from avrisk.learning.imitation.mgail import Discriminator
 from avrisk.learning.prior.bootstrap_heads import centre_heads
 from avrisk.learning.replay import replay

@@ -11,8 +11,9 @@
   new network;
 * :mod:`~avrisk.learning.imitation.dagger` -- expert labels on the states the
   learned drivers visit, and the DAgger rounds;
+* :mod:`~avrisk.learning.imitation.discriminator` -- the transition features
+  of human and simulated car following, and the logistic training of a
+  discriminator between them;
 * :mod:`~avrisk.learning.imitation.mgail` -- model-based GAIL's discriminator,
-  whose reward the closed-loop stage back-propagates through the simulator;
-* :mod:`~avrisk.learning.imitation.gail` -- GAIL with PPO, not used by the
-  shipped weights.
+  whose reward the closed-loop stage back-propagates through the simulator.
 """

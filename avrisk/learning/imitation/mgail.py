@@ -15,9 +15,10 @@ round of :func:`~avrisk.learning.training.closed_loop.closed_loop_finetune` with
     policy loss += -adversarial_weight * mean_t softplus(logit D(x_t))
                    (GAIL's reward -log(1 - D), D's weights held fixed)
 
-The discriminator's inputs are those of :mod:`avrisk.learning.imitation.gail`
-(:func:`~avrisk.learning.imitation.gail.transition_features`), standardised by the
-human statistics.
+The discriminator's inputs, network and logistic training are those of
+:mod:`avrisk.learning.imitation.discriminator`
+(:func:`~avrisk.learning.imitation.discriminator.transition_features`),
+standardised by the human statistics.
 """
 
 from __future__ import annotations
@@ -26,7 +27,11 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from avrisk.learning.imitation.gail import human_transitions, mlp, train_discriminator
+from avrisk.learning.imitation.discriminator import (
+    human_transitions,
+    mlp,
+    train_discriminator,
+)
 from avrisk.learning.replay import CarFollowingWindows
 
 __all__ = ["Discriminator"]

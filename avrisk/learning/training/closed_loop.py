@@ -66,7 +66,7 @@ from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import pack_xi
-from avrisk.learning.imitation.gail import transition_features
+from avrisk.learning.imitation.discriminator import transition_features
 from avrisk.learning.imitation.mgail import Discriminator
 from avrisk.learning.ngsim.samples import DEFAULT_WIDTH
 from avrisk.learning.replay import (
@@ -193,7 +193,7 @@ def simulated_transitions(
     Returns
     -------
     x : Tensor of shape (W, T - 1, 5)
-        :func:`~avrisk.learning.imitation.gail.transition_features` of steps
+        :func:`~avrisk.learning.imitation.discriminator.transition_features` of steps
         ``1 .. T-1``.
     valid : Tensor of bool, shape (W, T - 1)
         The step was simulated (its first state had not crashed).
