@@ -42,11 +42,12 @@ learner's own states with IDM as the expert: the learned drivers' reactions to
 neighbours and their emergency braking are therefore IDM's, not a human's.
 Their acceleration targets carry a lower loss weight than the human ones.
 
-The learned drivers do not change lanes: a unimodal Gaussian policy of the
+The driver network does not change lanes: a unimodal Gaussian policy of the
 current state cannot represent the discrete decision (trained on MOBIL's lane
 changes it drifted half-way into the next lane and sideswiped), so lane
-changes are not demonstrated. The human rate (US-101, about 50 per
-vehicle-hour) is not matched.
+changes are not demonstrated. They come from a layer on top of the network
+(:mod:`avrisk.agents.drivers.lane_change`), whose rate is fitted to the
+US-101 training vehicles (:mod:`avrisk.learning.ngsim.us101_lane_changes`).
 
 The paper's method
 ------------------
@@ -56,14 +57,15 @@ forward model is the simulator's own differentiable step:
 :func:`~avrisk.learning.training.closed_loop.closed_loop_finetune` with
 ``ClosedLoopConfig(adversarial_weight > 0)`` back-propagates the
 discriminator's reward (:mod:`~avrisk.learning.imitation.mgail`) through
-replays of human car following into every weight of the network, with a gap and a TTC
-barrier as RAIL's collision penalty. The shipped files add it to trajectory
-imitation (the default ``ClosedLoopConfig``): on held-out windows that had
-fewer rear-end collisions than imitation or MGAIL with the same barriers, and
-with the stressed replays none at all, at the cost of longer gaps
-(BENCHMARKS.md, "Learned drivers"). Model-free GAIL with PPO
+replays of human car following into every weight of the network, with a gap
+and a TTC barrier as RAIL's collision penalty. The shipped files add it to
+trajectory imitation (the default ``ClosedLoopConfig``): on held-out windows
+the two together had fewer rear-end collisions than either alone with the
+same barriers, and fewer still with the stressed replays, at the cost of
+longer gaps (BENCHMARKS.md, "Learned drivers"). Model-free GAIL with PPO
 (``benchmarks/gail_ppo.py``, the acceleration rows of the shared head only) is
-not run by ``train_drivers``; it did not reduce the
-rear-end collisions. The ensemble is one trunk with ``m`` bootstrap heads
-(DESIGN.md §4), not ``m`` independently trained generators.
+not run by ``train_drivers``; it did not reduce the rear-end collisions
+(BENCHMARKS.md, "GAIL fine-tuning of the acceleration head"). The ensemble is
+one trunk with ``m`` bootstrap heads, refitted with the trunk frozen so that
+they are comparable, not ``m`` independently trained generators.
 """

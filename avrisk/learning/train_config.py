@@ -57,7 +57,8 @@ class ClosedLoopConfig:
         Time to collision below which a second barrier acts [s]: ``(closing
         speed - gap / ttc_margin)_+^2`` [m^2/s^2] per step while in line. It
         grows while the follower closes in fast, before the gap is short (0:
-        off). 2.0 until the drivers of 2026-11-25 (sixth look).
+        off). Chosen with the shipped recipe (BENCHMARKS.md, "Training on top
+        of the brake").
     ttc_weight : float, default=10.0
         Weight of the TTC barrier [s^2/m^2].
     imitation_weight : float, default=1.0
@@ -97,9 +98,9 @@ class ClosedLoopConfig:
         Give the stress replays action noise of their own. False, as when
         the shipped files were trained, reuses the noise seeds of minibatch
         windows 7, 8, ..., so that the stress replays share those windows'
-        noise streams. True gave four trainings with stress_factor 2.0 no
-        fewer held-out collisions than the shared noise (BENCHMARKS.md,
-        "Keeping the safest of several trainings", recipe (q)).
+        noise streams. True did not reduce the held-out collisions
+        (BENCHMARKS.md, "Keeping the safest of several trainings", recipe
+        (q)).
     drive_with_guard : bool, default=True
         The minibatch and validation replays drive with the emergency brake
         the weights will carry (:attr:`TrainConfig.guard`): the network

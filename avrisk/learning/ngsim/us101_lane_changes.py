@@ -73,7 +73,7 @@ __all__ = [
 
 #: NGSIM frame interval [s].
 DT = 0.1
-#: Seed of the held-out draw (issue 21).
+#: Seed of the held-out draw (fixed: the shipped tables hold its split).
 SPLIT_SEED = 21
 #: Share of the vehicles held out for evaluation.
 HELD_OUT_FRACTION = 1.0 / 3.0
@@ -143,8 +143,7 @@ class LaneChangeTables:
         Columns of integers and strings must be identical; floating-point
         columns and the noise level agree to within a relative 1e-12, since
         numpy's vectorised arithmetic rounds differently on CPUs with and
-        without AVX-512 (up to 9e-14 apart, measured on the peak lateral
-        speeds).
+        without AVX-512 (in the last bits of the peak lateral speeds).
         """
         return (
             _tables_agree(self.vehicles, other.vehicles)

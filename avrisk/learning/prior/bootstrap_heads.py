@@ -3,7 +3,7 @@
 After behaviour cloning and DAgger, the last layer ``xi`` of the driver
 network is refitted ``m`` times, each on a bootstrap resample of the training
 episodes (within each source), with the trunk frozen so that the heads are
-comparable (DESIGN.md §4). The ``m`` heads are the members to which
+comparable. The ``m`` heads are the members to which
 :mod:`avrisk.learning.prior.xi_prior_fit` fits ``P0(xi)``.
 """
 

@@ -320,6 +320,32 @@ def stressed(windows: CarFollowingWindows, factor: float) -> CarFollowingWindows
     return dataclasses.replace(windows, v_l=v_l)
 
 
+def _minibatch_seeds(seed: int, it: int, n: int, config: ClosedLoopConfig) -> Tensor:
+    """Noise seeds of step ``it``'s ``n`` minibatch replays, int64 of shape (n,)."""
+    return torch.as_tensor(
+        seed * 1_000_003 + it * config.batch_windows + np.arange(n),
+        dtype=torch.int64,
+    )
+
+
+def _discriminator_step(
+    disc: Discriminator | None,
+    trace: ClosedLoopTrace,
+    windows: CarFollowingWindows,
+    config: ClosedLoopConfig,
+) -> dict[str, float]:
+    """Update ``disc`` on a minibatch's simulated transitions; its accuracy.
+
+    Returns ``{"disc_accuracy": ...}``, or ``{}`` without a discriminator.
+    """
+    if disc is None:
+        return {}
+    x, valid = simulated_transitions(trace, windows)
+    return {
+        "disc_accuracy": disc.update(x[valid], config.disc_epochs, config.disc_batch)
+    }
+
+
 def _stress_seeds(
     minibatch_seeds: Tensor, seed: int, it: int, n: int, config: ClosedLoopConfig
 ) -> Tensor:
@@ -434,17 +460,10 @@ def closed_loop_finetune(
     for it in range(config.iterations):
         size = min(config.batch_windows, len(train_idx))
         batch = rng.choice(train_idx, size=size, p=draw)
-        seeds = torch.as_tensor(
-            seed * 1_000_003 + it * config.batch_windows + np.arange(len(batch)),
-            dtype=torch.int64,
-        )
+        seeds = _minibatch_seeds(seed, it, len(batch), config)
         part = windows.take(batch)
         trace = differentiable_replay(part, net, road, seeds, guard)
-        disc_row = {}
-        if disc is not None:
-            x, valid = simulated_transitions(trace, part)
-            accuracy = disc.update(x[valid], config.disc_epochs, config.disc_batch)
-            disc_row = {"disc_accuracy": accuracy}
+        disc_row = _discriminator_step(disc, trace, part, config)
         loss, parts = closed_loop_loss(trace, part, config, disc)
         if config.stress_windows > 0 and len(hard_idx) > 0:
             pick = rng.choice(hard_idx, size=config.stress_windows)

@@ -108,11 +108,10 @@ def cpu_kernels() -> dict[str, Any]:
     """The CPU kernels torch and the loaded BLAS libraries dispatch to here.
 
     The same code, seed and thread count give other floating-point results
-    with other kernels: on a CPU with AVX-512, torch's default AVX-512
-    kernels move the closed-loop stage's losses in their 4th digit within 10
-    steps of training, against the AVX2 kernels of a CPU without it, and
-    OpenBLAS's SkylakeX kernels move the graphical lasso's precision by
-    about 3e-11 against its Haswell ones.
+    with other kernels: torch's AVX-512 kernels move the closed-loop stage's
+    losses against the AVX2 kernels of a CPU without AVX-512, and OpenBLAS's
+    SkylakeX kernels move the graphical lasso's precision against its Haswell
+    ones (BENCHMARKS.md, "Reproducing the shipped drivers: CPU kernels").
 
     Returns
     -------

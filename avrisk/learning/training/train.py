@@ -1,7 +1,7 @@
 """Training the learned drivers and ``P0(xi)`` from data: the stages in order.
 
-Pipeline of :func:`train_drivers` (DESIGN.md §4), one module of
-:mod:`avrisk.learning` a stage::
+Pipeline of :func:`train_drivers`, one module of :mod:`avrisk.learning` a
+stage::
 
     demonstrations  = NGSIM I-80 pairs (train split)           longitudinal
                     + NGSIM I-80 lateral pairs (train split)    + lane keeping
@@ -63,8 +63,11 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, replace
 from pathlib import Path
 
+import numpy as np
 import torch
+from numpy.typing import NDArray
 
+from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import (
     DRIVER_NET_FILE,
     XI_PRIOR_FILE,
@@ -73,6 +76,7 @@ from avrisk.agents.drivers.store import (
 )
 from avrisk.learning.imitation.behaviour_cloning import fit_driver_net
 from avrisk.learning.imitation.dagger import dagger_rounds
+from avrisk.learning.imitation.demonstrations import Demonstrations
 from avrisk.learning.prior.bootstrap_heads import bootstrap_heads, centre_heads
 from avrisk.learning.prior.xi_prior_fit import fit_xi_prior, validation_nll
 from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
@@ -263,6 +267,47 @@ class _Stopwatch:
         self._start = now
 
 
+def _closed_loop_stage(
+    net: DriverNet,
+    data_dir: str | Path | None,
+    config: TrainConfig,
+    seed: int,
+    progress: Progress | None,
+) -> list[dict[str, float]]:
+    """The closed-loop stage on the training windows (its history; [] if off)."""
+    if config.closed_loop.iterations == 0:
+        return []
+    return closed_loop_finetune(
+        net,
+        training_windows(data_dir, config.closed_loop.window_steps, config.periods),
+        config.closed_loop,
+        seed,
+        progress,
+        guard=config.guard if config.closed_loop.drive_with_guard else None,
+    )
+
+
+def _ensemble_stage(
+    net: DriverNet,
+    train: Demonstrations,
+    config: TrainConfig,
+    seed: int,
+    progress: Progress | None,
+) -> tuple[NDArray[np.float64], list[dict[str, float]]]:
+    """The bootstrap heads, centred on the network's head, and their history."""
+    heads, history = bootstrap_heads(
+        net,
+        train,
+        config.n_members,
+        epochs=config.head_epochs,
+        batch_size=config.head_batch_size,
+        lr=config.head_lr,
+        seed=seed,
+        progress=progress,
+    )
+    return centre_heads(heads, net), history
+
+
 def _train_drivers(
     seed: int,
     out: Path,
@@ -306,29 +351,10 @@ def _train_drivers(
     calibration = fit_sampling_noise(net, train, windows, seed, progress)
     stopwatch.lap("noise")
 
-    closed_loop_history: list[dict[str, float]] = []
-    if config.closed_loop.iterations > 0:
-        closed_loop_history = closed_loop_finetune(
-            net,
-            training_windows(data_dir, config.closed_loop.window_steps, config.periods),
-            config.closed_loop,
-            seed,
-            progress,
-            guard=config.guard if config.closed_loop.drive_with_guard else None,
-        )
+    closed_loop_history = _closed_loop_stage(net, data_dir, config, seed, progress)
     stopwatch.lap("closed_loop")
 
-    heads, head_history = bootstrap_heads(
-        net,
-        train,
-        config.n_members,
-        epochs=config.head_epochs,
-        batch_size=config.head_batch_size,
-        lr=config.head_lr,
-        seed=seed,
-        progress=progress,
-    )
-    heads = centre_heads(heads, net)
+    heads, head_history = _ensemble_stage(net, train, config, seed, progress)
     stopwatch.lap("heads")
 
     prior = fit_xi_prior(heads, config, seed, progress)
