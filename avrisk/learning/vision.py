@@ -40,7 +40,8 @@ from avrisk.agents.drivers import LearnedEgoPolicy
 from avrisk.agents.drivers.driver import LearnedState
 from avrisk.agents.vision import PilotNet, PilotNetEgo
 from avrisk.agents.vision.store import PILOTNET_FILE
-from avrisk.assembly.builder import ScenarioSimulator, base_distribution
+from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.parts import base_distribution
 from avrisk.learning.train_config import Progress, TrainEvent
 from avrisk.learning.training.report import training_environment
 from avrisk.scenario import load_spec
