@@ -3,7 +3,7 @@
 Scores each ``--guards`` setting (``GAP,DECEL`` or ``GAP,DECEL,hold``;
 ``none`` for the network alone) by the crashes of each trained drivers'
 folder on its closed-loop validation windows (training data:
-:func:`avrisk.learning.selection.validation_crashes`, 8 replays per window,
+:func:`avrisk.learning.training.selection.validation_crashes`, 8 replays per window,
 leaders as recorded and with their speed changes made 1.5 times as large),
 and prints one row per setting with the totals. The
 held-out windows are not used: measure the chosen setting on them afterwards
@@ -26,9 +26,9 @@ import torch
 
 from avrisk.agents.drivers.guard import parse_guard
 from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
-from avrisk.learning.selection import validation_crashes
 from avrisk.learning.train_config import ClosedLoopConfig
-from avrisk.learning.training_data import training_windows
+from avrisk.learning.training.data import training_windows
+from avrisk.learning.training.selection import validation_crashes
 
 #: The settings scored when ``--guards`` is not given.
 DEFAULT_GUARDS = ("none", "1,2", "1,1", "2,1", "2,0.5")

@@ -14,7 +14,7 @@ B. Multi-lane traffic (6 lanes, 6 vehicles, random scenes unseen in
    speed smoothed over 1 s, and jerk is not compared). The US-101 file does
    not ship with the package: set ``$AVRISK_NGSIM_DIR`` to a folder holding
    the original NGSIM files (``us101_vehicle_subset.csv.gz``; see
-   :mod:`avrisk.learning.ngsim`).
+   :mod:`avrisk.learning.ngsim.loaders`).
 
 C. The bundled scenario ``highway_idm`` with learned environment drivers
    (ego: IDM+MOBIL).
@@ -43,9 +43,9 @@ from avrisk.agents.drivers.store import (
     load_xi_prior,
 )
 from avrisk.agents.idm import IDMDriver
-from avrisk.learning.ngsim import load_us101
-from avrisk.learning.ngsim_samples import US101_LANE_WIDTH, episode_bounds
-from avrisk.learning.simulated_demonstrations import random_highway_scenes
+from avrisk.learning.imitation.simulated_demonstrations import random_highway_scenes
+from avrisk.learning.ngsim.loaders import load_us101
+from avrisk.learning.ngsim.samples import US101_LANE_WIDTH, episode_bounds
 from avrisk.realism.car_following import learned_drivers
 from avrisk.realism.lane_changes import frame_states
 from avrisk.realism.metrics import (

@@ -22,7 +22,7 @@ pairs and its lateral windows); ``all`` trains on both and is scored on the
 test splits (the default ``avrisk realism`` set), which it did not train on.
 Every training and scoring runs in its own process (``train`` and ``score``
 sub-commands), with the CPU kernels pinned as for the shipped files
-(:data:`~avrisk.learning.training_report.KERNEL_PINS`).
+(:data:`~avrisk.learning.training.report.KERNEL_PINS`).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
     """
     from avrisk.learning.guard_fit import fit_brake_guard
     from avrisk.learning.train_config import TrainConfig
-    from avrisk.learning.training_data import training_windows
+    from avrisk.learning.training.data import training_windows
 
     default = TrainConfig()
     if name == "shipped":
@@ -92,7 +92,7 @@ def train(fold: str, recipe: str, seed: int) -> None:
     """One training into its folder."""
     import torch
 
-    from avrisk.learning.train import train_drivers
+    from avrisk.learning.training.train import train_drivers
 
     torch.set_num_threads(1)
     periods, _ = FOLDS[fold]
@@ -114,7 +114,7 @@ def score(fold: str, recipe: str, seed: int) -> None:
 
     from avrisk.agents.drivers.store import load_driver_net
     from avrisk.learning.guard_fit import fit_brake_guard
-    from avrisk.learning.training_data import training_windows
+    from avrisk.learning.training.data import training_windows
     from avrisk.realism.periods import score_summary
     from avrisk.realism.report import DriverFiles, RealismSettings, run_realism
 
@@ -154,7 +154,7 @@ def score(fold: str, recipe: str, seed: int) -> None:
 
 def _child(*args: str) -> bool:
     """Run this script's sub-command in a fresh process; True if it succeeded."""
-    from avrisk.learning.training_report import KERNEL_PINS
+    from avrisk.learning.training.report import KERNEL_PINS
 
     env = {**os.environ, **KERNEL_PINS, "OMP_NUM_THREADS": "1"}
     env["PYTHONPATH"] = str(ROOT)

@@ -1,13 +1,13 @@
 """Does GAIL fine-tuning make the learned drivers more human? BC vs BC+GAIL.
 
 Starts from the shipped behaviour-cloned (+ DAgger) network, fine-tunes its
-acceleration head by GAIL with PPO (:func:`avrisk.learning.gail.gail_finetune`)
-on the NGSIM I-80 *training* car-following windows, and compares both networks
-on the *held-out* windows exactly as part A of ``avrisk realism`` does
-(15 s windows, leader replayed, same evaluation seed, ``mu0`` and ``xi ~ P0``;
-the GAIL change of the head is carried over to the prior by
-:func:`avrisk.learning.gail.translate_prior`). Nothing is tuned on the
-held-out windows.
+acceleration head by GAIL with PPO (:func:`gail_ppo.gail_finetune`, in the
+module beside this file) on the NGSIM I-80 *training* car-following windows,
+and compares both networks on the *held-out* windows exactly as part A of
+``avrisk realism`` does (15 s windows, leader replayed, same evaluation seed,
+``mu0`` and ``xi ~ P0``; the GAIL change of the head is carried over to the
+prior by :func:`gail_ppo.translate_prior`). Nothing is tuned on the held-out
+windows.
 
 Usage::
 
@@ -24,11 +24,13 @@ import time
 import numpy as np
 import torch
 
+# benchmarks/, this script's folder, is first on sys.path when it runs.
+from gail_ppo import GailConfig, gail_finetune, translate_prior
+
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
-from avrisk.learning.gail import GailConfig, gail_finetune, translate_prior
 from avrisk.learning.replay import replay
-from avrisk.learning.training_data import training_windows
+from avrisk.learning.training.data import training_windows
 from avrisk.realism.car_following import QUANTITIES, Followers, followers, recorded
 from avrisk.realism.held_out import held_out_windows
 from avrisk.realism.metrics import DT, ks_w1

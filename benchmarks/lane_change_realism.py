@@ -2,7 +2,7 @@
 
 The learned drivers change lanes through the layer of
 :mod:`avrisk.agents.drivers.lane_change`. Everything is measured with one
-detector (:mod:`avrisk.learning.lane_changes`) on the US-101 vehicles and on
+detector (:mod:`avrisk.learning.ngsim.lane_changes`) on the US-101 vehicles and on
 the simulator's traces alike, in random six-lane traffic (6 vehicles per scene;
 :mod:`avrisk.realism.lane_changes`), every vehicle driven by the driver network
 with ``xi ~ N(mu0, Sigma0)`` per scene.
@@ -51,7 +51,7 @@ import torch
 
 from avrisk.agents.drivers.lane_change import LaneChangeParams
 from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
-from avrisk.learning.us101_lane_changes import (
+from avrisk.learning.ngsim.us101_lane_changes import (
     LaneChangeStatistics,
     load_lane_change_tables,
     split_statistics,

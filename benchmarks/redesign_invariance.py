@@ -231,8 +231,8 @@ def train_tiny(out: Path) -> None:
     """``train_drivers(0, out)`` with :data:`TINY_TRAINING`'s budget."""
     from dataclasses import replace
 
-    from avrisk.learning.train import train_drivers
     from avrisk.learning.train_config import TrainConfig
+    from avrisk.learning.training.train import train_drivers
 
     default = TrainConfig()
     closed_loop = replace(default.closed_loop, **TINY_CLOSED_LOOP)

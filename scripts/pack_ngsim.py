@@ -8,10 +8,10 @@ reads the original files (``i80_cf_pairs.csv.gz`` and
 ``i80_0400_0415_emd_cf_pairs.parquet``; provenance in the source folder's
 ``SOURCE.md``) and writes, into ``--out`` (default the package's folder):
 
-* one zstd Parquet file per data set (:data:`avrisk.learning.ngsim_files.I80_PAIRS`
-  and :data:`~avrisk.learning.ngsim_files.I80_LATERAL`), every row, only the columns
+* one zstd Parquet file per data set (:data:`avrisk.learning.ngsim.files.I80_PAIRS`
+  and :data:`~avrisk.learning.ngsim.files.I80_LATERAL`), every row, only the columns
   the loaders read; the I-80 pairs file's ``spacing`` and ``dv`` are left out
-  when they equal :func:`~avrisk.learning.ngsim_packed.i80_derived_columns` bit for
+  when they equal :func:`~avrisk.learning.ngsim.packed.i80_derived_columns` bit for
   bit (the loader recomputes them). A float column whose values are decimals
   with ``k`` places is stored as the integers ``value * 10**k`` (field
   metadata ``DECIMALS_KEY``), with the values that are not (e.g. ``-0.0`` or
@@ -40,7 +40,13 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from avrisk.learning.ngsim import (
+from avrisk.learning.ngsim.files import (
+    I80_LATERAL,
+    I80_PAIRS,
+    NgsimFiles,
+    default_ngsim_dir,
+)
+from avrisk.learning.ngsim.loaders import (
     I80_FEET_COLUMNS,
     I80_LATERAL_COLUMNS,
     I80_PAIRS_COLUMNS,
@@ -48,13 +54,7 @@ from avrisk.learning.ngsim import (
     load_i80_pairs,
     read_i80_pairs_table,
 )
-from avrisk.learning.ngsim_files import (
-    I80_LATERAL,
-    I80_PAIRS,
-    NgsimFiles,
-    default_ngsim_dir,
-)
-from avrisk.learning.ngsim_packed import (
+from avrisk.learning.ngsim.packed import (
     DECIMALS_KEY,
     EXCEPTIONS_SUFFIX,
     i80_derived_columns,
@@ -193,9 +193,10 @@ def sha256(path: Path) -> str:
 SOURCE_MD = """\
 # NGSIM I-80 samples shipped with avrisk (packed) — provenance
 
-Everything `avrisk train-drivers` (`avrisk.learning.train.train_drivers`) reads.
-The loaders of `avrisk.learning.ngsim` read these files and return the same
-arrays, bit for bit, as from the original files below.
+Everything `avrisk train-drivers`
+(`avrisk.learning.training.train.train_drivers`) reads. The loaders of
+`avrisk.learning.ngsim.loaders` read these files and return the same arrays,
+bit for bit, as from the original files below.
 
 Underlying dataset: **NGSIM (Next Generation Simulation) vehicle trajectories**,
 US DOT / FHWA, collected 2005 by video at 10 Hz: I-80 in Emeryville, CA

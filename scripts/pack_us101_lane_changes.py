@@ -6,7 +6,7 @@ Command (from the repository root)::
 
 reads the original ``us101_vehicle_subset.csv.gz`` (provenance in the source
 folder's ``SOURCE.md``), draws the held-out third of its vehicles, detects
-their lane changes (:func:`avrisk.learning.us101_lane_changes.lane_change_tables`)
+their lane changes (:func:`avrisk.learning.ngsim.us101_lane_changes.lane_change_tables`)
 and writes the two tables into ``--out`` (default the package's folder). It
 then reads them back, stops with an error unless they equal what it made,
 and prints each split's statistics and the files' sha256 (for ``SOURCE.md``).
@@ -18,9 +18,9 @@ import argparse
 import hashlib
 from pathlib import Path
 
-from avrisk.learning.ngsim import load_us101
-from avrisk.learning.ngsim_files import US101_FILE, default_ngsim_dir
-from avrisk.learning.us101_lane_changes import (
+from avrisk.learning.ngsim.files import US101_FILE, default_ngsim_dir
+from avrisk.learning.ngsim.loaders import load_us101
+from avrisk.learning.ngsim.us101_lane_changes import (
     EVENTS_FILE,
     VEHICLES_FILE,
     lane_change_tables,

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from avrisk.learning.ngsim_files import NGSIM_DIR_ENV
+from avrisk.learning.ngsim.files import NGSIM_DIR_ENV
 
 #: The original NGSIM files (see their SOURCE.md): on the project's machines
 #: only, not in CI.

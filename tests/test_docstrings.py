@@ -58,14 +58,11 @@ SPEED = re.compile(
 #: A code literal: an example of a format, not a measurement.
 LITERAL = re.compile(r"``[^`]+``")
 
-#: TODO(issue 43, step 5): these modules are being rewritten on other branches
-#: (learning/) at the same time; their flagged docstrings
-#: and comments are cleaned after those branches merge, and their entries
-#: leave this list then. A module here is still scanned for everything else
-#: it does not flag.
-NOT_YET_CLEANED = {
-    "avrisk/learning/",
-}
+#: Modules (or folders, ending in ``/``) being rewritten on another branch,
+#: whose flagged docstrings and comments are cleaned when it merges; every
+#: module is clean now. A module here is still scanned for everything else it
+#: does not flag.
+NOT_YET_CLEANED: set[str] = set()
 
 
 def _blank(match):

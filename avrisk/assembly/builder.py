@@ -33,7 +33,6 @@ from avrisk.agents import (
     IDMDriver,
 )
 from avrisk.agents.drivers import DriverNet, load_driver_net
-from avrisk.assembly import parts
 from avrisk.assembly.parts import (
     camera_from_spec,
     driver_params,
@@ -58,10 +57,6 @@ from avrisk.sim.simulator import Simulator
 from avrisk.sim.state import VehicleState
 
 __all__ = ["ScenarioSimulator", "Step"]
-
-# avrisk.learning.vision imports base_distribution from this module; it moves
-# to avrisk.assembly.parts's when learning/ is reorganised (issue 43, step 4).
-base_distribution = parts.base_distribution
 
 #: ``step(carry, t) -> (carry, ttc)``, see :meth:`ScenarioSimulator.start`.
 Step = Callable[[RolloutCarry, "int | torch.Tensor"], tuple[RolloutCarry, torch.Tensor]]

@@ -20,7 +20,8 @@ from avrisk.agents.drivers.store import (
     XI_PRIOR_FILE,
     default_drivers_dir,
 )
-from avrisk.assembly.builder import ScenarioSimulator, base_distribution
+from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.parts import base_distribution
 from avrisk.assembly.traces import FailureRecorder
 from avrisk.assembly.traffic import TrafficDrivers
 from avrisk.fingerprint import sha256_file, sha256_json

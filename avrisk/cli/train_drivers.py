@@ -1,6 +1,6 @@
 """``avrisk train-drivers``: retrain the learned drivers and their ``xi`` prior.
 
-Runs :func:`avrisk.learning.train.train_drivers` on the NGSIM I-80 data
+Runs :func:`avrisk.learning.training.train.train_drivers` on the NGSIM I-80 data
 shipped with the package (``avrisk/data/ngsim/``) or in ``--data-dir`` (behaviour
 cloning, DAgger, the bootstrap ensemble of heads, the graphical-lasso prior of
 ``xi``; minutes on one core: BENCHMARKS.md, "Keeping the safest of several
@@ -15,7 +15,7 @@ command warns when the kernels here differ), and writes into ``--out``::
 
 With ``--candidates N`` it trains seeds ``SEED .. SEED+N-1`` into
 ``--out/candidates/seed-S/``, prints each one's crashes on its own closed-loop
-validation windows (:mod:`avrisk.learning.selection`) and copies the safest
+validation windows (:mod:`avrisk.learning.training.selection`) and copies the safest
 into ``--out`` (``--workers K``: K at a time, one process each). Files of
 those names already in ``--out`` are replaced. The shipped driver model
 (``avrisk/data/drivers/``, which the bundled scenarios use) is replaced only
@@ -47,7 +47,7 @@ from avrisk.agents.drivers.store import (
 from avrisk.cli.common import CliError, err_console, out_console, user_errors
 from avrisk.cli.progress import stage_columns
 from avrisk.cli.tables import add_columns, compact_table
-from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
+from avrisk.learning.ngsim.files import I80_LATERAL, I80_PAIRS, ngsim_dir, ngsim_file
 
 if TYPE_CHECKING:
     from avrisk.learning.train_config import TrainConfig, TrainEvent
@@ -55,7 +55,7 @@ if TYPE_CHECKING:
 #: Where ``train-drivers`` writes by default (not the shipped model).
 DEFAULT_OUT = Path("runs") / "drivers"
 
-#: What :func:`avrisk.learning.train.train_drivers` writes.
+#: What :func:`avrisk.learning.training.train.train_drivers` writes.
 OUTPUT_FILES = (DRIVER_NET_FILE, XI_PRIOR_FILE, "training_report.json")
 
 #: Stages of the training, as reported by its progress events, for people.
@@ -128,7 +128,7 @@ def _data_folder(data_dir: Path | None) -> Path:
     Parquet or gzip file, or one with missing or mistyped columns, is one
     CliError naming the file.
     """
-    from avrisk.learning.ngsim import load_i80_lateral, load_i80_pairs
+    from avrisk.learning.ngsim.loaders import load_i80_lateral, load_i80_pairs
 
     try:
         files = [ngsim_file(names, data_dir) for names in (I80_PAIRS, I80_LATERAL)]
@@ -169,7 +169,7 @@ def _warn_other_kernels() -> None:
     The shipped ``training_report.json`` records the kernels that trained
     them; with others the run is a training like theirs, not their copy.
     """
-    from avrisk.learning.training_report import (
+    from avrisk.learning.training.report import (
         KERNEL_PINS,
         TRAINING_REPORT_FILE,
         cpu_kernels,
@@ -241,7 +241,7 @@ def _check_periods(folder: Path | None, periods: tuple[str, ...] | None) -> None
     """Raise ValueError, naming those there are, for a period the data lack."""
     if periods is None:
         return
-    from avrisk.learning.training_data import available_periods
+    from avrisk.learning.training.data import available_periods
 
     there = available_periods(folder)
     unknown = sorted(set(periods) - set(there))
@@ -342,7 +342,7 @@ def train_drivers_command(
             )
         # Imported here: training pulls in scikit-learn, which no other
         # command needs at start-up.
-        from avrisk.learning import train
+        from avrisk.learning.training import train
 
         _warn_other_kernels()
         with training_progress(err_console) as progress:

@@ -6,7 +6,7 @@ simulator while its leader replays the recorded speed profile (a classic
 car-following validation; the follower's actions change its own future
 states, so it is closed loop). Comparing the simulated follower with the
 recorded one measures realism (:func:`replay_distances`);
-:func:`avrisk.learning.sampling_noise.calibrate_noise` uses replays of
+:func:`avrisk.learning.training.sampling_noise.calibrate_noise` uses replays of
 *training* windows to choose how much of the network's action noise to sample.
 """
 
@@ -23,9 +23,9 @@ from numpy.typing import NDArray
 from scipy import stats
 from torch import Tensor
 
-from avrisk.learning.ngsim_demonstrations import DEFAULT_WIDTH
-from avrisk.learning.ngsim_lateral import LaneCentres, lateral_tracks
-from avrisk.learning.ngsim_samples import (
+from avrisk.learning.ngsim.lateral import LaneCentres, lateral_tracks
+from avrisk.learning.ngsim.samples import (
+    DEFAULT_WIDTH,
     I80_N_LANES,
     CarFollowingPairs,
     LateralPairs,

@@ -1,9 +1,10 @@
-"""What :func:`~avrisk.learning.train.train_drivers` is told, and what it reports.
+"""What the driver training is told, and what it reports.
 
-:class:`TrainConfig` holds the settings of every training stage (the defaults
-made the shipped files); every stage reports its progress in
-:class:`TrainEvent` reports to an optional :data:`Progress` callback (the CLI
-draws them as progress bars).
+:class:`TrainConfig` holds the settings of every stage of
+:func:`~avrisk.learning.training.train.train_drivers` (the defaults made the
+shipped files); every stage reports its progress in :class:`TrainEvent`
+reports to an optional :data:`Progress` callback (the CLI draws them as
+progress bars).
 """
 
 from __future__ import annotations
@@ -56,7 +57,8 @@ class ClosedLoopConfig:
         Time to collision below which a second barrier acts [s]: ``(closing
         speed - gap / ttc_margin)_+^2`` [m^2/s^2] per step while in line. It
         grows while the follower closes in fast, before the gap is short (0:
-        off). 2.0 until the drivers of 2026-11-25 (sixth look).
+        off). Chosen with the shipped recipe (BENCHMARKS.md, "Training on top
+        of the brake").
     ttc_weight : float, default=10.0
         Weight of the TTC barrier [s^2/m^2].
     imitation_weight : float, default=1.0
@@ -66,7 +68,7 @@ class ClosedLoopConfig:
     offset_weight : float, default=1.0
         Weight of the lane-offset imitation term (lateral windows).
     adversarial_weight : float, default=10.0
-        Weight of MGAIL's reward (:mod:`avrisk.learning.mgail`): the loss
+        Weight of MGAIL's reward (:mod:`avrisk.learning.imitation.mgail`): the loss
         gets ``-adversarial_weight`` times the mean discriminator reward of the
         simulated transitions (0: no discriminator).
     disc_hidden : int, default=64
@@ -87,7 +89,7 @@ class ClosedLoopConfig:
     stress_windows : int, default=16
         Hard-braking training windows replayed per step besides the
         minibatch with their leaders braking ``stress_factor`` times as hard
-        (:func:`~avrisk.learning.closed_loop.stressed`), under the barriers
+        (:func:`~avrisk.learning.training.closed_loop.stressed`), under the barriers
         alone (the recorded follower no longer belongs to them): emergencies
         harder than the data hold, in which to learn to stop (0: none).
     stress_factor : float, default=1.5
@@ -96,9 +98,9 @@ class ClosedLoopConfig:
         Give the stress replays action noise of their own. False, as when
         the shipped files were trained, reuses the noise seeds of minibatch
         windows 7, 8, ..., so that the stress replays share those windows'
-        noise streams. True gave four trainings with stress_factor 2.0 no
-        fewer held-out collisions than the shared noise (BENCHMARKS.md,
-        "Keeping the safest of several trainings", recipe (q)).
+        noise streams. True did not reduce the held-out collisions
+        (BENCHMARKS.md, "Keeping the safest of several trainings", recipe
+        (q)).
     drive_with_guard : bool, default=True
         The minibatch and validation replays drive with the emergency brake
         the weights will carry (:attr:`TrainConfig.guard`): the network
@@ -174,7 +176,7 @@ class ClosedLoopConfig:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Settings of :func:`~avrisk.learning.train.train_drivers`.
+    """Settings of :func:`~avrisk.learning.training.train.train_drivers`.
 
     The defaults made the shipped files.
 
@@ -209,7 +211,7 @@ class TrainConfig:
     dagger_windows : int, default=0
         Learner replays per round of human car-following training windows
         (15 s), labelled by IDM
-        (:func:`avrisk.learning.dagger.replay_dagger_demonstrations`). Off by
+        (:func:`avrisk.learning.imitation.dagger.replay_dagger_demonstrations`). Off by
         default: with 256 per round the IDM labels contradicted the human ones
         on nearly the same states and closed-loop realism got worse.
     dagger_epochs : int, default=3
@@ -221,8 +223,9 @@ class TrainConfig:
         human data have no emergency braking; only the expert shows it).
     calibration_windows : int, default=160
         Training car-following windows replayed to calibrate the sampling
-        noise (:func:`avrisk.learning.sampling_noise.calibrate_noise`); 0 skips it and
-        keeps the network's own Gaussian (``noise_scale = 1``).
+        noise
+        (:func:`avrisk.learning.training.sampling_noise.calibrate_noise`); 0
+        skips it and keeps the network's own Gaussian (``noise_scale = 1``).
     calibration_steps : int, default=100
         Steps per calibration window.
     target_density : float, default=0.01
@@ -231,7 +234,7 @@ class TrainConfig:
         CE search box of the ``xi`` block, recorded in the prior's metadata.
     closed_loop : ClosedLoopConfig
         Closed-loop training after DAgger and the noise calibration
-        (:mod:`avrisk.learning.closed_loop`; ``iterations=0`` skips it).
+        (:mod:`avrisk.learning.training.closed_loop`; ``iterations=0`` skips it).
     guard : BrakeGuard or None, default=BrakeGuard(2.0, 2.0, hold_floor=True)
         The emergency brake written with the weights
         (:mod:`avrisk.agents.drivers.guard`): the scenarios' environment

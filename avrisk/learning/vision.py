@@ -40,9 +40,10 @@ from avrisk.agents.drivers import LearnedEgoPolicy
 from avrisk.agents.drivers.driver import LearnedState
 from avrisk.agents.vision import PilotNet, PilotNetEgo
 from avrisk.agents.vision.store import PILOTNET_FILE
-from avrisk.assembly.builder import ScenarioSimulator, base_distribution
+from avrisk.assembly.builder import ScenarioSimulator
+from avrisk.assembly.parts import base_distribution
 from avrisk.learning.train_config import Progress, TrainEvent
-from avrisk.learning.training_report import training_environment
+from avrisk.learning.training.report import training_environment
 from avrisk.scenario import load_spec
 from avrisk.scenario.components import EgoSpec
 from avrisk.scenario.sensors import CameraSpec
@@ -308,6 +309,27 @@ def _lane_keeping(sim: ScenarioSimulator, x: np.ndarray, seeds: np.ndarray) -> d
     }
 
 
+def _closed_loop(
+    sim: ScenarioSimulator, net: PilotNet, x: np.ndarray, seeds: np.ndarray
+) -> dict[str, dict]:
+    """Lane keeping of the lidar ego, then of PilotNet steering it, on the same scenes.
+
+    ``sim``'s ego becomes the PilotNet ego.
+    """
+    closed_loop = {"lidar_imitation": _lane_keeping(sim, x, seeds)}
+    sim.ego_policy = PilotNetEgo(net, sim.ego_policy)
+    closed_loop["vision_pilotnet"] = _lane_keeping(sim, x, seeds)
+    return closed_loop
+
+
+def _file_entry(path: Path) -> dict[str, Any]:
+    """A written file's size [bytes] and SHA-256, for the report."""
+    return {
+        "bytes": path.stat().st_size,
+        "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+    }
+
+
 def train_vision(
     seed: int = 0,
     out_dir: str | Path = "vision",
@@ -397,22 +419,14 @@ def _train_vision(
     weights = out / PILOTNET_FILE
     net.save(weights)
     net = PilotNet.load(weights)
-    x_eval, seeds_eval = scenes(config.eval_rollouts)
-    closed_loop = {"lidar_imitation": _lane_keeping(sim, x_eval, seeds_eval)}
-    sim.ego_policy = PilotNetEgo(net, sim.ego_policy)
-    closed_loop["vision_pilotnet"] = _lane_keeping(sim, x_eval, seeds_eval)
+    closed_loop = _closed_loop(sim, net, *scenes(config.eval_rollouts))
     report = {
         "seed": seed,
         "config": asdict(config),
         "rounds": rounds,
         "held_out_steering": _steering_error(net, val_images, val_labels),
         "closed_loop": closed_loop,
-        "files": {
-            PILOTNET_FILE: {
-                "bytes": weights.stat().st_size,
-                "sha256": hashlib.sha256(weights.read_bytes()).hexdigest(),
-            }
-        },
+        "files": {PILOTNET_FILE: _file_entry(weights)},
         "environment": training_environment(),
         "seconds": round(time.perf_counter() - start, 1),
     }

@@ -1,11 +1,12 @@
 """The held-out human data of the realism report, chosen before any training.
 
 * Part A: the NGSIM I-80 car-following episodes of the ``test`` split (the
-  ``split`` column of the pairs file, and :func:`~avrisk.learning.ngsim.
-  lateral_pair_split` for the lateral file; training never reads them), cut
+  ``split`` column of the pairs file, and
+  :func:`~avrisk.learning.ngsim.loaders.lateral_pair_split` for the lateral
+  file; training never reads them), cut
   into non-overlapping windows (:func:`held_out_windows`);
 * Part B: the third of the US-101 vehicles held out at random with seed 21
-  (:func:`~avrisk.learning.us101_lane_changes.us101_split`), as two small
+  (:func:`~avrisk.learning.ngsim.us101_lane_changes.us101_split`), as two small
   lane-change tables.
 
 Part A's windows can instead be those of one recording period
@@ -25,22 +26,22 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from avrisk.learning.ngsim import (
+from avrisk.learning.ngsim.files import (
+    I80_LATERAL,
+    I80_PAIRS,
+    default_ngsim_dir,
+    ngsim_file,
+)
+from avrisk.learning.ngsim.lateral import LaneCentres
+from avrisk.learning.ngsim.loaders import (
     LATERAL_PERIOD,
     lateral_pair_split,
     load_i80_lateral,
     load_i80_pairs,
     periods_of,
 )
-from avrisk.learning.ngsim_files import (
-    I80_LATERAL,
-    I80_PAIRS,
-    default_ngsim_dir,
-    ngsim_file,
-)
-from avrisk.learning.ngsim_lateral import LaneCentres
+from avrisk.learning.ngsim.us101_lane_changes import EVENTS_FILE, VEHICLES_FILE
 from avrisk.learning.replay import CarFollowingWindows, car_following_windows
-from avrisk.learning.us101_lane_changes import EVENTS_FILE, VEHICLES_FILE
 from avrisk.sim import Road
 
 __all__ = [

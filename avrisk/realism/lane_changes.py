@@ -2,7 +2,7 @@
 
 The learned drivers change lanes through the layer of
 :mod:`avrisk.agents.drivers.lane_change`. Everything is measured with one
-detector (:mod:`avrisk.learning.lane_changes`) on the US-101 vehicles and on
+detector (:mod:`avrisk.learning.ngsim.lane_changes`) on the US-101 vehicles and on
 the simulator's traces alike, in random six-lane traffic (:class:`Scenes`:
 6 vehicles per scene, 60 s), every vehicle driven by the same model, the
 learned network with ``xi ~ N(mu0, Sigma0)`` per scene. Compared
@@ -29,13 +29,13 @@ from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.lane_change import LaneChangeParams, LaneChangingDriver
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.idm import IDMDriver
-from avrisk.learning.lane_changes import (
+from avrisk.learning.imitation.simulated_demonstrations import random_highway_scenes
+from avrisk.learning.ngsim.lane_changes import (
     LaneChanges,
     detect_lane_changes,
     exposure_seconds,
 )
-from avrisk.learning.simulated_demonstrations import random_highway_scenes
-from avrisk.learning.us101_lane_changes import (
+from avrisk.learning.ngsim.us101_lane_changes import (
     LaneChangeStatistics,
     lane_change_statistics,
 )

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from avrisk.learning.lane_changes import poisson_rate_interval
+from avrisk.learning.ngsim.lane_changes import poisson_rate_interval
 
 __all__ = [
     "DT",
@@ -240,7 +240,7 @@ def event_rate(count: int, hours: float) -> dict[str, Any]:
     -------
     dict
         ``count``, ``per_hour`` [1/h] and ``ci95`` (Garwood, ``[low, high]``
-        [1/h], :func:`~avrisk.learning.lane_changes.poisson_rate_interval`).
+        [1/h], :func:`~avrisk.learning.ngsim.lane_changes.poisson_rate_interval`).
 
     Examples
     --------

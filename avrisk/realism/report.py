@@ -33,7 +33,7 @@ from avrisk.agents.drivers.store import (
     load_xi_prior,
 )
 from avrisk.fingerprint import sha256_file
-from avrisk.learning.us101_lane_changes import (
+from avrisk.learning.ngsim.us101_lane_changes import (
     HELD_OUT_FRACTION,
     SPLIT_SEED,
     LaneChangeTables,
@@ -319,7 +319,7 @@ def _provenance(result: RealismResult, command: str) -> dict[str, Any]:
             },
             "part_b": {
                 "what": "US-101 vehicles held out at random before any fitting "
-                "(avrisk.learning.us101_lane_changes.us101_split)",
+                "(avrisk.learning.ngsim.us101_lane_changes.us101_split)",
                 "split_seed": SPLIT_SEED,
                 "held_out_fraction": HELD_OUT_FRACTION,
                 "vehicles": held_out_b["vehicles"],
@@ -340,7 +340,8 @@ def _held_out_words(held_out: str) -> str:
     if held_out == HELD_OUT_TEST:
         return (
             "NGSIM I-80 car-following episodes of the test split (pairs file's "
-            "split column; lateral file by avrisk.learning.ngsim.lateral_pair_split)"
+            "split column; lateral file by "
+            "avrisk.learning.ngsim.loaders.lateral_pair_split)"
         )
     return (
         f"every NGSIM I-80 car-following episode of the period {held_out} "

@@ -6,8 +6,8 @@ from dataclasses import replace
 import pytest
 from typer.testing import CliRunner
 
-import avrisk.learning.train as training
-import avrisk.learning.training_report as training_report
+import avrisk.learning.training.report as training_report
+import avrisk.learning.training.train as training
 from avrisk.agents.drivers import XiPrior, load_driver_net
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.store import default_drivers_dir

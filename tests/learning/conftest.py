@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 import torch
 
-from avrisk.learning.ngsim_samples import LateralPairs
+from avrisk.learning.ngsim.samples import LateralPairs
 
 
 @pytest.fixture

@@ -4,14 +4,18 @@ import torch
 from avrisk.agents.drivers.features import FEATURE_INDEX, N_FEATURES
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import XI_DIM
-from avrisk.learning.behaviour_cloning import (
+from avrisk.learning.imitation.behaviour_cloning import (
     behaviour_cloning,
     fit_action_scale,
     fit_input_normalization,
 )
-from avrisk.learning.bootstrap_heads import bootstrap_heads
-from avrisk.learning.demonstrations import SOURCE_I80, SOURCE_IDM, Demonstrations
-from avrisk.learning.imitation_loss import imitation_nll
+from avrisk.learning.imitation.demonstrations import (
+    SOURCE_I80,
+    SOURCE_IDM,
+    Demonstrations,
+)
+from avrisk.learning.imitation.loss import imitation_nll
+from avrisk.learning.prior.bootstrap_heads import bootstrap_heads
 
 
 def synthetic_demos(n=3000, seed=0):

@@ -7,8 +7,12 @@ import torch
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.store import load_driver_net
-from avrisk.learning.bootstrap_heads import centre_heads
-from avrisk.learning.closed_loop import (
+from avrisk.learning.imitation.discriminator import human_transitions
+from avrisk.learning.imitation.mgail import Discriminator
+from avrisk.learning.prior.bootstrap_heads import centre_heads
+from avrisk.learning.replay import replay
+from avrisk.learning.train_config import ClosedLoopConfig, TrainConfig
+from avrisk.learning.training.closed_loop import (
     _minibatch_weights,
     _stress_seeds,
     closed_loop_finetune,
@@ -17,10 +21,6 @@ from avrisk.learning.closed_loop import (
     simulated_transitions,
     stressed,
 )
-from avrisk.learning.gail import human_transitions
-from avrisk.learning.mgail import Discriminator
-from avrisk.learning.replay import replay
-from avrisk.learning.train_config import ClosedLoopConfig, TrainConfig
 from avrisk.sim import Road
 from tests.learning.recorded_windows import recorded_windows
 

@@ -3,18 +3,22 @@ import pytest
 import torch
 
 from avrisk.agents.drivers.features import FEATURE_INDEX, N_FEATURES
-from avrisk.learning.demonstrations import SOURCE_I80, SOURCE_IDM, Demonstrations
-from avrisk.learning.ngsim_demonstrations import (
+from avrisk.learning.imitation.demonstrations import (
+    SOURCE_I80,
+    SOURCE_IDM,
+    Demonstrations,
+)
+from avrisk.learning.imitation.ngsim_demonstrations import (
     car_following_features,
     i80_pair_demonstrations,
 )
-from avrisk.learning.ngsim_lateral import (
+from avrisk.learning.imitation.simulated_demonstrations import simulated_demonstrations
+from avrisk.learning.ngsim.lateral import (
     LaneCentres,
     lateral_tracks,
     steer_from_heading,
 )
-from avrisk.learning.ngsim_samples import CarFollowingPairs
-from avrisk.learning.simulated_demonstrations import simulated_demonstrations
+from avrisk.learning.ngsim.samples import CarFollowingPairs
 from avrisk.sim import Road, VehicleState
 from avrisk.sim.dynamics import BicycleLimits, bicycle_step
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy import linalg
 
-from avrisk.learning.glasso import fit_sparse_gaussian, off_diagonal_sparsity
+from avrisk.learning.prior.glasso import fit_sparse_gaussian, off_diagonal_sparsity
 
 
 def chain_ensemble(rng, m=20, d=40):

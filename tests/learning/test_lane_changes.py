@@ -5,16 +5,16 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
 
-from avrisk.learning.lane_changes import (
+from avrisk.learning.ngsim.files import US101_FILE
+from avrisk.learning.ngsim.lane_changes import (
     LaneChanges,
     detect_in_episodes,
     detect_lane_changes,
     exposure_seconds,
     poisson_rate_interval,
 )
-from avrisk.learning.ngsim import load_us101
-from avrisk.learning.ngsim_files import US101_FILE
-from avrisk.learning.us101_lane_changes import (
+from avrisk.learning.ngsim.loaders import load_us101
+from avrisk.learning.ngsim.us101_lane_changes import (
     HELD_OUT_FRACTION,
     lane_change_tables,
     load_lane_change_tables,

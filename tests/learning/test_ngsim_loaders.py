@@ -8,14 +8,7 @@ import pyarrow.parquet as pq
 import pytest
 
 import avrisk
-from avrisk.learning.ngsim import (
-    lateral_pair_split,
-    load_i80_lateral,
-    load_i80_pairs,
-    load_us101,
-    read_i80_pairs_table,
-)
-from avrisk.learning.ngsim_files import (
+from avrisk.learning.ngsim.files import (
     I80_LATERAL,
     I80_PAIRS,
     NGSIM_DIR_ENV,
@@ -23,8 +16,15 @@ from avrisk.learning.ngsim_files import (
     ngsim_dir,
     ngsim_file,
 )
-from avrisk.learning.ngsim_packed import DECIMALS_KEY, EXCEPTIONS_SUFFIX
-from avrisk.learning.ngsim_samples import FT, CarFollowingPairs, episode_bounds
+from avrisk.learning.ngsim.loaders import (
+    lateral_pair_split,
+    load_i80_lateral,
+    load_i80_pairs,
+    load_us101,
+    read_i80_pairs_table,
+)
+from avrisk.learning.ngsim.packed import DECIMALS_KEY, EXCEPTIONS_SUFFIX
+from avrisk.learning.ngsim.samples import FT, CarFollowingPairs, episode_bounds
 from tests.ngsim_originals import original_file
 
 I80_HEADER = (

@@ -2,13 +2,13 @@ import numpy as np
 import torch
 
 from avrisk.agents.idm import IDMDriver, IDMParams
-from avrisk.learning.dagger import ExpertLabeller
-from avrisk.learning.demonstrations import SOURCE_IDM
+from avrisk.learning.imitation.dagger import ExpertLabeller
+from avrisk.learning.imitation.demonstrations import SOURCE_IDM
+from avrisk.learning.imitation.simulated_demonstrations import NO_LANE_CHANGE
 from avrisk.learning.replay import (
     replay,
     replay_distances,
 )
-from avrisk.learning.simulated_demonstrations import NO_LANE_CHANGE
 from avrisk.safety import MinTTC
 from avrisk.sim import Road, SimConfig, Simulator, VehicleState
 from avrisk.sim.interfaces import Action

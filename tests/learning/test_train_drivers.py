@@ -6,9 +6,9 @@ import torch
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.store import XiPrior, load_driver_net
 from avrisk.agents.drivers.xi import XI_DIM
-from avrisk.learning.selection import CandidateScore, choose
-from avrisk.learning.train import CANDIDATES_DIR, train_drivers
-from avrisk.learning.training_data import training_windows
+from avrisk.learning.training.data import training_windows
+from avrisk.learning.training.selection import CandidateScore, choose
+from avrisk.learning.training.train import CANDIDATES_DIR, train_drivers
 
 
 @pytest.mark.slow

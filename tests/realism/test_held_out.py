@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from avrisk.learning.ngsim import load_i80_pairs
+from avrisk.learning.ngsim.loaders import load_i80_pairs
 from avrisk.realism.held_out import data_files, held_out_windows, select_windows
 from avrisk.sim import Road
 
@@ -37,8 +37,8 @@ def test_a_subset_is_a_sorted_draw_named_by_held_out_index():
 
 
 def test_each_period_is_held_out_whole_and_the_lateral_file_joins_its_own_only():
-    from avrisk.learning.ngsim import LATERAL_PERIOD
-    from avrisk.learning.training_data import training_windows
+    from avrisk.learning.ngsim.loaders import LATERAL_PERIOD
+    from avrisk.learning.training.data import training_windows
     from avrisk.realism.held_out import held_out_periods
 
     road = Road()

@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from avrisk.learning.us101_lane_changes import load_lane_change_tables, split_statistics
+from avrisk.learning.ngsim.us101_lane_changes import (
+    load_lane_change_tables,
+    split_statistics,
+)
 from avrisk.realism.lane_changes import (
     RATE_TOLERANCE,
     collision_onsets,

@@ -106,7 +106,7 @@ class LaneChangeParams:
     rate : float, default=69.6 / 3600
         Hazard of a lane-change desire [1/s] (a vehicle keeping its lane).
         Default: fitted in closed loop to the US-101 training vehicles
-        (:mod:`avrisk.learning.us101_lane_changes`: 58.9 per vehicle-hour);
+        (:mod:`avrisk.learning.ngsim.us101_lane_changes`: 58.9 per vehicle-hour);
         desires that wait for a gap, and none arriving during a manoeuvre,
         make the simulated rate fall short of the hazard, so the hazard is
         58.90 x 58.90 / 49.87 (rounded), 49.87 being the simulated rate at a

@@ -171,12 +171,12 @@ class DriverNet(nn.Module):
         action noise (acceleration, steering) when actions are sampled in
         closed loop (:class:`~avrisk.agents.drivers.driver.LearnedDriver`); 0
         draws independent noise every step (the paper's sampling). Fitted to
-        the human residuals by :func:`avrisk.learning.train.train_drivers`.
+        the human residuals by :func:`avrisk.learning.training.train.train_drivers`.
     noise_scale : tuple of float, default=(1.0, 1.0)
         Factor on the standard deviations when actions are sampled in closed
         loop, per action, ``>= 0`` (1: the network's own Gaussian; 0: its mean).
         Calibrated on closed-loop replays of human training episodes by
-        :func:`avrisk.learning.train.train_drivers`.
+        :func:`avrisk.learning.training.train.train_drivers`.
     guard : BrakeGuard, optional
         The emergency brake these drivers are meant to drive with
         (:mod:`avrisk.agents.drivers.guard`); saved with the weights. The

@@ -1,7 +1,7 @@
 """The shipped driver model: network weights and the distribution of ``xi``.
 
 Two small files in ``avrisk/data/drivers/`` (written by
-:func:`avrisk.learning.train.train_drivers`, read without pickle):
+:func:`avrisk.learning.training.train.train_drivers`, read without pickle):
 
 * ``driver_net.npz`` -- :class:`~avrisk.agents.drivers.network.DriverNet`
   weights (float32): trunk, input standardisation, action scale and the shared

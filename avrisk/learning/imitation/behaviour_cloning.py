@@ -1,12 +1,12 @@
 """Behaviour cloning: a new driver network fitted to demonstrations.
 
 :func:`fit_driver_net` is the first stage of
-:func:`~avrisk.learning.train.train_drivers`: a :class:`DriverNet` whose input
+:func:`~avrisk.learning.training.train.train_drivers`: a :class:`DriverNet` whose input
 standardisation (:func:`fit_input_normalization`) and action scales
 (:func:`fit_action_scale`) come from the training demonstrations, trained as a
 whole (trunk and shared head) by :func:`behaviour_cloning`, Adam on the
-weighted Gaussian NLL of :mod:`avrisk.learning.imitation_loss` with a cosine
-learning-rate schedule. DAgger (:mod:`avrisk.learning.dagger`) refits with the
+weighted Gaussian NLL of :mod:`avrisk.learning.imitation.loss` with a cosine
+learning-rate schedule. DAgger (:mod:`avrisk.learning.imitation.dagger`) refits with the
 same function.
 """
 
@@ -20,8 +20,8 @@ from numpy.typing import NDArray
 
 from avrisk.agents.drivers.features import FEATURE_NAMES, INDICATOR_FEATURES
 from avrisk.agents.drivers.network import DriverNet
-from avrisk.learning.demonstrations import Demonstrations
-from avrisk.learning.imitation_loss import (
+from avrisk.learning.imitation.demonstrations import Demonstrations
+from avrisk.learning.imitation.loss import (
     demonstration_tensors,
     imitation_nll,
     weighted_nll,

@@ -1,7 +1,7 @@
 """The packed Parquet form of the NGSIM files, and reading columns of either form.
 
 ``scripts/pack_ngsim.py`` packs each original file into a compact, lossless
-zstd Parquet file (:data:`avrisk.learning.ngsim_files.NgsimFiles.packed`):
+zstd Parquet file (:data:`avrisk.learning.ngsim.files.NgsimFiles.packed`):
 
 * string columns are dictionary-encoded;
 * a float column whose values are decimals with ``k`` places is stored as the
@@ -12,7 +12,7 @@ zstd Parquet file (:data:`avrisk.learning.ngsim_files.NgsimFiles.packed`):
   :func:`i80_derived_columns` bit for bit.
 
 :func:`read_column` undoes the first two on any table (the original files'
-columns pass through), so the loaders of :mod:`avrisk.learning.ngsim` return
+columns pass through), so the loaders of :mod:`avrisk.learning.ngsim.loaders` return
 the same arrays, bit for bit, from either form.
 """
 
@@ -25,7 +25,7 @@ import numpy as np
 import pyarrow as pa
 from numpy.typing import NDArray
 
-from avrisk.learning.ngsim_samples import FloatArray
+from avrisk.learning.ngsim.samples import FloatArray
 
 __all__ = [
     "DECIMALS_KEY",
@@ -92,7 +92,7 @@ def i80_derived_columns(feet: Mapping[str, FloatArray]) -> dict[str, FloatArray]
     """The I-80 pairs file's ``spacing`` [ft] and ``dv`` [ft/s] from its other columns.
 
     The source computed them so in float64, bit for bit; the packed file omits
-    them and :func:`~avrisk.learning.ngsim.load_i80_pairs` recomputes them.
+    them and :func:`~avrisk.learning.ngsim.loaders.load_i80_pairs` recomputes them.
 
     Parameters
     ----------

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from avrisk.agents.drivers.network import ActionDistribution, DriverNet
-from avrisk.learning.demonstrations import SOURCE_NAMES, Demonstrations
+from avrisk.learning.imitation.demonstrations import SOURCE_NAMES, Demonstrations
 
 __all__ = ["demonstration_tensors", "imitation_nll", "weighted_nll"]
 

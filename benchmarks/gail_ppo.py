@@ -1,4 +1,10 @@
-"""Adversarial imitation (GAIL with PPO) of human car following, after BC + DAgger.
+"""GAIL with PPO of human car following, after BC + DAgger: a tried idea, not shipped.
+
+``benchmarks/gail_realism.py`` fine-tunes the shipped network with
+:func:`gail_finetune` and scores it as ``avrisk realism`` does (BENCHMARKS.md,
+"GAIL fine-tuning of the acceleration head (not shipped)"); it did not reduce
+the rear-end collisions, so ``avrisk train-drivers`` does not run it and the
+method lives here, beside that benchmark, rather than in the package.
 
 GAIL (Ho and Ermon 2016) trains a discriminator ``D`` to tell human
 transitions from the policy's and rewards the policy for transitions that
@@ -16,12 +22,9 @@ here PPO (Schulman et al. 2017). Everything runs in our batched simulator::
         advantages by GAE with a separate value network; PPO clipped
             surrogate on the acceleration head
 
-Discriminator input (compact, documented, computed identically from the
-human record and the simulated trace): ``x_t = (v_t [m/s], gap_t [m],
-v_leader,t - v_t [m/s], a_{t-1} [m/s^2], a_t [m/s^2])`` with the *realised*
-accelerations ``a_t = (v_{t+1} - v_t) / dt``; ``a_{t-1}`` makes jerk visible.
-It is defined for ``t >= 1``; the first step gets reward 0. Inputs are
-standardised by the human statistics.
+The discriminator, its inputs and its training are the package's
+(:mod:`avrisk.learning.imitation.discriminator`), which model-based GAIL
+(:mod:`avrisk.learning.imitation.mgail`) shares.
 
 Policy and what is tuned
 ------------------------
@@ -38,11 +41,10 @@ translation (:func:`translate_prior`). The noise buffers
 (``noise_correlation``, ``noise_scale``) are kept.
 
 This is model-free GAIL with PPO, on car following only (no lane changes, no
-multi-vehicle traffic). Model-based GAIL (the paper's MGAIL, Baram et al.
-2017), whose policy gradient is the discriminator's reward differentiated
-through the dynamics, reuses :func:`transition_features` and
-:func:`train_discriminator` in :mod:`avrisk.learning.mgail` and
-:mod:`avrisk.learning.closed_loop`, through the simulator's own step.
+multi-vehicle traffic).
+
+Why one module: it is one method, kept whole beside the benchmark that runs
+it, and the package does not ship it.
 """
 
 from __future__ import annotations
@@ -60,7 +62,13 @@ from avrisk.agents.drivers.driver import LearnedDriver, LearnedState
 from avrisk.agents.drivers.features import features_from_observation
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import XiPrior
-from avrisk.learning.replay import DT, CarFollowingWindows, replay
+from avrisk.learning.imitation.discriminator import (
+    human_transitions,
+    mlp,
+    train_discriminator,
+    transition_features,
+)
+from avrisk.learning.replay import CarFollowingWindows, replay
 from avrisk.learning.train_config import Progress, TrainEvent
 from avrisk.sim import Road
 from avrisk.sim.interfaces import Action
@@ -73,11 +81,7 @@ __all__ = [
     "accel_log_prob",
     "gae",
     "gail_finetune",
-    "human_transitions",
-    "mlp",
     "ppo_update",
-    "train_discriminator",
-    "transition_features",
     "translate_prior",
 ]
 
@@ -150,54 +154,6 @@ class GailConfig:
         for name in ("iterations", "windows_per_iter", "ppo_windows", "disc_batch"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1; got {getattr(self, name)}")
-
-
-def mlp(n_in: int, hidden: int, n_out: int = 1) -> nn.Sequential:
-    """Two tanh hidden layers of ``hidden`` units (discriminator, value)."""
-    return nn.Sequential(
-        nn.Linear(n_in, hidden),
-        nn.Tanh(),
-        nn.Linear(hidden, hidden),
-        nn.Tanh(),
-        nn.Linear(hidden, n_out),
-    )
-
-
-# ------------------------------------------------------------ transitions
-def transition_features(v: Tensor, v_l: Tensor, gap: Tensor) -> Tensor:
-    """Discriminator inputs of every step of car-following tracks.
-
-    Differentiable: MGAIL (:mod:`avrisk.learning.mgail`) back-propagates the
-    discriminator's reward through them into a simulated follower.
-
-    Parameters
-    ----------
-    v, v_l : Tensor of shape (W, T+1)
-        Follower and leader speed [m/s].
-    gap : Tensor of shape (W, T+1)
-        Bumper-to-bumper gap [m].
-
-    Returns
-    -------
-    Tensor of shape (W, T, 5), the dtype of ``v``
-        ``(v_t, gap_t, v_l,t - v_t, a_{t-1}, a_t)`` per step ``t``; row ``t = 0``
-        has ``a_{-1} = 0`` and is not used (see the module docstring).
-    """
-    a = torch.diff(v, dim=1) / DT  # (W, T)
-    a_prev = torch.cat([torch.zeros_like(a[:, :1]), a[:, :-1]], dim=1)
-    return torch.stack([v[:, :-1], gap[:, :-1], (v_l - v)[:, :-1], a_prev, a], dim=-1)
-
-
-def human_transitions(windows: CarFollowingWindows) -> Tensor:
-    """Discriminator inputs of the recorded followers, steps ``t >= 1``.
-
-    Returns
-    -------
-    Tensor of float32, shape (W * (T - 1), 5)
-    """
-    tracks = (torch.as_tensor(a) for a in (windows.v_f, windows.v_l, windows.gap))
-    x = transition_features(*tracks)[:, 1:].float()
-    return x.reshape(-1, x.shape[-1])
 
 
 class _Recorder:
@@ -278,7 +234,7 @@ def accel_log_prob(
     With ``eps_t = (a_t - m_t) / sigma_t`` and ``rho = net.noise_correlation[0]``,
     ``log p(a_t | past) = log N(eps_t; rho eps_{t-1}, 1 - rho^2) - log sigma_t``
     (``eps_{-1} = 0`` and unit variance at ``t = 0``, as
-    :func:`~avrisk.agents.drivers.driver.ar1_noise` starts).
+    :func:`~avrisk.agents.drivers.sampling.ar1_noise` starts).
 
     Parameters
     ----------
@@ -451,61 +407,110 @@ def ppo_update(
     return out
 
 
-# ---------------------------------------------------------- discriminator
-def train_discriminator(
-    disc: nn.Module,
-    human: Tensor,
-    policy: Tensor,
-    optimizer: torch.optim.Optimizer,
-    *,
-    epochs: int,
-    batch: int,
-    generator: torch.Generator,
-) -> float:
-    """Logistic regression of human (label 1) vs policy (label 0) inputs.
-
-    Parameters
-    ----------
-    disc : nn.Module
-        ``x -> logit D(x)`` on standardised inputs.
-    human : Tensor of shape (N_h, F)
-    policy : Tensor of shape (N_p, F)
-    optimizer : torch.optim.Optimizer
-    epochs : int
-        Passes over ``policy``; every step pairs ``batch`` policy rows with
-        ``batch`` human rows drawn at random.
-    batch : int
-    generator : torch.Generator
-
-    Returns
-    -------
-    float
-        Accuracy on the policy rows and as many random human rows, after the
-        update [-].
-    """
-    n = policy.shape[0]
-    for _ in range(epochs):
-        perm = torch.randperm(n, generator=generator)
-        for s in range(0, n, batch):
-            p = policy[perm[s : s + batch]]
-            h = human[
-                torch.randint(0, human.shape[0], (p.shape[0],), generator=generator)
-            ]
-            logits = disc(torch.cat([h, p])).squeeze(-1)
-            labels = torch.cat([torch.ones(len(h)), torch.zeros(len(p))])
-            loss = F.binary_cross_entropy_with_logits(logits, labels)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-    h = human[torch.randint(0, human.shape[0], (n,), generator=generator)]
-    with torch.no_grad():
-        correct = (disc(h) > 0).sum() + (disc(policy) <= 0).sum()
-    return float(correct) / (2 * n)
-
-
 # -------------------------------------------------------------- top level
-def _standardiser(x: Tensor) -> tuple[Tensor, Tensor]:
-    return x.mean(0), x.std(0).clamp_min(1e-6)
+@dataclass(frozen=True)
+class _Learners:
+    """The discriminator and value network of a run, their optimisers, the policy's.
+
+    ``human`` holds the human transitions standardised by their own mean
+    ``x_mean`` and scale ``x_scale``; the value network's inputs are
+    standardised by ``s_mean`` and ``s_scale``.
+    """
+
+    disc: nn.Module
+    value_net: nn.Module
+    disc_opt: torch.optim.Optimizer
+    value_opt: torch.optim.Optimizer
+    policy_opt: torch.optim.Optimizer
+    human: Tensor
+    x_mean: Tensor
+    x_scale: Tensor
+    s_mean: Tensor
+    s_scale: Tensor
+
+
+def _learners(
+    net: DriverNet, windows: CarFollowingWindows, config: GailConfig, seed: int
+) -> _Learners:
+    """The discriminator and value network, initialised from ``seed``."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        disc = mlp(5, config.disc_hidden)
+        value_net = mlp(4, config.value_hidden)
+    human = human_transitions(windows)
+    x_mean, x_scale = human.mean(0), human.std(0).clamp_min(1e-6)
+    return _Learners(
+        disc=disc,
+        value_net=value_net,
+        disc_opt=torch.optim.Adam(disc.parameters(), lr=config.disc_lr),
+        value_opt=torch.optim.Adam(value_net.parameters(), lr=config.value_lr),
+        policy_opt=_head_optimizer(net, config.policy_lr),
+        human=(human - x_mean) / x_scale,
+        x_mean=x_mean,
+        x_scale=x_scale,
+        s_mean=torch.cat([x_mean[:3], torch.tensor([0.5])]),
+        s_scale=torch.cat([x_scale[:3], torch.tensor([0.3])]),
+    )
+
+
+def _gail_round(
+    net: DriverNet,
+    ro: _Rollouts,
+    learners: _Learners,
+    config: GailConfig,
+    generator: torch.Generator,
+) -> dict[str, float]:
+    """One round on replayed rollouts: discriminator, rewards, GAE, PPO.
+
+    Returns the round's history row without its ``"iteration"`` (see
+    :func:`gail_finetune`).
+    """
+    x = (ro.x - learners.x_mean) / learners.x_scale
+    scored = ro.valid.clone()
+    scored[:, 0] = False
+    acc = train_discriminator(
+        learners.disc,
+        learners.human,
+        x[scored],
+        learners.disc_opt,
+        epochs=config.disc_epochs,
+        batch=config.disc_batch,
+        generator=generator,
+    )
+    state = (ro.state - learners.s_mean) / learners.s_scale
+    with torch.no_grad():
+        gail_r = F.softplus(learners.disc(x).squeeze(-1)) * scored
+        rewards = gail_r.clone()
+        hit = torch.nonzero(ro.crash).squeeze(-1)
+        rewards[hit, ro.last[hit]] -= config.collision_penalty
+        values = learners.value_net(state).squeeze(-1)
+        adv = gae(rewards, values, ro.last, config.gamma, config.gae_lambda)
+        old_log_p, entropy = accel_log_prob(net, ro.hidden, ro.accel)
+    batch = PPOBatch(
+        hidden=ro.hidden,
+        accel=ro.accel,
+        old_log_p=old_log_p,
+        advantages=adv,
+        returns=adv + values,
+        state=state,
+        valid=ro.valid,
+    )
+    stats = ppo_update(
+        net,
+        learners.value_net,
+        batch,
+        learners.policy_opt,
+        learners.value_opt,
+        config,
+        generator,
+    )
+    return {
+        "disc_accuracy": acc,
+        "mean_reward": float(gail_r[scored].mean()),
+        "entropy": float(entropy[ro.valid].mean()),
+        "collision_rate": float(ro.crash.float().mean()),
+        **stats,
+    }
 
 
 def gail_finetune(
@@ -559,61 +564,15 @@ def gail_finetune(
     net = copy.deepcopy(net).eval()
     rng = np.random.default_rng(seed)
     gen = torch.Generator().manual_seed(seed)
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        disc = mlp(5, config.disc_hidden)
-        value_net = mlp(4, config.value_hidden)
-    human = human_transitions(windows)
-    x_mean, x_scale = _standardiser(human)
-    human = (human - x_mean) / x_scale
-    s_mean = torch.cat([x_mean[:3], torch.tensor([0.5])])
-    s_scale = torch.cat([x_scale[:3], torch.tensor([0.3])])
-    disc_opt = torch.optim.Adam(disc.parameters(), lr=config.disc_lr)
-    value_opt = torch.optim.Adam(value_net.parameters(), lr=config.value_lr)
-    policy_opt = _head_optimizer(net, config.policy_lr)
+    learners = _learners(net, windows, config, seed)
     k = min(config.windows_per_iter, len(windows))
     history = []
     for it in range(config.iterations):
         pick = np.sort(rng.choice(len(windows), size=k, replace=False))
         ro = _rollouts(net, windows.take(pick), road, seed * 1000 + it)
-        x = (ro.x - x_mean) / x_scale
-        scored = ro.valid.clone()
-        scored[:, 0] = False
-        acc = train_discriminator(
-            disc,
-            human,
-            x[scored],
-            disc_opt,
-            epochs=config.disc_epochs,
-            batch=config.disc_batch,
-            generator=gen,
-        )
-        state = (ro.state - s_mean) / s_scale
-        with torch.no_grad():
-            gail_r = F.softplus(disc(x).squeeze(-1)) * scored
-            rewards = gail_r.clone()
-            hit = torch.nonzero(ro.crash).squeeze(-1)
-            rewards[hit, ro.last[hit]] -= config.collision_penalty
-            values = value_net(state).squeeze(-1)
-            adv = gae(rewards, values, ro.last, config.gamma, config.gae_lambda)
-            old_log_p, entropy = accel_log_prob(net, ro.hidden, ro.accel)
-        batch = PPOBatch(
-            hidden=ro.hidden,
-            accel=ro.accel,
-            old_log_p=old_log_p,
-            advantages=adv,
-            returns=adv + values,
-            state=state,
-            valid=ro.valid,
-        )
-        stats = ppo_update(net, value_net, batch, policy_opt, value_opt, config, gen)
         row = {
             "iteration": float(it + 1),
-            "disc_accuracy": acc,
-            "mean_reward": float(gail_r[scored].mean()),
-            "entropy": float(entropy[ro.valid].mean()),
-            "collision_rate": float(ro.crash.float().mean()),
-            **stats,
+            **_gail_round(net, ro, learners, config, gen),
         }
         history.append(row)
         if progress is not None:

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 
-from avrisk.learning.ngsim_samples import LateralPairs, episode_bounds
+from avrisk.learning.ngsim.samples import LateralPairs, episode_bounds
 
 __all__ = [
     "LATERAL_SMOOTHING",

@@ -2,15 +2,15 @@
 
 Trainings of the same recipe that differ only in their seed crash on the
 held-out windows very differently (BENCHMARKS.md, "The shipped recipe over
-training seeds": 0, 24, 16 and 82 collisions in 20.2 vehicle-hours over seeds
-0-3), and the closed-loop stage's early stopping does not see it (one replay
-per validation window, 0-2 crashes at the kept step of every training). What
-does: replaying the closed-loop stage's own validation windows (the share
-``validation_fraction`` of the training windows that the stage held out, drawn
-with the training's seed) :data:`REPLICATES` times each with ``xi ~ P0`` and
-sampled actions, the leaders' speed changes made :data:`STRESS` times as large
-(:func:`~avrisk.learning.closed_loop.stressed`). Over 15 trainings its crash
-count ranked the held-out collisions with Spearman 0.76 (p = 0.0009).
+training seeds"), and the closed-loop stage's early stopping does not see it
+(one replay per validation window). What does: replaying the closed-loop
+stage's own validation windows (the share ``validation_fraction`` of the
+training windows that the stage held out, drawn with the training's seed)
+:data:`REPLICATES` times each with ``xi ~ P0`` and sampled actions, the
+leaders' speed changes made :data:`STRESS` times as large
+(:func:`~avrisk.learning.training.closed_loop.stressed`): its crash count
+ranks the trainings' held-out collisions (BENCHMARKS.md, "Keeping the safest
+of several trainings").
 
 :func:`validation_crashes` scores one training; :func:`choose` keeps the one
 with the fewest stressed crashes (then the fewest crashes with the leaders as
@@ -38,9 +38,9 @@ from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import XiPrior
-from avrisk.learning.closed_loop import split_windows, stressed
 from avrisk.learning.replay import CarFollowingWindows, replay
 from avrisk.learning.train_config import ClosedLoopConfig
+from avrisk.learning.training.closed_loop import split_windows, stressed
 from avrisk.scenario.base_distribution import xi_base_family
 from avrisk.sim import Road
 

@@ -1,7 +1,7 @@
 """Loaders for the NGSIM samples the project uses, in SI units.
 
 Three data sets (provenance in the data folder's ``SOURCE.md``), each read
-into a frozen dataclass of :mod:`avrisk.learning.ngsim_samples`, one row per
+into a frozen dataclass of :mod:`avrisk.learning.ngsim.samples`, one row per
 0.1 s sample:
 
 * :func:`load_i80_pairs` -- I-80 leader-follower car-following pairs
@@ -15,7 +15,7 @@ into a frozen dataclass of :mod:`avrisk.learning.ngsim_samples`, one row per
   them are not in the file.
 
 The I-80 loaders read the original files or the packed ones shipped with the
-package (:mod:`avrisk.learning.ngsim_files`, :mod:`avrisk.learning.ngsim_packed`)
+package (:mod:`avrisk.learning.ngsim.files`, :mod:`avrisk.learning.ngsim.packed`)
 and return the same arrays, bit for bit. :func:`lateral_pair_split` splits the
 lateral pairs into train and test as the car-following pairs are split.
 
@@ -36,9 +36,9 @@ import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 from numpy.typing import NDArray
 
-from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, US101_FILE, ngsim_file
-from avrisk.learning.ngsim_packed import i80_derived_columns, read_column
-from avrisk.learning.ngsim_samples import (
+from avrisk.learning.ngsim.files import I80_LATERAL, I80_PAIRS, US101_FILE, ngsim_file
+from avrisk.learning.ngsim.packed import i80_derived_columns, read_column
+from avrisk.learning.ngsim.samples import (
     FT,
     CarFollowingPairs,
     LateralPairs,
@@ -68,13 +68,13 @@ I80_PAIRS_COLUMNS = (
     "in_manifest", "t",
 )  # fmt: skip
 #: Columns of the I-80 pairs file in feet, ft/s or ft/s^2, apart from those of
-#: :func:`~avrisk.learning.ngsim_packed.i80_derived_columns`.
+#: :func:`~avrisk.learning.ngsim.packed.i80_derived_columns`.
 I80_FEET_COLUMNS = (
     "x_follower", "v_follower", "a_follower", "x_leader", "v_leader", "a_leader",
     "leader_length",
 )  # fmt: skip
 #: Columns of the lateral pairs file and the
-#: :class:`~avrisk.learning.ngsim_samples.LateralPairs` fields they fill (besides
+#: :class:`~avrisk.learning.ngsim.samples.LateralPairs` fields they fill (besides
 #: ``pair_id``).
 I80_LATERAL_COLUMNS = {
     "vehicle_id": "follower_id", "preceding": "leader_id", "frame_id": "frame",
@@ -122,8 +122,8 @@ def load_i80_pairs(path: str | Path | None = None) -> CarFollowingPairs:
     ----------
     path : str or Path, optional
         The original ``.csv`` or ``.csv.gz`` file or the packed ``.parquet``;
-        default the :data:`~avrisk.learning.ngsim_files.I80_PAIRS` file in
-        :func:`~avrisk.learning.ngsim_files.ngsim_dir`.
+        default the :data:`~avrisk.learning.ngsim.files.I80_PAIRS` file in
+        :func:`~avrisk.learning.ngsim.files.ngsim_dir`.
 
     Returns
     -------
@@ -171,8 +171,8 @@ def load_i80_lateral(path: str | Path | None = None) -> LateralPairs:
     ----------
     path : str or Path, optional
         The original or the packed ``.parquet`` file (same column names);
-        default the :data:`~avrisk.learning.ngsim_files.I80_LATERAL` file in
-        :func:`~avrisk.learning.ngsim_files.ngsim_dir`.
+        default the :data:`~avrisk.learning.ngsim.files.I80_LATERAL` file in
+        :func:`~avrisk.learning.ngsim.files.ngsim_dir`.
 
     Returns
     -------
@@ -208,8 +208,8 @@ def load_us101(path: str | Path | None = None) -> VehicleTrajectories:
     ----------
     path : str or Path, optional
         The ``.csv`` or ``.csv.gz`` file; default
-        :data:`~avrisk.learning.ngsim_files.US101_FILE` in
-        :func:`~avrisk.learning.ngsim_files.ngsim_dir`, which must then name a
+        :data:`~avrisk.learning.ngsim.files.US101_FILE` in
+        :func:`~avrisk.learning.ngsim.files.ngsim_dir`, which must then name a
         folder holding the original files (``$AVRISK_NGSIM_DIR``): the package
         does not ship US-101.
 

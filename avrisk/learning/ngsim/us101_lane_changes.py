@@ -8,7 +8,7 @@ and read by :func:`load_lane_change_tables`:
 
 * *vehicles*: one row per vehicle with its split, frames, exposure [s], mean
   speed [m/s] and number of lane changes;
-* *events*: one row per lane change (:mod:`avrisk.learning.lane_changes`),
+* *events*: one row per lane change (:mod:`avrisk.learning.ngsim.lane_changes`),
   with its vehicle, split, crossing frame, direction (avrisk frame: ``+1``
   left), duration [s], peak lateral speed [m/s] and speed [m/s].
 
@@ -17,7 +17,7 @@ third held out at random with the fixed seed :data:`SPLIT_SEED`). The one
 quantity the detector learns from data, the lateral speed of lane keeping
 (its noise level), is measured on the training vehicles only and then applied
 to all. Lanes are the 12 ft bands of the NGSIM frame
-(:data:`~avrisk.learning.ngsim_samples.US101_LANE_WIDTH`).
+(:data:`~avrisk.learning.ngsim.samples.US101_LANE_WIDTH`).
 
 :func:`lane_change_statistics` gives a split's rate per vehicle-hour with its
 exact Poisson interval, and the quantiles of duration and peak lateral speed;
@@ -40,16 +40,16 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from avrisk.learning.lane_changes import (
+from avrisk.learning.ngsim.files import default_ngsim_dir
+from avrisk.learning.ngsim.lane_changes import (
     MIN_STAY,
     detect_in_episodes,
     exposure_seconds,
     lane_keeping_noise_speed,
     poisson_rate_interval,
 )
-from avrisk.learning.ngsim_files import default_ngsim_dir
-from avrisk.learning.ngsim_lateral import LATERAL_SMOOTHING
-from avrisk.learning.ngsim_samples import (
+from avrisk.learning.ngsim.lateral import LATERAL_SMOOTHING
+from avrisk.learning.ngsim.samples import (
     US101_LANE_WIDTH,
     VehicleTrajectories,
     episode_bounds,
@@ -73,7 +73,7 @@ __all__ = [
 
 #: NGSIM frame interval [s].
 DT = 0.1
-#: Seed of the held-out draw (issue 21).
+#: Seed of the held-out draw (fixed: the shipped tables hold its split).
 SPLIT_SEED = 21
 #: Share of the vehicles held out for evaluation.
 HELD_OUT_FRACTION = 1.0 / 3.0
@@ -143,8 +143,7 @@ class LaneChangeTables:
         Columns of integers and strings must be identical; floating-point
         columns and the noise level agree to within a relative 1e-12, since
         numpy's vectorised arithmetic rounds differently on CPUs with and
-        without AVX-512 (up to 9e-14 apart, measured on the peak lateral
-        speeds).
+        without AVX-512 (in the last bits of the peak lateral speeds).
         """
         return (
             _tables_agree(self.vehicles, other.vehicles)
@@ -186,7 +185,7 @@ def lane_change_tables(us: VehicleTrajectories) -> LaneChangeTables:
     Parameters
     ----------
     us : VehicleTrajectories
-        :func:`avrisk.learning.ngsim.load_us101` of the original file.
+        :func:`avrisk.learning.ngsim.loaders.load_us101` of the original file.
 
     Returns
     -------
@@ -244,7 +243,7 @@ def load_lane_change_tables(folder: str | Path | None = None) -> LaneChangeTable
     Parameters
     ----------
     folder : str or Path, optional
-        Default :func:`~avrisk.learning.ngsim_files.default_ngsim_dir`.
+        Default :func:`~avrisk.learning.ngsim.files.default_ngsim_dir`.
 
     Returns
     -------
@@ -323,7 +322,7 @@ def lane_change_statistics(
     n_vehicles : int
     exposure_s : float
         Total exposure [vehicle-s]
-        (:func:`~avrisk.learning.lane_changes.exposure_seconds`).
+        (:func:`~avrisk.learning.ngsim.lane_changes.exposure_seconds`).
     direction, duration, peak_lateral_speed : ndarray of shape (N,)
         Of the group's changes (``+1`` left; [s]; [m/s]).
 

@@ -1,8 +1,8 @@
 """``P0(xi)`` from the bootstrap heads, and the validation of the heads and ``mu0``.
 
-The last stage of :func:`~avrisk.learning.train.train_drivers`: the ``m``
-bootstrap heads (:mod:`avrisk.learning.bootstrap_heads`) are the samples to
-which :func:`~avrisk.learning.glasso.fit_sparse_gaussian` fits
+The last stage of :func:`~avrisk.learning.training.train.train_drivers`: the ``m``
+bootstrap heads (:mod:`avrisk.learning.prior.bootstrap_heads`) are the samples to
+which :func:`~avrisk.learning.prior.glasso.fit_sparse_gaussian` fits
 ``xi ~ N(mu0, Sigma0)`` with a sparse precision (:func:`fit_xi_prior`);
 :func:`validation_nll` measures how well the shared head, ``mu0`` and every
 head imitate the validation demonstrations.
@@ -18,9 +18,9 @@ from numpy.typing import NDArray
 
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import XiPrior
-from avrisk.learning.demonstrations import Demonstrations
-from avrisk.learning.glasso import fit_sparse_gaussian
-from avrisk.learning.imitation_loss import imitation_nll
+from avrisk.learning.imitation.demonstrations import Demonstrations
+from avrisk.learning.imitation.loss import imitation_nll
+from avrisk.learning.prior.glasso import fit_sparse_gaussian
 from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
 
 __all__ = ["fit_xi_prior", "validation_nll"]
@@ -49,7 +49,7 @@ def fit_xi_prior(
     -------
     XiPrior
         Its metadata: the fit's
-        (:meth:`~avrisk.learning.glasso.SparseGaussianFit.to_meta`), the seed,
+        (:meth:`~avrisk.learning.prior.glasso.SparseGaussianFit.to_meta`), the seed,
         ``max_shift`` and the median and largest spread of the members.
     """
     fit = fit_sparse_gaussian(heads, target_density=config.target_density)

@@ -26,7 +26,7 @@ and as differentiable-simulation imitation does (e.g. Scheel et al. 2021,
             short
         adversarial (MGAIL, if adversarial_weight > 0): the mean reward
             -log(1 - D(x_t)) of a discriminator D of human vs simulated
-            transitions x_t (:mod:`avrisk.learning.mgail`), updated on the
+            transitions x_t (:mod:`avrisk.learning.imitation.mgail`), updated on the
             same minibatch just before; its gradient flows through the
             simulated transitions into the policy, as in model-based GAIL
             (Baram et al. 2017) with the simulator as the model, and the
@@ -66,9 +66,9 @@ from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import pack_xi
-from avrisk.learning.gail import transition_features
-from avrisk.learning.mgail import Discriminator
-from avrisk.learning.ngsim_demonstrations import DEFAULT_WIDTH
+from avrisk.learning.imitation.discriminator import transition_features
+from avrisk.learning.imitation.mgail import Discriminator
+from avrisk.learning.ngsim.samples import DEFAULT_WIDTH
 from avrisk.learning.replay import (
     BANDS,
     DT,
@@ -193,7 +193,8 @@ def simulated_transitions(
     Returns
     -------
     x : Tensor of shape (W, T - 1, 5)
-        :func:`~avrisk.learning.gail.transition_features` of steps ``1 .. T-1``.
+        :func:`~avrisk.learning.imitation.discriminator.transition_features` of steps
+        ``1 .. T-1``.
     valid : Tensor of bool, shape (W, T - 1)
         The step was simulated (its first state had not crashed).
     """
@@ -319,6 +320,32 @@ def stressed(windows: CarFollowingWindows, factor: float) -> CarFollowingWindows
     return dataclasses.replace(windows, v_l=v_l)
 
 
+def _minibatch_seeds(seed: int, it: int, n: int, config: ClosedLoopConfig) -> Tensor:
+    """Noise seeds of step ``it``'s ``n`` minibatch replays, int64 of shape (n,)."""
+    return torch.as_tensor(
+        seed * 1_000_003 + it * config.batch_windows + np.arange(n),
+        dtype=torch.int64,
+    )
+
+
+def _discriminator_step(
+    disc: Discriminator | None,
+    trace: ClosedLoopTrace,
+    windows: CarFollowingWindows,
+    config: ClosedLoopConfig,
+) -> dict[str, float]:
+    """Update ``disc`` on a minibatch's simulated transitions; its accuracy.
+
+    Returns ``{"disc_accuracy": ...}``, or ``{}`` without a discriminator.
+    """
+    if disc is None:
+        return {}
+    x, valid = simulated_transitions(trace, windows)
+    return {
+        "disc_accuracy": disc.update(x[valid], config.disc_epochs, config.disc_batch)
+    }
+
+
 def _stress_seeds(
     minibatch_seeds: Tensor, seed: int, it: int, n: int, config: ClosedLoopConfig
 ) -> Tensor:
@@ -433,17 +460,10 @@ def closed_loop_finetune(
     for it in range(config.iterations):
         size = min(config.batch_windows, len(train_idx))
         batch = rng.choice(train_idx, size=size, p=draw)
-        seeds = torch.as_tensor(
-            seed * 1_000_003 + it * config.batch_windows + np.arange(len(batch)),
-            dtype=torch.int64,
-        )
+        seeds = _minibatch_seeds(seed, it, len(batch), config)
         part = windows.take(batch)
         trace = differentiable_replay(part, net, road, seeds, guard)
-        disc_row = {}
-        if disc is not None:
-            x, valid = simulated_transitions(trace, part)
-            accuracy = disc.update(x[valid], config.disc_epochs, config.disc_batch)
-            disc_row = {"disc_accuracy": accuracy}
+        disc_row = _discriminator_step(disc, trace, part, config)
         loss, parts = closed_loop_loss(trace, part, config, disc)
         if config.stress_windows > 0 and len(hard_idx) > 0:
             pick = rng.choice(hard_idx, size=config.stress_windows)

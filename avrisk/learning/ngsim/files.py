@@ -2,8 +2,8 @@
 
 Every data set has an *original* file (as described in the original folder's
 ``SOURCE.md``) and a *packed* Parquet file made from it by
-``scripts/pack_ngsim.py`` (:mod:`avrisk.learning.ngsim_packed`); the loaders of
-:mod:`avrisk.learning.ngsim` read either and return the same arrays. The two
+``scripts/pack_ngsim.py`` (:mod:`avrisk.learning.ngsim.packed`); the loaders of
+:mod:`avrisk.learning.ngsim.loaders` read either and return the same arrays. The two
 I-80 data sets, all that training reads, ship packed with the package in
 ``avrisk/data/ngsim/`` (the default folder, :func:`default_ngsim_dir`).
 US-101 does not ship: set ``$AVRISK_NGSIM_DIR`` to a folder holding the
@@ -52,14 +52,14 @@ class NgsimFiles(NamedTuple):
 
 
 #: I-80 car-following pairs
-#: (:func:`~avrisk.learning.ngsim.load_i80_pairs`).
+#: (:func:`~avrisk.learning.ngsim.loaders.load_i80_pairs`).
 I80_PAIRS = NgsimFiles("i80_cf_pairs.csv.gz", "i80_cf_pairs.parquet")
 #: I-80 16:00-16:15 pairs with lateral positions
-#: (:func:`~avrisk.learning.ngsim.load_i80_lateral`).
+#: (:func:`~avrisk.learning.ngsim.loaders.load_i80_lateral`).
 I80_LATERAL = NgsimFiles(
     "i80_0400_0415_emd_cf_pairs.parquet", "i80_0400_0415_lateral_pairs.parquet"
 )
-#: US-101 trajectories (:func:`~avrisk.learning.ngsim.load_us101`); not shipped
+#: US-101 trajectories (:func:`~avrisk.learning.ngsim.loaders.load_us101`); not shipped
 #: with the package.
 US101_FILE = "us101_vehicle_subset.csv.gz"
 

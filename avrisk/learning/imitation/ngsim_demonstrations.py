@@ -8,11 +8,11 @@
 * **Pairs with lateral positions** (:func:`lateral_pair_demonstrations`):
   human longitudinal *and* lane-keeping behaviour (no lane changes: the pairs
   are single-lane episodes), the lateral motion from
-  :mod:`avrisk.learning.ngsim_lateral`.
+  :mod:`avrisk.learning.ngsim.lateral`.
 
 A data sample becomes a two-vehicle scene (follower, and its leader ahead in
 the same lane) on the scenario road, observed by the simulator
-(:func:`car_following_features`; see :mod:`avrisk.learning.demonstrations`).
+(:func:`car_following_features`; see :mod:`avrisk.learning.imitation.demonstrations`).
 Acceleration targets are the forward difference of speed
 ``(v[t+1] - v[t]) / dt`` [m/s^2] (how the simulator applies it over a step).
 """
@@ -27,14 +27,15 @@ import torch
 from numpy.typing import NDArray
 
 from avrisk.agents.drivers.features import N_FEATURES, features_from_observation
-from avrisk.learning.demonstrations import (
+from avrisk.learning.imitation.demonstrations import (
     SOURCE_I80,
     SOURCE_I80_LATERAL,
     Demonstrations,
     observing_simulator,
 )
-from avrisk.learning.ngsim_lateral import LaneCentres, lateral_tracks
-from avrisk.learning.ngsim_samples import (
+from avrisk.learning.ngsim.lateral import LaneCentres, lateral_tracks
+from avrisk.learning.ngsim.samples import (
+    DEFAULT_WIDTH,
     I80_N_LANES,
     CarFollowingPairs,
     LateralPairs,
@@ -43,14 +44,10 @@ from avrisk.learning.ngsim_samples import (
 from avrisk.sim import Road, VehicleState
 
 __all__ = [
-    "DEFAULT_WIDTH",
     "car_following_features",
     "i80_pair_demonstrations",
     "lateral_pair_demonstrations",
 ]
-
-#: Width of a vehicle whose width the data do not give [m].
-DEFAULT_WIDTH = 1.9
 
 
 def car_following_features(

@@ -4,11 +4,11 @@
 :data:`SOURCE_NAMES`; the builders live with their data:
 
 * **NGSIM I-80 car-following pairs** and **I-80 pairs with lateral positions**
-  (:mod:`avrisk.learning.ngsim_demonstrations`): human *longitudinal*
+  (:mod:`avrisk.learning.imitation.ngsim_demonstrations`): human *longitudinal*
   behaviour behind a leader, and human lane keeping where the data have
   lateral positions;
 * **Our own simulator with IDM drivers**
-  (:mod:`avrisk.learning.simulated_demonstrations`): multi-lane traffic,
+  (:mod:`avrisk.learning.imitation.simulated_demonstrations`): multi-lane traffic,
   neighbours in other lanes and vehicles cutting in, which the NGSIM pairs
   lack. These demonstrations are *not human*: their acceleration targets carry
   a lower weight than the human ones. Lane changes are not demonstrated.

@@ -6,7 +6,7 @@ coefficient per action comes from the human residuals
 (:func:`fit_noise_correlation`); how much of the network's standard deviation
 to sample (``noise_scale``) is chosen by closed-loop replays of human
 car-following windows (:func:`calibrate_noise`). :func:`fit_sampling_noise`
-does both, the noise stage of :func:`~avrisk.learning.train.train_drivers`.
+does both, the noise stage of :func:`~avrisk.learning.training.train.train_drivers`.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ import torch
 
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.network import DriverNet
-from avrisk.learning.demonstrations import SOURCE_IDM, Demonstrations
-from avrisk.learning.imitation_loss import demonstration_tensors
+from avrisk.learning.imitation.demonstrations import SOURCE_IDM, Demonstrations
+from avrisk.learning.imitation.loss import demonstration_tensors
 from avrisk.learning.replay import CarFollowingWindows, replay, replay_distances
 from avrisk.learning.train_config import Progress, TrainEvent
 from avrisk.sim import Road

@@ -42,8 +42,8 @@ from numpy.typing import NDArray
 from scipy import stats
 from scipy.ndimage import gaussian_filter1d
 
-from avrisk.learning.ngsim_lateral import LATERAL_SMOOTHING
-from avrisk.learning.ngsim_samples import FloatArray, IntArray
+from avrisk.learning.ngsim.lateral import LATERAL_SMOOTHING
+from avrisk.learning.ngsim.samples import FloatArray, IntArray
 
 __all__ = [
     "MIN_STAY",

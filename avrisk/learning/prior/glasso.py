@@ -160,6 +160,26 @@ def _glasso_blocks(
     return pz, n_iter
 
 
+def _sparse_precision(
+    emp: NDArray[np.float64], alpha: float, max_iter: int, tol: float, zero_tol: float
+) -> tuple[NDArray[np.float64], int, float]:
+    """One graphical-lasso fit at ``alpha``: symmetric, tiny entries zeroed, checked.
+
+    Returns the standardised precision ``Pz``, the solver's iterations and
+    ``Pz``'s smallest eigenvalue; raises FloatingPointError if ``Pz`` is not
+    finite and positive definite.
+    """
+    pz, n_iter = _glasso_blocks(emp, alpha, max_iter, tol)
+    pz = 0.5 * (pz + pz.T)
+    diag = np.sqrt(np.diag(pz))
+    pz[np.abs(pz) <= zero_tol * np.outer(diag, diag)] = 0.0
+    np.fill_diagonal(pz, diag**2)
+    eig = float(linalg.eigvalsh(pz, subset_by_index=[0, 0])[0])
+    if not np.isfinite(pz).all() or eig <= 0:
+        raise FloatingPointError(f"precision not positive definite (min eig {eig})")
+    return pz, n_iter, eig
+
+
 def fit_sparse_gaussian(
     samples: NDArray[Any],
     *,
@@ -247,16 +267,7 @@ def fit_sparse_gaussian(
     last_error: Exception | None = None
     for _ in range(max_retries + 1):
         try:
-            pz, n_iter = _glasso_blocks(emp, a, max_iter, tol)
-            pz = 0.5 * (pz + pz.T)
-            diag = np.sqrt(np.diag(pz))
-            pz[np.abs(pz) <= zero_tol * np.outer(diag, diag)] = 0.0
-            np.fill_diagonal(pz, diag**2)
-            eig = float(linalg.eigvalsh(pz, subset_by_index=[0, 0])[0])
-            if not np.isfinite(pz).all() or eig <= 0:
-                raise FloatingPointError(
-                    f"precision not positive definite (min eig {eig})"
-                )
+            pz, n_iter, eig = _sparse_precision(emp, a, max_iter, tol, zero_tol)
             break
         except (FloatingPointError, ValueError, linalg.LinAlgError) as err:
             last_error = err

@@ -21,7 +21,7 @@ therefore teach *recovery, lane keeping and reactions as IDM does them*;
 human longitudinal behaviour still comes from the NGSIM demonstrations (the
 DAgger acceleration labels carry a lower weight). The loop is
 :func:`dagger_rounds`, the DAgger stage of
-:func:`~avrisk.learning.train.train_drivers`.
+:func:`~avrisk.learning.training.train.train_drivers`.
 """
 
 from __future__ import annotations
@@ -34,15 +34,15 @@ import torch
 from avrisk.agents.drivers.driver import LearnedDriver
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.idm import IDMDriver, IDMState
-from avrisk.learning.behaviour_cloning import behaviour_cloning
-from avrisk.learning.demonstrations import Demonstrations
-from avrisk.learning.replay import CarFollowingWindows, replay
-from avrisk.learning.simulated_demonstrations import (
+from avrisk.learning.imitation.behaviour_cloning import behaviour_cloning
+from avrisk.learning.imitation.demonstrations import Demonstrations
+from avrisk.learning.imitation.simulated_demonstrations import (
     RecordingDriver,
     random_highway_scenes,
     record_student_rollouts,
     split_students,
 )
+from avrisk.learning.replay import CarFollowingWindows, replay
 from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
 from avrisk.sim import Road
 from avrisk.sim.interfaces import Action
@@ -118,7 +118,7 @@ def dagger_demonstrations(
 
     Half of the vehicles of every scene are learners (students, recorded); the
     others are IDM+MOBIL traffic (see
-    :func:`~avrisk.learning.simulated_demonstrations.split_students`).
+    :func:`~avrisk.learning.imitation.simulated_demonstrations.split_students`).
 
     Parameters
     ----------
@@ -126,7 +126,7 @@ def dagger_demonstrations(
         The current learner.
     n_rollouts : int
         Random scenes
-        (:func:`~avrisk.learning.simulated_demonstrations.random_highway_scenes`).
+        (:func:`~avrisk.learning.imitation.simulated_demonstrations.random_highway_scenes`).
     seed : int
         Seeds the scenes and the action noise.
     road : Road, optional
@@ -249,7 +249,7 @@ def dagger_rounds(
     ``config.dagger_windows`` of those human windows
     (:func:`replay_dagger_demonstrations`); the labelled states join the
     demonstrations and the network is refitted on all of them
-    (:func:`~avrisk.learning.behaviour_cloning.behaviour_cloning`).
+    (:func:`~avrisk.learning.imitation.behaviour_cloning.behaviour_cloning`).
 
     Parameters
     ----------

@@ -4,13 +4,13 @@
 :class:`LateralPairs` (I-80 16:00-16:15 pairs with lateral positions) and
 :class:`VehicleTrajectories` (US-101 single vehicles) hold equal-length numpy
 columns, one row per 0.1 s sample, the rows of one episode contiguous
-(:func:`episode_bounds`). The loaders of :mod:`avrisk.learning.ngsim` fill them.
+(:func:`episode_bounds`). The loaders of :mod:`avrisk.learning.ngsim.loaders` fill them.
 
 NGSIM frame: ``Local_Y`` runs along the road in the direction of travel and
 marks the *front* centre of the vehicle; ``Local_X`` is lateral, from the
 left-most edge of the section, increasing to the **right**; lane 1 is the
 left-most lane. (avrisk's road frame has ``y`` increasing to the left and lane
-0 on the right; :mod:`avrisk.learning.ngsim_demonstrations` converts.)
+0 on the right; :mod:`avrisk.learning.imitation.ngsim_demonstrations` converts.)
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "DEFAULT_WIDTH",
     "FT",
     "I80_LANE_WIDTH",
     "I80_N_LANES",
@@ -42,6 +43,8 @@ FT = 0.3048
 I80_N_LANES = 6
 #: Nominal lane width of I-80 and US-101 (12 ft) [m].
 I80_LANE_WIDTH = US101_LANE_WIDTH = 12 * FT
+#: Width of a vehicle whose width the data do not give [m].
+DEFAULT_WIDTH = 1.9
 
 IntArray = NDArray[np.int64]
 FloatArray = NDArray[np.float64]

@@ -5,8 +5,8 @@ discriminator ``D`` to tell human transitions from the policy's, as GAIL
 does, but improves the policy by back-propagating ``D``'s reward through a
 differentiable model of the dynamics instead of by a policy gradient. Our
 simulator's functional step is differentiable, so the model is the simulator
-itself (:func:`avrisk.learning.closed_loop.differentiable_replay`). One
-round of :func:`~avrisk.learning.closed_loop.closed_loop_finetune` with
+itself (:func:`avrisk.learning.training.closed_loop.differentiable_replay`). One
+round of :func:`~avrisk.learning.training.closed_loop.closed_loop_finetune` with
 ``adversarial_weight > 0``::
 
     replay a minibatch of training windows with gradient
@@ -15,9 +15,10 @@ round of :func:`~avrisk.learning.closed_loop.closed_loop_finetune` with
     policy loss += -adversarial_weight * mean_t softplus(logit D(x_t))
                    (GAIL's reward -log(1 - D), D's weights held fixed)
 
-The discriminator's inputs are those of :mod:`avrisk.learning.gail`
-(:func:`~avrisk.learning.gail.transition_features`), standardised by the
-human statistics.
+The discriminator's inputs, network and logistic training are those of
+:mod:`avrisk.learning.imitation.discriminator`
+(:func:`~avrisk.learning.imitation.discriminator.transition_features`),
+standardised by the human statistics.
 """
 
 from __future__ import annotations
@@ -26,7 +27,11 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from avrisk.learning.gail import human_transitions, mlp, train_discriminator
+from avrisk.learning.imitation.discriminator import (
+    human_transitions,
+    mlp,
+    train_discriminator,
+)
 from avrisk.learning.replay import CarFollowingWindows
 
 __all__ = ["Discriminator"]

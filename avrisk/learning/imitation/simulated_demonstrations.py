@@ -8,7 +8,7 @@ every scene are "students" (:func:`split_students`) that keep their lane
 the others are IDM+MOBIL "background" drivers that change lanes around them.
 :func:`record_student_rollouts` runs the scenes and collects the students'
 rows; :func:`simulated_demonstrations` records lane-keeping IDM students, and
-:func:`avrisk.learning.dagger.dagger_demonstrations` learners labelled by IDM.
+:func:`avrisk.learning.imitation.dagger.dagger_demonstrations` learners labelled by IDM.
 
 These demonstrations are *not human*: they teach the network the IDM model's
 lane keeping and reactions. Lane changes are *not* demonstrated: a unimodal
@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from avrisk.agents.drivers.features import N_FEATURES, features_from_observation
 from avrisk.agents.idm import IDMDriver, IDMParams
-from avrisk.learning.demonstrations import (
+from avrisk.learning.imitation.demonstrations import (
     SOURCE_IDM,
     Demonstrations,
     observing_simulator,

@@ -3,8 +3,8 @@
 After behaviour cloning and DAgger, the last layer ``xi`` of the driver
 network is refitted ``m`` times, each on a bootstrap resample of the training
 episodes (within each source), with the trunk frozen so that the heads are
-comparable (DESIGN.md §4). The ``m`` heads are the members to which
-:mod:`avrisk.learning.xi_prior_fit` fits ``P0(xi)``.
+comparable. The ``m`` heads are the members to which
+:mod:`avrisk.learning.prior.xi_prior_fit` fits ``P0(xi)``.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from numpy.typing import NDArray
 
 from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import pack_xi
-from avrisk.learning.demonstrations import Demonstrations
-from avrisk.learning.imitation_loss import demonstration_tensors, weighted_nll
+from avrisk.learning.imitation.demonstrations import Demonstrations
+from avrisk.learning.imitation.loss import demonstration_tensors, weighted_nll
 from avrisk.learning.train_config import Progress, TrainEvent
 
 __all__ = ["bootstrap_heads", "centre_heads"]

@@ -1,8 +1,11 @@
-"""What :func:`~avrisk.learning.train.train_drivers` reads: demonstrations and windows.
+"""What the driver training reads: demonstrations and car-following windows.
 
-The NGSIM I-80 car-following pairs and lateral pairs of an NGSIM folder
-(:mod:`avrisk.learning.ngsim`), split into train and test as the source splits
-them (:func:`~avrisk.learning.ngsim.lateral_pair_split` for the lateral file):
+:func:`~avrisk.learning.training.train.train_drivers` reads the NGSIM I-80
+car-following pairs and lateral pairs of an NGSIM folder
+(:mod:`avrisk.learning.ngsim.loaders`), split into train and test as the
+source splits them
+(:func:`~avrisk.learning.ngsim.loaders.lateral_pair_split` for the lateral
+file):
 
 * :func:`load_demonstrations` -- training demonstrations (the NGSIM train
   splits and IDM+MOBIL scenes) and validation ones (the test splits and
@@ -13,7 +16,7 @@ them (:func:`~avrisk.learning.ngsim.lateral_pair_split` for the lateral file):
 Only the train splits are trained or calibrated on. ``TrainConfig.periods``
 restricts both files to some recording periods (leave-one-period-out
 validation, :mod:`avrisk.realism.held_out`): the lateral file, which covers
-16:00-16:15 only (:data:`~avrisk.learning.ngsim.LATERAL_PERIOD`), is read
+16:00-16:15 only (:data:`~avrisk.learning.ngsim.loaders.LATERAL_PERIOD`), is read
 only when that period is among them.
 """
 
@@ -26,23 +29,23 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from avrisk.learning.demonstrations import Demonstrations
-from avrisk.learning.ngsim import (
+from avrisk.learning.imitation.demonstrations import Demonstrations
+from avrisk.learning.imitation.ngsim_demonstrations import (
+    i80_pair_demonstrations,
+    lateral_pair_demonstrations,
+)
+from avrisk.learning.imitation.simulated_demonstrations import simulated_demonstrations
+from avrisk.learning.ngsim.files import I80_LATERAL, I80_PAIRS, ngsim_file
+from avrisk.learning.ngsim.lateral import LaneCentres
+from avrisk.learning.ngsim.loaders import (
     LATERAL_PERIOD,
     lateral_pair_split,
     load_i80_lateral,
     load_i80_pairs,
     periods_of,
 )
-from avrisk.learning.ngsim_demonstrations import (
-    i80_pair_demonstrations,
-    lateral_pair_demonstrations,
-)
-from avrisk.learning.ngsim_files import I80_LATERAL, I80_PAIRS, ngsim_file
-from avrisk.learning.ngsim_lateral import LaneCentres
-from avrisk.learning.ngsim_samples import CarFollowingPairs, LateralPairs
+from avrisk.learning.ngsim.samples import CarFollowingPairs, LateralPairs
 from avrisk.learning.replay import CarFollowingWindows, car_following_windows
-from avrisk.learning.simulated_demonstrations import simulated_demonstrations
 from avrisk.learning.train_config import TrainConfig
 from avrisk.sim import Road
 
@@ -123,7 +126,7 @@ def load_demonstrations(
     Parameters
     ----------
     data_dir : str or Path or None
-        NGSIM folder (:func:`avrisk.learning.ngsim_files.ngsim_dir`; None: the
+        NGSIM folder (:func:`avrisk.learning.ngsim.files.ngsim_dir`; None: the
         data shipped with the package), packed or original files.
     seed : int
         Seeds the simulated scenes (validation uses ``seed + 1``).

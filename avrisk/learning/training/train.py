@@ -1,41 +1,45 @@
 """Training the learned drivers and ``P0(xi)`` from data: the stages in order.
 
-Pipeline of :func:`train_drivers` (DESIGN.md §4), one module a stage::
+Pipeline of :func:`train_drivers`, one module of :mod:`avrisk.learning` a
+stage::
 
     demonstrations  = NGSIM I-80 pairs (train split)           longitudinal
                     + NGSIM I-80 lateral pairs (train split)    + lane keeping
                     + IDM+MOBIL in our simulator                neighbours
-                                                        (training_data.py)
+                                                    (training/data.py)
     trunk + head    = argmin weighted Gaussian NLL  (Adam)      behaviour cloning
-                                                        (behaviour_cloning.py)
+                                                    (imitation/behaviour_cloning.py)
     sampling noise  = AR(1) from human residuals, scale by replays
-                                                        (sampling_noise.py)
+                                                    (training/sampling_noise.py)
     DAgger x K      = learner drives, IDM+MOBIL labels the       covariate shift
-                      visited states; refit on the aggregate    (dagger.py)
+                      visited states; refit on the aggregate
+                                                    (imitation/dagger.py)
     sampling noise  = again, for the final network
     closed loop     = back-propagation through replays of       closed-loop
                       training windows: imitation + MGAIL        realism
                       reward + gap and TTC barriers, and
                       hard-braking windows with their leaders
                       braking harder, under the barriers
-                                              (closed_loop.py, mgail.py)
+                                                    (training/closed_loop.py,
+                                                     imitation/mgail.py)
     heads 1..m      = the head refitted on m bootstrap resamples of the
                       episodes (trunk frozen, so the heads are comparable),
                       then moved together so that their mean is the
-                      closed-loop head                 (bootstrap_heads.py)
+                      closed-loop head              (prior/bootstrap_heads.py)
     mu0, Sigma0^-1  = ensemble mean, Ledoit-Wolf + graphical lasso
-                                                        (xi_prior_fit.py)
+                                                    (prior/xi_prior_fit.py)
     files, report   = driver_net.npz (with the emergency brake
                       TrainConfig.guard, which training itself never
                       drives with), xi_prior.npz, training_report.json
-                                                        (training_report.py)
+                                                    (training/report.py)
 
-The settings of every stage are one :class:`~avrisk.learning.train_config.TrainConfig`.
-With ``candidates > 1`` the recipe is trained with as many seeds and the
-training whose drivers (with their emergency brake) crash least on their own
-closed-loop validation windows is kept (:mod:`avrisk.learning.selection`;
-training data only): trainings of one recipe differ widely in how often their
-drivers crash.
+The settings of every stage are one
+:class:`~avrisk.learning.train_config.TrainConfig`. With ``candidates > 1``
+the recipe is trained with as many seeds and the training whose drivers (with
+their emergency brake) crash least on their own closed-loop validation
+windows is kept (:mod:`avrisk.learning.training.selection`; training data
+only): trainings of one recipe differ widely in how often their drivers
+crash.
 The shipped files are ``driver_net.npz`` (trunk + shared head) and
 ``xi_prior.npz`` (``mu0``, sparse precision, members); see
 :mod:`avrisk.agents.drivers.store`. The run is seeded: the same seed, data
@@ -59,35 +63,39 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, replace
 from pathlib import Path
 
+import numpy as np
 import torch
+from numpy.typing import NDArray
 
+from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.store import (
     DRIVER_NET_FILE,
     XI_PRIOR_FILE,
     load_driver_net,
     load_xi_prior,
 )
-from avrisk.learning.behaviour_cloning import fit_driver_net
-from avrisk.learning.bootstrap_heads import bootstrap_heads, centre_heads
-from avrisk.learning.closed_loop import closed_loop_finetune
-from avrisk.learning.dagger import dagger_rounds
-from avrisk.learning.sampling_noise import fit_sampling_noise
-from avrisk.learning.selection import (
+from avrisk.learning.imitation.behaviour_cloning import fit_driver_net
+from avrisk.learning.imitation.dagger import dagger_rounds
+from avrisk.learning.imitation.demonstrations import Demonstrations
+from avrisk.learning.prior.bootstrap_heads import bootstrap_heads, centre_heads
+from avrisk.learning.prior.xi_prior_fit import fit_xi_prior, validation_nll
+from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
+from avrisk.learning.training.closed_loop import closed_loop_finetune
+from avrisk.learning.training.data import load_demonstrations, training_windows
+from avrisk.learning.training.report import (
+    TRAINING_REPORT_FILE,
+    TrainingReport,
+    training_environment,
+    write_training_outputs,
+)
+from avrisk.learning.training.sampling_noise import fit_sampling_noise
+from avrisk.learning.training.selection import (
     REPLICATES,
     STRESS,
     CandidateScore,
     choose,
     validation_crashes,
 )
-from avrisk.learning.train_config import Progress, TrainConfig, TrainEvent
-from avrisk.learning.training_data import load_demonstrations, training_windows
-from avrisk.learning.training_report import (
-    TRAINING_REPORT_FILE,
-    TrainingReport,
-    training_environment,
-    write_training_outputs,
-)
-from avrisk.learning.xi_prior_fit import fit_xi_prior, validation_nll
 
 __all__ = ["CANDIDATES_DIR", "train_drivers"]
 
@@ -118,7 +126,7 @@ def train_drivers(
         ``training_report.json`` (created if missing).
     data_dir : str or Path, optional
         NGSIM folder; default ``$AVRISK_NGSIM_DIR``, else the data shipped
-        with the package (:func:`avrisk.learning.ngsim_files.ngsim_dir`).
+        with the package (:func:`avrisk.learning.ngsim.files.ngsim_dir`).
     config : TrainConfig, optional
         Default ``TrainConfig()``, the settings of the shipped files.
     progress : callable, optional
@@ -133,7 +141,7 @@ def train_drivers(
         Trainings of the recipe, with seeds ``seed, seed + 1, ...``. With
         more than one, each is written to ``out_dir/candidates/seed-S/`` and
         scored by its drivers' crashes on its own closed-loop validation
-        windows (:func:`~avrisk.learning.selection.validation_crashes`), and
+        windows (:func:`~avrisk.learning.training.selection.validation_crashes`), and
         the one with the fewest is copied to ``out_dir``; its report's
         ``selection`` lists every candidate's score. A candidate's files are
         those of ``train_drivers(seed + k)``.
@@ -259,6 +267,47 @@ class _Stopwatch:
         self._start = now
 
 
+def _closed_loop_stage(
+    net: DriverNet,
+    data_dir: str | Path | None,
+    config: TrainConfig,
+    seed: int,
+    progress: Progress | None,
+) -> list[dict[str, float]]:
+    """The closed-loop stage on the training windows (its history; [] if off)."""
+    if config.closed_loop.iterations == 0:
+        return []
+    return closed_loop_finetune(
+        net,
+        training_windows(data_dir, config.closed_loop.window_steps, config.periods),
+        config.closed_loop,
+        seed,
+        progress,
+        guard=config.guard if config.closed_loop.drive_with_guard else None,
+    )
+
+
+def _ensemble_stage(
+    net: DriverNet,
+    train: Demonstrations,
+    config: TrainConfig,
+    seed: int,
+    progress: Progress | None,
+) -> tuple[NDArray[np.float64], list[dict[str, float]]]:
+    """The bootstrap heads, centred on the network's head, and their history."""
+    heads, history = bootstrap_heads(
+        net,
+        train,
+        config.n_members,
+        epochs=config.head_epochs,
+        batch_size=config.head_batch_size,
+        lr=config.head_lr,
+        seed=seed,
+        progress=progress,
+    )
+    return centre_heads(heads, net), history
+
+
 def _train_drivers(
     seed: int,
     out: Path,
@@ -302,29 +351,10 @@ def _train_drivers(
     calibration = fit_sampling_noise(net, train, windows, seed, progress)
     stopwatch.lap("noise")
 
-    closed_loop_history: list[dict[str, float]] = []
-    if config.closed_loop.iterations > 0:
-        closed_loop_history = closed_loop_finetune(
-            net,
-            training_windows(data_dir, config.closed_loop.window_steps, config.periods),
-            config.closed_loop,
-            seed,
-            progress,
-            guard=config.guard if config.closed_loop.drive_with_guard else None,
-        )
+    closed_loop_history = _closed_loop_stage(net, data_dir, config, seed, progress)
     stopwatch.lap("closed_loop")
 
-    heads, head_history = bootstrap_heads(
-        net,
-        train,
-        config.n_members,
-        epochs=config.head_epochs,
-        batch_size=config.head_batch_size,
-        lr=config.head_lr,
-        seed=seed,
-        progress=progress,
-    )
-    heads = centre_heads(heads, net)
+    heads, head_history = _ensemble_stage(net, train, config, seed, progress)
     stopwatch.lap("heads")
 
     prior = fit_xi_prior(heads, config, seed, progress)

@@ -1,4 +1,4 @@
-"""What :func:`~avrisk.learning.train.train_drivers` writes and reports.
+"""What :func:`~avrisk.learning.training.train.train_drivers` writes and reports.
 
 The run's outputs in its folder: the network (:data:`DRIVER_NET_FILE`), the
 ``xi`` prior (:data:`XI_PRIOR_FILE`) and a JSON :class:`TrainingReport` of
@@ -35,7 +35,9 @@ TRAINING_REPORT_FILE = "training_report.json"
 
 @dataclass(frozen=True)
 class TrainingReport:
-    """What :func:`~avrisk.learning.train.train_drivers` did and measured (JSON).
+    """What the driver training did and measured (JSON).
+
+    Written by :func:`~avrisk.learning.training.train.train_drivers`.
 
     Attributes
     ----------
@@ -52,7 +54,7 @@ class TrainingReport:
     closed_loop_history : list of dict
         Per validation of the closed-loop stage: the minibatch's loss parts
         and the validation windows'
-        (:func:`~avrisk.learning.closed_loop.closed_loop_finetune`).
+        (:func:`~avrisk.learning.training.closed_loop.closed_loop_finetune`).
     head_history : list of dict
         Per head epoch: mean training loss over the heads.
     validation : dict
@@ -62,7 +64,7 @@ class TrainingReport:
         distances of every candidate.
     prior : dict
         The prior's metadata: the graphical-lasso fit
-        (:meth:`~avrisk.learning.glasso.SparseGaussianFit.to_meta`) and more.
+        (:meth:`~avrisk.learning.prior.glasso.SparseGaussianFit.to_meta`) and more.
     config : dict
     environment : dict
         Versions and thread count.
@@ -70,7 +72,7 @@ class TrainingReport:
         Wall time per stage.
     selection : dict or None
         With ``candidates > 1``: the criterion, every candidate's score
-        (:class:`~avrisk.learning.selection.CandidateScore`) and the seed
+        (:class:`~avrisk.learning.training.selection.CandidateScore`) and the seed
         kept; None for a single training.
     """
 
@@ -106,11 +108,10 @@ def cpu_kernels() -> dict[str, Any]:
     """The CPU kernels torch and the loaded BLAS libraries dispatch to here.
 
     The same code, seed and thread count give other floating-point results
-    with other kernels: on a CPU with AVX-512, torch's default AVX-512
-    kernels move the closed-loop stage's losses in their 4th digit within 10
-    steps of training, against the AVX2 kernels of a CPU without it, and
-    OpenBLAS's SkylakeX kernels move the graphical lasso's precision by
-    about 3e-11 against its Haswell ones.
+    with other kernels: torch's AVX-512 kernels move the closed-loop stage's
+    losses against the AVX2 kernels of a CPU without AVX-512, and OpenBLAS's
+    SkylakeX kernels move the graphical lasso's precision against its Haswell
+    ones (BENCHMARKS.md, "Reproducing the shipped drivers: CPU kernels").
 
     Returns
     -------
