@@ -362,12 +362,21 @@ class Estimate:
         )
 
     def __str__(self) -> str:
+        """One line: p, its interval, hits, ESS, calls, and which estimate answered.
+
+        ``details["answer"]`` names the estimate that answered where an
+        estimator has two (``splitting_is``: ``importance_sampling`` or
+        ``splitting``, the levels' product).
+        """
         lo, hi = self.ci
+        answer = (self.details or {}).get("answer")
         return (
             f"{self.method}: P(f <= {self.gamma:g}) = {self.p:.4g} "
             f"+- {self.stderr:.2g} "
             f"({self.main.confidence:.0%} CI [{lo:.3g}, {hi:.3g}], "
-            f"{self.n_hits} hits, ESS {self.ess:.1f}, {self.n_evals} calls of f)"
+            f"{self.n_hits} hits, ESS {self.ess:.1f}, {self.n_evals} calls of f"
+            + (f"; answer: {answer}" if answer else "")
+            + ")"
         )
 
 
