@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> None:
     from avrisk.assembly import SimulationObjective, base_distribution
     from avrisk.rare import estimate as estimate_p
     from avrisk.rare.estimator import DEFAULT_METHOD, estimator_class
-    from avrisk.rare.splitting import SplittingError
+    from avrisk.rare.splitting_levels import SplittingError
     from avrisk.rare.trust import estimate_trust
     from avrisk.report.answer import SCENARIO_WORDING
     from avrisk.scenario import load_spec

@@ -41,10 +41,6 @@ MODULES_NOT_YET_SPLIT = {
         "splitting's particles as an importance-sampling proposal and the "
         "estimator in one; being split into the proposal fit and the estimator"
     ),
-    "avrisk/rare/splitting.py": (
-        "subset simulation's levels, moves and estimator in one; being split "
-        "into levels and moves"
-    ),
     "avrisk/rare/mixture.py": (
         "mixture EM and the mixture CE estimator in one; EM to be its own module"
     ),

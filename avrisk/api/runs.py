@@ -53,7 +53,7 @@ from avrisk.rare import InvalidOutputError
 from avrisk.rare.estimator import TooManyFailuresError
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import WorkerError
-from avrisk.rare.splitting import SplittingError
+from avrisk.rare.splitting_levels import SplittingError
 from avrisk.registry import ComponentError
 from avrisk.scenario import (
     ScenarioSpec,

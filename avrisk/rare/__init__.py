@@ -28,8 +28,9 @@ from avrisk.rare.mixture import MixtureCrossEntropy, MixtureProposal, mixture_ce
 from avrisk.rare.naive_mc import NaiveMC, naive_mc
 from avrisk.rare.problem import InvalidOutputError, RareEventProblem
 from avrisk.rare.results import CEInfo, Estimate, GammaEstimate, MixtureInfo
-from avrisk.rare.splitting import SplittingError, SubsetSimulation, subset_simulation
+from avrisk.rare.splitting import SubsetSimulation, subset_simulation
 from avrisk.rare.splitting_importance import SplittingImportanceSampling, splitting_is
+from avrisk.rare.splitting_levels import SplittingError
 from avrisk.rare.stages import StageBatch, run_stage
 
 __all__ = [

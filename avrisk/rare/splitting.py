@@ -22,75 +22,12 @@ A test threshold ``g`` is estimated from the deepest set conditioned on a level
 at or above ``g``; below ``gamma`` it may see no particle (``p = 0``; its
 interval then reaches up to that of ``gamma``).
 
-Moves
------
-Chains move in the space of independent standard normals of the base family
-(:meth:`~avrisk.rare.families.base.ExponentialFamily.to_standard_normal`):
-``X = T^-1(Z)`` with ``Z ~ N(0, I)``. A preconditioned Crank-Nicolson proposal
-``z' = sqrt(1 - beta^2) z + beta eps``, ``eps ~ N(0, I)``, is reversible with
-respect to ``N(0, I)``, so accepting it iff ``f(T^-1(z')) <= b_l`` leaves ``P0``
-conditioned on ``f <= b_l`` invariant, with no density ratio; and its
-acceptance does not fall with the dimension. The chains move in lockstep, one
-round of proposals at a time; after each round ``beta`` is multiplied by
-``exp(ADAPT_GAIN (accepted - TARGET_ACCEPTANCE proposed) / chains)`` (clipped
-to ``[MIN_BETA, 1]``), which drives the acceptance rate towards
-``TARGET_ACCEPTANCE = 0.3``; ``beta`` carries over from level to level. A chain
-that is refused keeps its state (as Metropolis-Hastings does); only when no
-chain accepts in ``MAX_ROUNDS_WITHOUT_MOVE`` rounds in a row with ``beta``
-already at ``MIN_BETA`` (a step that barely moves: the set below the level has
-no volume, or ``f`` jumps) does the run stop with a :class:`SplittingError`. With
-``n_moves > 1`` a chain keeps every ``n_moves``-th state only (thinning). For a
-seeded (stochastic) ``f`` each proposal has its own seed: the chain moves on
-``(x, seed)``, and a fresh seed is an independence proposal from its prior, so
-the move stays reversible.
-
-Ties
-----
-Many rollouts may share one value of ``f`` (``inf`` for no encounter, ``0`` for
-crashes, a capped or coarse ``f``). The level is still the quantile and the
-survivors are counted exactly (``f <= level``). When ties leave more than
-``p0_max`` of the particles at or below the quantile, the level moves to the
-largest value below the tie: the factor is then the share strictly below it,
-counted exactly as generalized splitting does, and the chains stay in ``f <=
-level``, so the moves keep the conditional law invariant. The level must fall
-at every set: one that cannot (the tie at the current level holds the whole
-set) ends the levels with a bound (*Plateaus*).
-
-Plateaus
---------
-``f`` may be constant on most of ``P0`` (a TTC capped where nothing closes): a
-first set of ``N`` draws may then hold few or no particles below the tie.
-When it holds fewer than ``min_survivors`` below it (or every draw at it),
-the first set takes ``(plateau_draws - 1) N`` more draws of ``P0``. Its factor
-is the share of those further draws alone: the first ``N`` decided that they
-were drawn, and a count that decides its own sample size is biased (stopping
-at the ``m``-th hit overstates ``p`` by about ``m / (m - 1)``); all of the
-set's particles below the level seed chains. With some below, the levels go
-on (few chains: a wider interval, from their correlation). With none counted,
-the answer is a bound, as naive Monte Carlo's with no hit: ``p`` is reported
-as 0 with the interval ``[0, u]``, ``u`` the product of the factors so far
-times the exact 95% upper bound of a share of 0 of the last set
-(``details["bound_only"]``). The same holds for a later set whose particles
-all tie at its level. No run stops on a flat ``f``: it is an event the draws
-never came near, not a proof that it cannot happen.
-
-Standard error
---------------
-Au & Beck's coefficient of variation: level ``l`` contributes ``delta_l^2 =
-(1 - p_l) / (N p_l) (1 + gamma_l)`` with ``gamma_l = 2 sum_k (pairs_k / N)
-rho_l(k)``, ``rho_l(k)`` the correlation of the indicators ``1{f <= b_{l+1}}``
-``k`` states apart in a chain, estimated over the ``pairs_k`` such pairs of
-the level's chains (set 0 is independent: ``gamma_0 = 0``), and ``delta^2 =
-sum_l delta_l^2``. The levels are taken as uncorrelated (Au & Beck's
-approximation; their positive correlation makes it somewhat optimistic).
-``stderr = p_hat delta``; the interval is normal on ``log p`` with ``Var(log
-p_hat) = log(1 + delta^2)``: ``log p_hat`` is a sum over levels, so closer to
-normal than the skewed product, and the interval stays above 0. Measured on
-the 2-d linear problem at ``p = 1e-6`` (400 seeds): at ``N = 2000`` the spread
-of ``log p_hat`` is 8% above the reported one and the 95% interval covers
-``p`` in 92% of runs; at ``N = 500``, 20% and 90%. The estimator also has Au &
-Beck's ``O(1/N)`` bias, upwards there: +2% (+-1.5%) at ``N = 2000``, +16%
-(+-3%) at ``N = 500``; use ``N >= 1000``.
+The method is three modules: this one, the estimator and its settings;
+:mod:`avrisk.rare.splitting_levels`, the particle sets, the choice of each
+level and the estimate with its error (its sections *Ties*, *Plateaus* and
+*Standard error*, which the sections named here refer to);
+:mod:`avrisk.rare.splitting_moves`, the draws of ``P0`` and the pCN chains
+that make the sets (*Moves*, *Seeds and resume*).
 
 Failed samples
 --------------
@@ -100,25 +37,10 @@ level (its ``f`` as ``+inf``): a failed proposal is rejected. They are counted
 Carlo and cross-entropy: counted dangerous, they would change the levels and
 the chains themselves, so no second estimate follows from the same samples.
 
-Seeds and resume
-----------------
-Every batch of at most :data:`~avrisk.rare.problem.SAMPLE_CHUNK` points is
-evaluated through :meth:`EstimationContext.evaluate` as chunk 0 of its own
-stage (1, 2, ... in the order of the run; a stage's per-sample seeds depend on
-the stage, so no two proposals share one); its random numbers come from
-``default_rng([seed, stage])``. The points are functions of the run seed and
-of earlier values of ``f`` only: a resumed run asks for the recorded points
-again and replays them, and the result does not depend on ``batch_size``.
-
 References
 ----------
 S.-K. Au, J. L. Beck. "Estimation of small failure probabilities in high
 dimensions by subset simulation." Probabilistic Engineering Mechanics 16, 2001.
-S. L. Cotter, G. O. Roberts, A. M. Stuart, D. White. "MCMC methods for
-functions: modifying old algorithms to make them faster." Statistical Science
-28, 2013 (pCN).
-I. Papaioannou, W. Betz, K. Zwirglmaier, D. Straub. "MCMC algorithms for subset
-simulation." Probabilistic Engineering Mechanics 41, 2015.
 """
 
 from __future__ import annotations
@@ -130,7 +52,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
-from scipy import stats
 
 from avrisk.rare.black_box import estimate
 from avrisk.rare.estimator import (
@@ -139,39 +60,20 @@ from avrisk.rare.estimator import (
     EstimatorSettings,
     register_estimator,
 )
-from avrisk.rare.families.base import ExponentialFamily, FloatArray
-from avrisk.rare.final_stage import CONFIDENCE, MIN_RELIABLE_ESS
-from avrisk.rare.problem import (
-    SAMPLE_CHUNK,
-    BatchFunction,
-    RareEventProblem,
+from avrisk.rare.families.base import ExponentialFamily
+from avrisk.rare.final_stage import MIN_RELIABLE_ESS
+from avrisk.rare.problem import BatchFunction, RareEventProblem
+from avrisk.rare.results import Estimate, SearchConvergence
+from avrisk.rare.splitting_levels import (
+    ParticleSet,
+    SplittingState,
+    exhausted_error,
+    level_cov_squared,
+    levels_estimate,
+    next_level,
+    on_plateau,
 )
-from avrisk.rare.results import Estimate, GammaEstimate, SearchConvergence
-
-#: Acceptance rate the pCN step ``beta`` is adapted towards.
-TARGET_ACCEPTANCE = 0.3
-#: Gain of the adaptation: ``log beta`` moves by this times the acceptance error.
-ADAPT_GAIN = 1.0
-#: Smallest pCN step.
-MIN_BETA = 1e-3
-#: Standard normal quantile of the intervals' confidence (1.96 for 95%).
-Z_CONFIDENCE = float(stats.norm.ppf(0.5 + CONFIDENCE / 2))
-#: Rounds in a row in which no chain accepts before the run stops.
-MAX_ROUNDS_WITHOUT_MOVE = 10
-
-STDERR_METHOD = (
-    "Au & Beck (2001) coefficient of variation: per level (1 - p_l) / (N p_l) "
-    "(1 + gamma_l), gamma_l from the indicators' correlation along the chains, "
-    "summed over levels taken as uncorrelated"
-)
-INTERVAL_METHOD = (
-    "log-normal: normal on log p, Var(log p) = log(1 + cov^2), cov from the "
-    "levels' survivor counts and the chains' correlation"
-)
-
-
-class SplittingError(ValueError):
-    """The levels cannot reach ``gamma`` (the message says why)."""
+from avrisk.rare.splitting_moves import draw_p0, drawn_more, move_chains
 
 
 class SplittingSettings(EstimatorSettings):
@@ -188,7 +90,8 @@ class SplittingSettings(EstimatorSettings):
         the level moves below the tied value (at least ``p0``).
     max_levels : int, default=12
         Most particle sets, the draws of ``P0`` included; not reaching
-        ``gamma`` within them is a :class:`SplittingError`.
+        ``gamma`` within them is a
+        :class:`~avrisk.rare.splitting_levels.SplittingError`.
     n_moves : int, default=1
         pCN proposals per kept chain state (``> 1`` thins the chains).
     initial_beta : float, default=0.6
@@ -196,7 +99,8 @@ class SplittingSettings(EstimatorSettings):
     min_survivors : int, default=10
         Fewest of the first ``N`` draws of ``P0`` that must lie below a tie of
         ``f`` at their level (a plateau, e.g. a capped TTC); fewer, and the
-        first set grows to ``plateau_draws N`` draws (*Plateaus*).
+        first set grows to ``plateau_draws N`` draws (*Plateaus* in
+        :mod:`avrisk.rare.splitting_levels`).
     plateau_draws : int, default=8
         Draws of a first set grown on a plateau, in multiples of ``N`` (1:
         never grown).
@@ -237,75 +141,6 @@ class SplittingSettings(EstimatorSettings):
         if p0 is not None and p0_max < p0:
             raise ValueError(f"p0_max ({p0_max}) must be at least p0 ({p0})")
         return p0_max
-
-
-class ParticleSet(NamedTuple):
-    """The ``N`` particles of one level, by chain.
-
-    Attributes
-    ----------
-    values : ndarray of shape (n_chains, max_length)
-        ``f`` of chain ``j``'s state ``i`` (``+inf`` where its evaluation
-        failed, NaN past the chain's end). Set 0 has ``N`` chains of length 1.
-    level : float
-        The next level chosen from these particles (``gamma`` on the last set).
-    counted_from : int, default=0
-        First chain whose states the set's factor counts: ``N`` for a first
-        set grown on a plateau, whose first ``N`` draws decided that it grows
-        (*Plateaus*), else 0.
-    """
-
-    values: FloatArray
-    level: float
-    counted_from: int = 0
-
-    @property
-    def flat(self) -> FloatArray:
-        """The ``N`` values, chain after chain, shape (N,)."""
-        return self.values[~np.isnan(self.values)]
-
-    @property
-    def counted(self) -> FloatArray:
-        """The chains the factor counts, shape (n_chains - counted_from, max_length)."""
-        return self.values[self.counted_from :]
-
-
-class SplittingState(NamedTuple):
-    """What the next level needs.
-
-    Attributes
-    ----------
-    z : ndarray of shape (N, D)
-        The last set's particles in standard-normal space, in the order of
-        ``sets[-1].flat`` (shape (0, D) before the first step).
-    sets : tuple of ParticleSet
-        Every set so far (the estimate of every threshold reads them).
-    beta : float
-        pCN step for the next moves.
-    reached : bool
-        Whether the last set's level is ``gamma`` (the steps are over).
-    n_stages : int
-        Stages (evaluated batches) used so far.
-    n_evals : int
-        Calls of ``f`` so far.
-    n_failed : int
-        Evaluations that failed so far.
-    rounds_without_move : int
-        Rounds in a row in which no chain accepted.
-    exhausted : bool, default=False
-        Whether ``max_levels`` sets ended above ``gamma`` (the steps are over,
-        without an estimate: :func:`exhausted_error`).
-    """
-
-    z: FloatArray
-    sets: tuple[ParticleSet, ...]
-    beta: float
-    reached: bool
-    n_stages: int
-    n_evals: int
-    n_failed: int
-    rounds_without_move: int
-    exhausted: bool = False
 
 
 #: The levels' diagnostics in plain words (:meth:`SubsetSimulation.diagnostics`).
@@ -433,11 +268,13 @@ class SubsetSimulation:
         if state.sets:
             moved = move_chains(state, problem, context, s.n_moves, s.n_particles)
         else:
-            moved = _draw_p0(state, problem, context, s.n_particles)
-            if s.plateau_draws > 1 and _on_plateau(moved.values, problem.gamma, s):
+            moved = draw_p0(state, problem, context, s.n_particles)
+            if s.plateau_draws > 1 and on_plateau(
+                moved.values, problem.gamma, s.p0, s.p0_max, s.min_survivors
+            ):
                 counted_from = s.n_particles
                 more = (s.plateau_draws - 1) * s.n_particles
-                moved = _drawn_more(moved, problem, context, more)
+                moved = drawn_more(moved, problem, context, more)
         flat = moved.values[~np.isnan(moved.values)]
         level = next_level(flat, current, problem.gamma, s.p0, s.p0_max)
         if level is None or (
@@ -583,362 +420,6 @@ class SubsetSimulation:
             f"a level of the search held only {min(few)} particles below it (f "
             "ties on a plateau?): its interval is likely too narrow",
         )
-
-
-def exhausted_error(
-    state: SplittingState, gamma: float, max_levels: int
-) -> SplittingError:
-    """The error of levels that ``max_levels`` sets did not bring to ``gamma``."""
-    level = state.sets[-1].level
-    p_so_far = math.prod(_factors(state.sets))
-    return SplittingError(
-        f"after max_levels={max_levels} levels the level is f <= {level:g}, still "
-        f"above gamma = {gamma:g} (P0(f <= {level:g}) is about {p_so_far:.2g}): the "
-        "event may be impossible, or rarer than that many levels reach; raise "
-        "max_levels (or p0)"
-    )
-
-
-def levels_estimate(
-    state: SplittingState, problem: RareEventProblem, n_particles: int
-) -> Estimate:
-    """Subset simulation's estimate of every threshold from a run's particle sets.
-
-    ``details`` holds the levels, the survivors of each set, their c.o.v.s,
-    the first set's draws, whether the answer is a bound only (no particle at
-    or below ``gamma``: *Plateaus*) and the failed evaluations.
-    """
-    by_gamma = {problem.gamma: _estimate_at(state.sets, problem.gamma)}
-    for g in problem.thresholds[1:]:
-        by_gamma[g] = _estimate_at(state.sets, g, by_gamma[problem.gamma].ci[1])
-    return Estimate(
-        method="subset_simulation",
-        gamma=problem.gamma,
-        by_gamma=by_gamma,
-        n_evals=state.n_evals,
-        details={
-            "levels": [ps.level for ps in state.sets],
-            "survivors": _survivors(state.sets),
-            "level_cov": [
-                math.sqrt(level_cov_squared(ps.counted, ps.level)) for ps in state.sets
-            ],
-            "n_particles": n_particles,
-            "first_set_draws": state.sets[0].flat.size,
-            "bound_only": by_gamma[problem.gamma].n_hits == 0,
-            "n_failed": state.n_failed,
-            "stderr_method": STDERR_METHOD,
-        },
-    )
-
-
-def next_level(
-    values: FloatArray,
-    current: float,
-    gamma: float,
-    p0: float,
-    p0_max: float,
-) -> float | None:
-    """The next level from a particle set's ``f`` (*Ties* in the module docstring).
-
-    Parameters
-    ----------
-    values : ndarray of shape (N,)
-        ``f`` of the set's particles (``+inf`` for failed ones), all at or
-        below ``current``.
-    current : float
-        Level the set is conditioned on (``inf`` for draws of ``P0``).
-    gamma : float
-        Threshold of the event.
-    p0, p0_max : float
-        Quantile level; largest share of survivors ties may leave.
-
-    Returns
-    -------
-    float or None
-        ``gamma`` when the ``p0``-quantile is at or below it, else a level
-        below ``current``; None when none can fall below it (every particle
-        at ``current``: a plateau).
-
-    Examples
-    --------
-    >>> values = np.array([0.0, 1.0, 1.0, 1.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
-    >>> float(next_level(values, np.inf, -1.0, p0=0.2, p0_max=0.5))  # 5 survivors
-    1.0
-    >>> float(next_level(values, np.inf, -1.0, p0=0.2, p0_max=0.4))  # below the ties
-    0.0
-    >>> print(next_level(np.full(10, 7.0), 7.0, -1.0, p0=0.2, p0_max=0.5))
-    None
-    """
-    quantile = float(np.quantile(values, p0, method="inverted_cdf"))
-    if quantile > gamma and np.count_nonzero(values <= quantile) > p0_max * values.size:
-        below = values[values < quantile]
-        if below.size:
-            quantile = float(below.max())
-    if max(quantile, gamma) >= current:
-        return None
-    return max(quantile, gamma)
-
-
-def level_cov_squared(values: FloatArray, threshold: float) -> float:
-    """Au & Beck's squared c.o.v. of a set's share of ``f <= threshold``.
-
-    Parameters
-    ----------
-    values : ndarray of shape (n_chains, max_length)
-        ``f`` by chain, NaN past each chain's end (:class:`ParticleSet`).
-    threshold : float
-
-    Returns
-    -------
-    float
-        ``(1 - p) / (N p) (1 + gamma)`` with ``gamma = 2 sum_k (pairs_k / N)
-        rho(k)`` over the lags ``k`` within chains; 0 when ``p`` is 0 or 1.
-    """
-    present = ~np.isnan(values)
-    hits = values <= threshold
-    n = int(present.sum())
-    p = np.count_nonzero(hits) / n
-    if p in (0.0, 1.0):
-        return 0.0
-    variance = p * (1 - p)
-    correlation = 0.0
-    for lag in range(1, values.shape[1]):
-        pairs = np.count_nonzero(present[:, :-lag] & present[:, lag:])
-        both = np.count_nonzero(hits[:, :-lag] & hits[:, lag:])
-        correlation += pairs / n * (both / pairs - p * p) / variance
-    # chains of pCN states are positively correlated; a negative estimate is
-    # noise, and would make the interval narrower than independent draws'
-    return (1 - p) / (n * p) * max(1.0, 1 + 2 * correlation)
-
-
-def _survivors(sets: Sequence[ParticleSet]) -> list[int]:
-    """Each set's number of particles at or below its level."""
-    return [int(np.count_nonzero(ps.flat <= ps.level)) for ps in sets]
-
-
-def _factors(sets: Sequence[ParticleSet]) -> list[float]:
-    """Each set's factor: the share of its counted states at or below its level."""
-    return [_share(ps.counted, ps.level) for ps in sets]
-
-
-def _share(values: FloatArray, threshold: float) -> float:
-    """Share of the present (non-NaN) ``values`` at or below ``threshold``."""
-    present = values[~np.isnan(values)]
-    return np.count_nonzero(present <= threshold) / present.size
-
-
-def _on_plateau(values: FloatArray, gamma: float, settings: SplittingSettings) -> bool:
-    """Whether draws of ``P0`` hold too few particles below a tie (*Plateaus*).
-
-    Parameters
-    ----------
-    values : ndarray of shape (N_0, 1)
-        ``f`` of the first set's draws.
-    gamma : float
-    settings : SplittingSettings
-        ``p0``, ``p0_max`` and ``min_survivors``.
-    """
-    flat = values.ravel()
-    level = next_level(flat, math.inf, gamma, settings.p0, settings.p0_max)
-    if level is None:  # every draw at +inf
-        return True
-    # without ties the level keeps at least p0 N survivors: fewer means a tie
-    survivors = int(np.count_nonzero(flat <= level))
-    few = min(settings.min_survivors, settings.p0 * flat.size)
-    return level > gamma and (survivors < few or survivors == flat.size)
-
-
-def lognormal_interval(p: float, cov_squared: float) -> tuple[float, float]:
-    """``p``'s interval, normal on ``log p`` with ``Var(log p) = log(1 + cov^2)``.
-
-    The upper end is at most 1.
-    """
-    half = Z_CONFIDENCE * math.sqrt(math.log1p(cov_squared))
-    return (p * math.exp(-half), min(1.0, p * math.exp(half)))
-
-
-def _estimate_at(
-    sets: Sequence[ParticleSet], g: float, bound: float = 1.0
-) -> GammaEstimate:
-    """``P0(f <= g)`` from the deepest set conditioned on a level ``>= g``.
-
-    With no particle of that set at or below ``g``, ``p`` is 0 and the
-    interval reaches up to the upper end of the factors above times the exact
-    upper bound of a share of 0 of that set, or ``bound`` if lower (the
-    interval of ``gamma``, for ``g`` below it).
-    """
-    deepest = max(i for i in range(len(sets)) if i == 0 or sets[i - 1].level >= g)
-    above = sets[:deepest]
-    counted = sets[deepest].counted
-    n_last = int(np.count_nonzero(~np.isnan(counted)))
-    n_hits = int(np.count_nonzero(counted <= g))
-    p_above = math.prod(_factors(above))
-    p = p_above * n_hits / n_last
-    cov_squared = sum(
-        level_cov_squared(ps.counted, ps.level) for ps in above
-    ) + level_cov_squared(counted, g)
-    if n_hits:
-        ci = lognormal_interval(p, cov_squared)
-    else:  # the upper ends of the factors above and of a share of 0
-        cov_above = cov_squared - level_cov_squared(counted, g)
-        half = Z_CONFIDENCE * math.sqrt(math.log1p(cov_above))
-        upper_above = p_above * math.exp(half)
-        upper = -math.expm1(math.log((1 - CONFIDENCE) / 2) / n_last)
-        ci = (0.0, min(bound, upper_above * upper))
-    return GammaEstimate(
-        gamma=g,
-        p=p,
-        stderr=p * math.sqrt(cov_squared),
-        ci=ci,
-        n_hits=n_hits,
-        ess=float(n_hits),
-        n_samples=n_last,
-        confidence=CONFIDENCE,
-        interval=INTERVAL_METHOD,
-    )
-
-
-class _Moved(NamedTuple):
-    """A new particle set and what making it cost (see :class:`SplittingState`)."""
-
-    z: FloatArray
-    values: FloatArray
-    acceptance: float
-    n_calls: int
-    beta: float
-    n_stages: int
-    n_failed: int
-    rounds_without_move: int
-
-
-def _draw_p0(
-    state: SplittingState, problem: RareEventProblem, context: EstimationContext, n: int
-) -> _Moved:
-    """Set 0: ``n`` draws of ``P0`` (standard normals mapped by the base)."""
-    empty = _Moved(
-        np.empty((0, problem.base.dim)),
-        np.empty((0, 1)),
-        math.nan,
-        0,
-        state.beta,
-        state.n_stages,
-        0,
-        state.rounds_without_move,
-    )
-    return _drawn_more(empty, problem, context, n)
-
-
-def _drawn_more(
-    first: _Moved, problem: RareEventProblem, context: EstimationContext, n: int
-) -> _Moved:
-    """The first set with ``n`` more draws of ``P0``, a stage of their own."""
-    stage = first.n_stages + 1
-    z = np.random.default_rng([context.seed, stage]).standard_normal(
-        (n, problem.base.dim)
-    )
-    values, n_failed, n_stages = _evaluate(problem, context, z, stage)
-    return first._replace(
-        z=np.concatenate([first.z, z]),
-        values=np.concatenate([first.values, values[:, None]]),
-        n_calls=first.n_calls + n,
-        n_stages=first.n_stages + n_stages,
-        n_failed=first.n_failed + n_failed,
-    )
-
-
-def move_chains(
-    state: SplittingState,
-    problem: RareEventProblem,
-    context: EstimationContext,
-    n_moves: int,
-    n: int,
-) -> _Moved:
-    """The next set, ``n`` states of chains from the last set's survivors (pCN)."""
-    last = state.sets[-1]
-    flat = last.flat
-    seeds = np.flatnonzero(flat <= last.level)
-    n_chains = seeds.size
-    lengths = np.full(n_chains, n // n_chains)
-    lengths[: n % n_chains] += 1  # the longer chains first: who moves is a prefix
-    z_chain = np.zeros((n_chains, lengths[0], state.z.shape[1]))
-    values = np.full((n_chains, lengths[0]), np.nan)
-    z_chain[:, 0], values[:, 0] = state.z[seeds], flat[seeds]
-    beta, n_stages, stuck = state.beta, state.n_stages, state.rounds_without_move
-    accepted = proposed = n_failed = 0
-    for position in range(1, lengths[0]):
-        moving = int(np.count_nonzero(lengths > position))
-        z, f = z_chain[:moving, position - 1], values[:moving, position - 1]
-        for _ in range(n_moves):
-            stage = n_stages + 1
-            eps = np.random.default_rng([context.seed, stage]).standard_normal(z.shape)
-            proposal = math.sqrt(1 - beta * beta) * z + beta * eps
-            f_new, failed, used = _evaluate(problem, context, proposal, stage)
-            accept = f_new <= last.level
-            z = np.where(accept[:, None], proposal, z)
-            f = np.where(accept, f_new, f)
-            n_accepted = int(np.count_nonzero(accept))
-            beta = _adapted(beta, n_accepted, moving, n_chains)
-            stuck = 0 if n_accepted else stuck + 1
-            if stuck >= MAX_ROUNDS_WITHOUT_MOVE and beta == MIN_BETA:
-                raise SplittingError(
-                    f"no chain accepted a pCN proposal in {stuck} rounds in a row at "
-                    f"level f <= {last.level:g}, with the smallest step beta = "
-                    f"{MIN_BETA:g}: the set below the level may have no volume, or f "
-                    "may jump there (a stochastic f whose outcome hardly depends on x?)"
-                )
-            accepted += n_accepted
-            proposed += moving
-            n_failed += failed
-            n_stages += used
-        z_chain[:moving, position], values[:moving, position] = z, f
-    present = ~np.isnan(values)
-    return _Moved(
-        z_chain[present],
-        values,
-        accepted / proposed if proposed else math.nan,
-        proposed,
-        beta,
-        n_stages,
-        n_failed,
-        stuck,
-    )
-
-
-def _adapted(beta: float, n_accepted: int, n_proposed: int, n_chains: int) -> float:
-    """``beta`` after a round of ``n_proposed`` proposals from ``n_chains`` chains.
-
-    ``log beta`` moves by ``ADAPT_GAIN`` times the acceptance rate's error,
-    weighted by the share of the chains that proposed (a round of a few chains
-    at a level's end moves it little).
-    """
-    error = (n_accepted - TARGET_ACCEPTANCE * n_proposed) / n_chains
-    return float(np.clip(beta * math.exp(ADAPT_GAIN * error), MIN_BETA, 1.0))
-
-
-def _evaluate(
-    problem: RareEventProblem,
-    context: EstimationContext,
-    z: FloatArray,
-    first_stage: int,
-) -> tuple[FloatArray, int, int]:
-    """``f`` at ``T^-1(z)``, at most ``SAMPLE_CHUNK`` rows per stage.
-
-    Returns
-    -------
-    values : ndarray of shape (n,)
-        ``+inf`` where the evaluation failed.
-    n_failed : int
-    n_stages : int
-        Stages used, from ``first_stage`` on.
-    """
-    parts, n_failed = [], 0
-    starts = range(0, len(z), SAMPLE_CHUNK)
-    for k, start in enumerate(starts):
-        x = problem.base.from_standard_normal(z[start : start + SAMPLE_CHUNK])
-        values, failed = context.evaluate(problem, x, first_stage + k, 0)
-        parts.append(np.where(failed, np.inf, values))
-        n_failed += int(np.count_nonzero(failed))
-    return np.concatenate(parts), n_failed, len(starts)
 
 
 def subset_simulation(

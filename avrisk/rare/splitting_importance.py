@@ -155,17 +155,15 @@ from avrisk.rare.particle_fit import (
 )
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
 from avrisk.rare.results import Estimate, GammaEstimate
-from avrisk.rare.splitting import (
+from avrisk.rare.splitting import SplittingInfo, SplittingSettings, SubsetSimulation
+from avrisk.rare.splitting_levels import (
     Z_CONFIDENCE,
-    SplittingInfo,
-    SplittingSettings,
     SplittingState,
-    SubsetSimulation,
     exhausted_error,
     levels_estimate,
     lognormal_interval,
-    move_chains,
 )
+from avrisk.rare.splitting_moves import move_chains
 
 __all__ = [
     "SplittingISSettings",
@@ -482,9 +480,9 @@ class SplittingImportanceSampling(SubsetSimulation):
         The proposal is fitted to every replicate's particles at once, and
         sampled ``n_final`` times. With no hit at ``gamma`` in any replicate
         (a plateau no particle left), subset simulation's bound is the answer
-        (its module docstring, *Plateaus*). The fit's generator comes from the
-        run seed, so a resumed run fits the same proposal and replays the
-        recorded final stage.
+        (*Plateaus* in :mod:`avrisk.rare.splitting_levels`). The fit's
+        generator comes from the run seed, so a resumed run fits the same
+        proposal and replays the recorded final stage.
         """
         s = self.settings
         replicates = [r for r in (*state.finished, state.current) if not r.exhausted]

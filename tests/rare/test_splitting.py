@@ -16,13 +16,9 @@ from avrisk.rare import (
     subset_simulation,
 )
 from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem
-from avrisk.rare.splitting import (
-    MAX_ROUNDS_WITHOUT_MOVE,
-    SplittingSettings,
-    SubsetSimulation,
-    level_cov_squared,
-    next_level,
-)
+from avrisk.rare.splitting import SplittingSettings, SubsetSimulation
+from avrisk.rare.splitting_levels import level_cov_squared, next_level
+from avrisk.rare.splitting_moves import MAX_ROUNDS_WITHOUT_MOVE
 from avrisk.testing import (
     beta_sum_problem,
     check_estimator,

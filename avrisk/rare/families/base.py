@@ -153,9 +153,9 @@ class ExponentialFamily(abc.ABC):
 
         ``T`` is a bijection (up to the edges of a bounded support) with
         inverse :meth:`from_standard_normal`. Subset simulation
-        (:mod:`avrisk.rare.splitting`) moves its particles in that space, where
-        a preconditioned Crank-Nicolson step leaves ``N(0, I)``, and so ``P0``,
-        invariant.
+        (:mod:`avrisk.rare.splitting_moves`) moves its particles in that space,
+        where a preconditioned Crank-Nicolson step leaves ``N(0, I)``, and so
+        ``P0``, invariant.
 
         Parameters
         ----------
