@@ -267,12 +267,9 @@ def particle_proposal(
 
     def held_out_points(fitter: Fitter) -> FloatArray:
         """Each particle's log-likelihood under the fit to the other half, (n,)."""
-        scores = np.empty(len(z))
-        for train in (first, ~first):
-            components, weights, _ = fitter(z[train], chain[train])
-            log_joint = np.log(weights) + component_log_kernels(components, z[~train])
-            scores[~train] = logsumexp(log_joint, axis=1)
-        return scores
+        return cross_fitted_log_ratios(
+            z, chain, (~first, first), lambda p, c: fitter(p, c)[:2]
+        )
 
     def summed(scores: FloatArray) -> float:
         """Mean held-out log-likelihood of each half, summed over the halves."""
@@ -320,6 +317,37 @@ def particle_proposal(
     )
 
 
+def cross_fitted_log_ratios(
+    z: FloatArray,
+    chain: np.ndarray,
+    held_out: Sequence[np.ndarray],
+    fit: Callable[
+        [FloatArray, np.ndarray], tuple[Sequence[ExponentialFamily], FloatArray]
+    ],
+) -> FloatArray:
+    """``log(sum_k pi_k q_k / p0)`` of each particle, (n,), by a fit not seeing it.
+
+    Parameters
+    ----------
+    z : ndarray of shape (n, D)
+        The particles in standard-normal space.
+    chain : ndarray of int, shape (n,)
+        Each particle's chain.
+    held_out : sequence of ndarray of bool, shape (n,)
+        Disjoint masks covering every particle, fitted in this order: each
+        part is scored under ``fit`` of the particles outside it.
+    fit : callable
+        ``fit(points, point_chain) -> (components, weights)``, shifts of one
+        structure and their weights ``pi_k``.
+    """
+    log_ratios = np.empty(len(z))
+    for test in held_out:
+        components, weights = fit(z[~test], chain[~test])
+        log_joint = np.log(weights) + component_log_kernels(components, z[test])
+        log_ratios[test] = logsumexp(log_joint, axis=1)
+    return log_ratios
+
+
 def held_out_weights(
     z: FloatArray,
     chain: np.ndarray,
@@ -362,15 +390,12 @@ def held_out_weights(
     if len(chains) < PREDICTION_FOLDS:
         return HeldOutWeights(float("nan"), float("nan"))
     fold = np.searchsorted(chains, chain) % PREDICTION_FOLDS
-    log_ratios = np.empty(len(z))  # log(sum_k pi_k q_k / p0) of each particle
-    for k in range(PREDICTION_FOLDS):
-        test = fold == k
-        components, weights, shifted = fitter(z[~test], chain[~test])
-        components, weights = with_light_regions(
-            z, components, weights, shifted, base, rng
-        )
-        log_joint = np.log(weights) + component_log_kernels(components, z[test])
-        log_ratios[test] = logsumexp(log_joint, axis=1)
+    log_ratios = cross_fitted_log_ratios(  # log(sum_k pi_k q_k / p0), (n,)
+        z,
+        chain,
+        [fold == k for k in range(PREDICTION_FOLDS)],
+        lambda p, c: with_light_regions(z, *fitter(p, c), base, rng),
+    )
     if defensive > 0:
         log_ratios = np.logaddexp(
             math.log(defensive), math.log1p(-defensive) + log_ratios
