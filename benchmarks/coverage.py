@@ -100,10 +100,9 @@ def run(args: argparse.Namespace) -> None:
     """Run one preset for the seeds not yet in ``args.out``."""
     from avrisk.assembly import SimulationObjective, base_distribution
     from avrisk.rare import estimate as estimate_p
-    from avrisk.rare.estimator import DEFAULT_METHOD, estimator_class
+    from avrisk.rare.estimator import DEFAULT_METHOD
     from avrisk.rare.splitting_levels import SplittingError
-    from avrisk.rare.trust import estimate_trust
-    from avrisk.report.answer import SCENARIO_WORDING
+    from avrisk.report.answer import threshold_trust
     from avrisk.scenario import load_spec
 
     torch.set_num_threads(args.threads)
@@ -142,10 +141,9 @@ def run(args: argparse.Namespace) -> None:
                 continue
         seconds = time.perf_counter() - start
         as_dict = estimate.to_dict()
+        summary = {"method": method, "estimate": as_dict}
         trust = {  # the CLI's label at every threshold
-            f"{g['gamma']:g}": str(
-                estimate_trust(estimator_class(method), as_dict, g, SCENARIO_WORDING)
-            )
+            f"{g['gamma']:g}": str(threshold_trust(summary, g))
             for g in as_dict["by_gamma"]
         }
         record = {
