@@ -19,7 +19,9 @@ the estimator's own settings, ``n_iter = 20`` for cross-entropy), with its
 sample counts (``n_particles``, ``n_per_iter``, ``n_final``) scaled by one
 factor so that its planned budget (:meth:`Estimator.budget`, an upper bound
 for splitting, every diagnostic included) is at most ``SUITE_BUDGET = 1e5``
-calls of ``f``. OpenTURNS's ``SubsetSampling`` and
+calls of ``f``; for ``splitting_is`` the plan without regrowth, with the cap
+``max_calls = SUITE_BUDGET`` on its regrowths (a replicate that ran out of
+levels runs again only while the whole run's bound stays within the cap). OpenTURNS's ``SubsetSampling`` and
 ``StandardSpaceCrossEntropyImportanceSampling`` (defaults, probability 0.1 per
 level / quantile level 0.1) run in the base's standard-normal space with
 ``OT_PER_STEP`` samples per level or iteration, stopped with an error past
@@ -107,16 +109,18 @@ def suite_settings(method: str) -> dict[str, Any]:
 
     fields = estimator_class(method).Settings.model_fields
     base = {k: v for k, v in CLI_DEFAULTS.items() if k in fields}
-    default = get_estimator(method, **base)
+    plan = {"regrow": 0} if "regrow" in fields else {}  # the plan without regrowth
+    default = get_estimator(method, **base, **plan)
     scale = SUITE_BUDGET / default.budget()
     counts = {
         k: max(100, int(getattr(default.settings, k) * scale) // 100 * 100)
         for k in COUNT_SETTINGS
         if k in fields
     }
-    while get_estimator(method, **base, **counts).budget() > SUITE_BUDGET:
+    while get_estimator(method, **base, **plan, **counts).budget() > SUITE_BUDGET:
         counts = {k: v - 100 for k, v in counts.items()}
-    return {**base, **counts}
+    cap = {"max_calls": SUITE_BUDGET} if "max_calls" in fields else {}
+    return {**base, **counts, **cap}
 
 
 class _Counted:

@@ -92,9 +92,12 @@ beyond their errors (:func:`replicates_disagree`, in
 miss a region; the run says caution only when its importance-sampling
 estimate is borne out by no replicate's (:meth:`doubts`). One run cannot see
 a region no replicate reached. A replicate whose ``max_levels`` sets end above
-``gamma`` (its levels followed a mechanism that does not end in the event) is
-left out of the fit and the run says caution; only when none reaches
-``gamma`` is it subset simulation's error.
+``gamma`` (its levels followed a mechanism that does not end in the event)
+runs again, fresh, with twice its particles, up to ``regrow`` times and
+within ``max_calls`` (*Regrowth* in :mod:`avrisk.rare.splitting_replicates`);
+the runs it replaces are in the record but in no estimate. One that still
+ends above ``gamma`` is left out of the fit and the run says caution; only
+when none reaches ``gamma`` is it subset simulation's error.
 
 The answer
 ----------
@@ -134,10 +137,10 @@ import dataclasses
 import math
 import warnings
 from collections.abc import Sequence
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy import ShareOfP0
@@ -146,7 +149,7 @@ from avrisk.rare.estimator import (
     EstimationContext,
     register_estimator,
 )
-from avrisk.rare.families.base import ExponentialFamily, FloatArray
+from avrisk.rare.families.base import ExponentialFamily
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
 from avrisk.rare.particle_fit import (
     HeldOutWeights,
@@ -157,13 +160,18 @@ from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
 from avrisk.rare.results import Estimate, GammaEstimate
 from avrisk.rare.splitting import SplittingInfo, SplittingSettings, SubsetSimulation
 from avrisk.rare.splitting_levels import (
-    Z_CONFIDENCE,
-    SplittingState,
     exhausted_error,
     levels_estimate,
-    lognormal_interval,
 )
 from avrisk.rare.splitting_moves import move_chains
+from avrisk.rare.splitting_replicates import (
+    ReplicatesState,
+    combined_levels,
+    estimates_disagree,
+    pooled_chains,
+    regrowth_fits,
+    replicates_disagree,
+)
 
 __all__ = [
     "SplittingISSettings",
@@ -180,11 +188,6 @@ ADVICE = Advice(
     heavy_tail="raise n_particles and n_final, or compare subset simulation's own "
     "estimate of the run (details['splitting']) and runs with other seeds",
 )
-
-#: Standard errors of the difference of two replicates' ``log p`` beyond which
-#: they disagree (*Replicates*): two-sided 0.3% for normal errors, as subset
-#: simulation's own errors are somewhat optimistic.
-DISAGREEMENT_Z = 3.0
 
 #: What ``details["importance_sampling"]`` keeps of the sample's estimate at
 #: each threshold (the answer's may be the levels').
@@ -220,7 +223,19 @@ class SplittingISSettings(SplittingSettings):
     replicates : int, default=2
         Independent replicates of the levels, ``n_particles / replicates``
         particles each (*Replicates*).
+    regrow : int, default=2
+        Times a replicate whose ``max_levels`` sets end above ``gamma`` runs
+        again, fresh, with twice its particles (*Replicates*): how far the
+        run may adapt its calls to an event whose levels are harder to follow
+        than the settings planned for.
+    max_calls : int or None, default=None
+        The most calls of ``f`` the run may make, regrowths included: a
+        replicate is regrown only while the most the rest of the run can take
+        stays within it. None: every regrowth ``regrow`` allows
+        (:meth:`SplittingImportanceSampling.budget` is then the bound).
     """
+
+    OMIT_IF_DEFAULT = ("min_survivors", "plateau_draws", "regrow", "max_calls")
 
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
     n_components: int = Field(
@@ -244,6 +259,18 @@ class SplittingISSettings(SplittingSettings):
         2, ge=1, description="Independent replicates of the levels (N split)."
     )
 
+    regrow: int = Field(
+        2,
+        ge=0,
+        description="Times a replicate that ran out of levels runs again with "
+        "twice its particles.",
+    )
+    max_calls: int | None = Field(
+        None,
+        ge=1,
+        description="The most calls of f, regrowths included (None: as regrow allows).",
+    )
+
     @field_validator("replicates")
     @classmethod
     def _particles_each(cls, replicates: int, info: ValidationInfo) -> int:
@@ -254,6 +281,18 @@ class SplittingISSettings(SplittingSettings):
                 "particles each"
             )
         return replicates
+
+    @model_validator(mode="after")
+    def _cap_holds_the_plan(self) -> SplittingISSettings:
+        planned = SplittingImportanceSampling(
+            self.model_copy(update={"regrow": 0, "max_calls": None})
+        )
+        if self.max_calls is not None and self.max_calls < planned.budget():
+            raise ValueError(
+                f"max_calls={self.max_calls:,} is less than the run's bound without "
+                f"regrowth ({planned.budget():,} calls)"
+            )
+        return self
 
 
 @register_estimator
@@ -271,27 +310,49 @@ class SplittingImportanceSampling(SubsetSimulation):
         """Subset simulation's bound, the moves at ``gamma`` and the final stage.
 
         The replicates share the ``N`` particles of a level, so they change
-        no bound.
+        no bound; each of them regrown ``regrow`` times runs ``2^(regrow + 1)
+        - 1`` times its levels' bound, and ends with ``2^regrow`` times its
+        particles at ``gamma``. ``max_calls``, where it is lower, bounds it.
         """
         s = self.settings
-        return super().budget() + s.n_particles * s.n_moves + s.n_final
+        levels = super().budget() * (2 ** (s.regrow + 1) - 1)
+        bound = levels + s.n_particles * 2**s.regrow * s.n_moves + s.n_final
+        return bound if s.max_calls is None else min(bound, s.max_calls)
 
-    @property
-    def levels(self) -> SubsetSimulation:
-        """One replicate's subset simulation: ``n_particles / replicates`` each."""
+    def levels(self, n_particles: int) -> SubsetSimulation:
+        """One replicate's subset simulation, with ``n_particles`` per level."""
         s = self.settings
         each = {name: getattr(s, name) for name in SplittingSettings.model_fields}
-        each["n_particles"] = s.n_particles // s.replicates
-        return SubsetSimulation(SplittingSettings(**each))
+        return SubsetSimulation(
+            SplittingSettings(**{**each, "n_particles": n_particles})
+        )
 
     def init(self, problem: RareEventProblem) -> ReplicatesState:  # type: ignore[override]
-        """The first replicate's levels, not yet begun."""
-        return ReplicatesState((), self.levels.init(problem))
+        """The first replicate's levels, not yet begun: ``n_particles / replicates``."""
+        n = self.settings.n_particles // self.settings.replicates
+        return ReplicatesState((), self.levels(n).init(problem), (n,))
 
     def done(self, state: ReplicatesState) -> bool:  # type: ignore[override]
-        """Once the last replicate's levels reach ``gamma``."""
-        return len(state.finished) + 1 == self.settings.replicates and (
-            self.levels.done(state.current)
+        """Once the last replicate's levels are over, and it is not to be regrown."""
+        return (
+            self.levels(state.sizes[-1]).done(state.current)
+            and not self._regrows(state)
+            and state.filled + 1 == self.settings.replicates
+        )
+
+    def _regrows(self, state: ReplicatesState) -> bool:
+        """Whether the replicate that just ended out of levels runs again, larger."""
+        s = self.settings
+        n_first = state.sizes[0]
+        regrown = round(np.log2(state.sizes[-1] / n_first))
+        if not state.current.exhausted or regrown >= s.regrow:
+            return False
+        return regrowth_fits(
+            state,
+            s.replicates,
+            lambda n: self.levels(n).budget(),
+            lambda n: n * s.n_moves + s.n_final,
+            self.budget(),
         )
 
     def step(  # type: ignore[override]
@@ -305,13 +366,22 @@ class SplittingImportanceSampling(SubsetSimulation):
         A replicate's stages follow the last one's, so that every stage has
         its own random numbers and a resumed run replays them in order.
         """
-        levels = self.levels
-        if levels.done(state.current):
-            fresh = levels.init(problem)._replace(
-                n_stages=state.current.n_stages, n_evals=state.current.n_evals
+        if self.levels(state.sizes[-1]).done(state.current):
+            regrown = self._regrows(state)
+            n = 2 * state.sizes[-1] if regrown else state.sizes[0]
+            fresh = (
+                self.levels(n)
+                .init(problem)
+                ._replace(
+                    n_stages=state.current.n_stages, n_evals=state.current.n_evals
+                )
             )
-            state = ReplicatesState((*state.finished, state.current), fresh)
-        current, info = levels.step(state.current, problem, context)
+            state = ReplicatesState(
+                state.all, fresh, (*state.sizes, n), state.filled + (not regrown)
+            )
+        current, info = self.levels(state.sizes[-1]).step(
+            state.current, problem, context
+        )
         return (
             state._replace(current=current),
             info._replace(replicate=len(state.finished)),
@@ -357,9 +427,18 @@ class SplittingImportanceSampling(SubsetSimulation):
         if exhausted:
             reasons.append(
                 f"{exhausted} of the {len(own) + exhausted} replicates of the search "
-                "did not reach gamma within max_levels levels (they followed a "
-                "mechanism that does not end in the event): the answer rests on "
-                "the others (compare runs with other seeds, or raise max_levels)"
+                "did not reach gamma within max_levels levels, regrown as far as "
+                "regrow and max_calls allow (they followed a mechanism that does "
+                "not end in the event): the answer rests on the others (compare "
+                "runs with other seeds, or raise n_particles)"
+            )
+        regrown = details.get("replicates_regrown") or 0
+        if regrown and details.get("answer") == "splitting":
+            reasons.append(
+                f"the levels answer, but {regrown} replicates of them ran out of "
+                "levels before larger ones reached gamma: the product of those "
+                "that reached it leans high (compare importance sampling, "
+                "details['importance_sampling'], or raise n_particles)"
             )
         if details.get("answer") != "splitting" and all(
             estimates_disagree(main, r) for r in own
@@ -391,8 +470,10 @@ class SplittingImportanceSampling(SubsetSimulation):
     def progress(self, info: SplittingInfo) -> str:
         """``"replicate 2/2, set 3: f <= 1.23, 212 survivors, ..."``."""
         text = super().progress(info)
-        r = self.settings.replicates
-        return text if r == 1 else f"replicate {info.replicate + 1}/{r}, {text}"
+        r, i = self.settings.replicates, info.replicate
+        if r == 1 and not i:
+            return text
+        return f"replicate {i + 1}{f'/{r}' if i < r else ' (regrown)'}, {text}"
 
     def checkpoint(  # type: ignore[override]
         self, state: ReplicatesState, infos: Sequence[SplittingInfo]
@@ -414,8 +495,9 @@ class SplittingImportanceSampling(SubsetSimulation):
     def describe(self) -> str:
         """``"subset simulation, 2,000 particles per level, p0 0.1, then IS ..."``."""
         s = self.settings
+        regrowth = f", regrown up to {s.regrow}x" if s.regrow else ""
         return (
-            f"{super().describe()}, then IS {s.n_final:,} "
+            f"{super().describe()}{regrowth}, then IS {s.n_final:,} "
             f"({s.n_components} components, defensive {s.defensive:g})"
         )
 
@@ -485,36 +567,28 @@ class SplittingImportanceSampling(SubsetSimulation):
         proposal and replays the recorded final stage.
         """
         s = self.settings
-        replicates = [r for r in (*state.finished, state.current) if not r.exhausted]
-        if not replicates:  # none reached gamma: the first one's error
-            raise exhausted_error(
-                state.finished[0] if state.finished else state.current,
-                problem.gamma,
-                s.max_levels,
-            )
-        n_exhausted = s.replicates - len(replicates)
-        n_each = s.n_particles // s.replicates
-        own = [levels_estimate(r, problem, n_each) for r in replicates]
-        combined = combined_levels(own, problem, s.n_particles)
-        with_hits = [r for r, e in zip(replicates, own, strict=True) if e.n_hits]
+        reached = state.reached()
+        if not reached:  # none reached gamma: the last one's error
+            raise exhausted_error(state.current, problem.gamma, s.max_levels)
+        own = [levels_estimate(r, problem, n) for r, n in reached]
+        combined = combined_levels(own, problem, sum(n for _, n in reached))
+        with_hits = [(r, n) for (r, n), e in zip(reached, own, strict=True) if e.n_hits]
         if not with_hits:  # no particle to fit: the levels' bound
             return dataclasses.replace(combined, method="splitting_is")
         moves, stage = [], state.current.n_stages
-        for r in with_hits:  # each on stages of its own, after every replicate's
+        for r, n in with_hits:  # each on stages of its own, after every replicate's
             moves.append(
-                move_chains(
-                    r._replace(n_stages=stage), problem, context, s.n_moves, n_each
-                )
+                move_chains(r._replace(n_stages=stage), problem, context, s.n_moves, n)
             )
             stage = moves[-1].n_stages
         rng = np.random.default_rng(
             np.random.SeedSequence([context.seed], spawn_key=(FIT_STREAM,))
         )
         z = np.concatenate([m.z for m in moves])
-        chain = _pooled_chains([m.values for m in moves])
+        chain = pooled_chains([m.values for m in moves])
         slope = slope_direction(
-            np.concatenate([r.z for r in with_hits]),
-            np.concatenate([r.sets[-1].flat for r in with_hits]),
+            np.concatenate([r.z for r, _ in with_hits]),
+            np.concatenate([r.sets[-1].flat for r, _ in with_hits]),
         )
         fitted = particle_proposal(z, chain, problem.base, s, rng, slope)
         proposal = fitted.proposal
@@ -572,7 +646,10 @@ class SplittingImportanceSampling(SubsetSimulation):
                     {"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own
                 ],
                 "replicates_disagree": replicates_disagree(own),
-                "replicates_exhausted": n_exhausted,
+                "replicates_exhausted": s.replicates - len(reached),
+                "replicates_regrown": sum(r.exhausted for r in state.all)
+                - (s.replicates - len(reached)),
+                "replicate_particles": [n for _, n in reached],
             },
         )
 
@@ -635,134 +712,6 @@ def _proposal_table(details: dict[str, Any], main: dict[str, Any]) -> Diagnostic
             "when those samples were made. Hits, ESS and Pareto k are "
             "its samples' at gamma."
         ),
-    )
-
-
-def replicates_disagree(own: Sequence[Estimate]) -> bool:
-    """Whether two replicates' estimates of ``p`` disagree beyond their errors.
-
-    Two with hits disagree when their ``log p`` differ by more than
-    ``DISAGREEMENT_Z`` standard errors (``Var(log p) = log(1 + cov^2)``); one
-    with hits and one without, when the first's interval lies above the
-    second's bound. Independent searches that end in different places are the
-    sign of a failure region one of them did not find, and so perhaps one
-    that none found.
-    """
-    for i, a in enumerate(own):
-        for b in own[i + 1 :]:
-            if a.n_hits and b.n_hits:
-                var = sum(np.log1p((e.stderr / e.p) ** 2) for e in (a, b))
-                if abs(np.log(a.p / b.p)) > DISAGREEMENT_Z * np.sqrt(var):
-                    return True
-            elif a.n_hits or b.n_hits:
-                hit, bound = (a, b) if a.n_hits else (b, a)
-                if hit.ci[0] > bound.ci[1]:
-                    return True
-    return False
-
-
-def estimates_disagree(sampled: dict[str, Any], levels: dict[str, Any]) -> bool:
-    """Whether the importance-sampling and the levels' estimates of ``p`` disagree.
-
-    Both as ``{"p", "ci"}`` (the sampled one with ``stderr``): their ``log
-    p`` differ by more than ``DISAGREEMENT_Z`` standard errors, the sampled
-    one's ``log(1 + (stderr / p)^2)``, the levels' from their log-normal
-    interval's half-width. An estimate of 0 disagrees with one whose interval
-    lies above its bound.
-    """
-    p, q = sampled["p"], levels["p"]
-    if p <= 0 or q <= 0:
-        return (p > 0 and sampled["ci"][0] > levels["ci"][1]) or (
-            q > 0 and levels["ci"][0] > sampled["ci"][1]
-        )
-    var = np.log1p((sampled["stderr"] / p) ** 2)
-    var += (np.log(levels["ci"][1] / q) / Z_CONFIDENCE) ** 2
-    return bool(abs(np.log(p / q)) > DISAGREEMENT_Z * np.sqrt(var))
-
-
-class ReplicatesState(NamedTuple):
-    """Replicates of the levels: the finished ones and the one under way.
-
-    Attributes
-    ----------
-    finished : tuple of SplittingState
-        Replicates whose levels reached ``gamma``, in order.
-    current : SplittingState
-        The replicate under way (the last one once :meth:`done`).
-    """
-
-    finished: tuple[SplittingState, ...]
-    current: SplittingState
-
-
-def _pooled_chains(values: Sequence[FloatArray]) -> np.ndarray:
-    """Chain numbers of the pooled particles of several replicates' moves.
-
-    Parameters
-    ----------
-    values : sequence of ndarray of shape (n_chains_r, length_r)
-        Each replicate's moved states by chain (NaN past a chain's end).
-
-    Returns
-    -------
-    ndarray of int, shape (n,)
-        One number per present state, in the order of the replicates' ``z``:
-        the first half of every replicate's chains (in their ancestors' order)
-        before all second halves, so the fit's two halves
-        (:func:`particle_proposal`) each hold half of every replicate.
-    """
-    keys = []
-    for r, v in enumerate(values):
-        c = np.nonzero(~np.isnan(v))[0]
-        keys.append(np.stack([c >= (v.shape[0] + 1) // 2, np.full_like(c, r), c], 1))
-    key = np.concatenate(keys)
-    _, number = np.unique(key, axis=0, return_inverse=True)
-    return number.ravel()
-
-
-def combined_levels(
-    own: Sequence[Estimate], problem: RareEventProblem, n_particles: int
-) -> Estimate:
-    """Subset simulation's estimate of the run: the replicates' mean.
-
-    Each replicate's product estimate has its own error; their mean has
-    variance ``sum(stderr_r^2) / R^2`` and a log-normal interval as one
-    replicate's. Zero hits in every replicate: the largest of their bounds
-    (each is a 95% bound of ``p`` on its own).
-    """
-    first = own[0]
-    if len(own) == 1:
-        return first
-    by_gamma = {}
-    for g in first.by_gamma:
-        parts = [e.by_gamma[g] for e in own]
-        p = float(np.mean([e.p for e in parts]))
-        stderr = float(np.sqrt(sum(e.stderr**2 for e in parts))) / len(parts)
-        if p > 0:
-            ci = lognormal_interval(p, (stderr / p) ** 2)
-        else:
-            ci = (0.0, max(e.ci[1] for e in parts))
-        by_gamma[g] = dataclasses.replace(
-            parts[0],
-            p=p,
-            stderr=stderr,
-            ci=ci,
-            n_hits=sum(e.n_hits for e in parts),
-            ess=float(sum(e.ess for e in parts)),
-            n_samples=sum(e.n_samples for e in parts),
-        )
-    details = {
-        key: [e.details[key] for e in own]
-        for key in ("levels", "survivors", "level_cov", "first_set_draws")
-    }
-    details |= {
-        "n_particles": n_particles,
-        "bound_only": by_gamma[problem.gamma].n_hits == 0,
-        "n_failed": sum(e.details["n_failed"] for e in own),
-        "stderr_method": first.details["stderr_method"],
-    }
-    return dataclasses.replace(
-        first, by_gamma=by_gamma, n_evals=own[-1].n_evals, details=details
     )
 
 

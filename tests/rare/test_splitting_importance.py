@@ -315,12 +315,21 @@ def test_an_interrupted_run_resumes_to_the_same_summary(tmp_path):
 
 
 def test_settings_budget_and_description():
-    method = get_estimator("splitting_is", n_particles=400, max_levels=6, n_final=900)
+    plan = dict(n_particles=400, max_levels=6, n_final=900)
+    method = get_estimator("splitting_is", **plan, regrow=0)
     assert method.budget() == 400 * (8 + 5) + 400 + 900
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, then IS 900 "
         "(4 components, defensive 0.1)"
     )
+    # each replicate regrown twice: 1 + 2 + 4 times the levels, 4 times at gamma
+    regrown = get_estimator("splitting_is", **plan)
+    assert regrown.budget() == 7 * 400 * (8 + 5) + 4 * 400 + 900
+    assert "regrown up to 2x" in regrown.describe()
+    capped = get_estimator("splitting_is", **plan, max_calls=10_000)
+    assert capped.budget() == 10_000
+    with pytest.raises(ValueError, match="less than the run's bound without regrowth"):
+        get_estimator("splitting_is", **plan, max_calls=6_000)
     with pytest.raises(ValueError, match="shift"):
         get_estimator("splitting_is", shift="some")
     est = sis(gaussian_linear_problem(2, p=1e-4), seed=0, n_particles=300)

@@ -11,7 +11,7 @@ from avrisk.rare import (
     subset_simulation,
 )
 from avrisk.rare.estimator import estimator_class
-from avrisk.rare.splitting_importance import estimates_disagree, replicates_disagree
+from avrisk.rare.splitting_replicates import estimates_disagree, replicates_disagree
 from avrisk.rare.trust import GENERIC, Trust, Wording, estimate_trust, trust_at
 
 GOOD = {"gamma": 0.0, "n_hits": 50, "ess": 40.0, "pareto_k": 0.4}

@@ -1,0 +1,239 @@
+"""Independent replicates of subset simulation's levels, and what they say together.
+
+:class:`~avrisk.rare.splitting_importance.SplittingImportanceSampling` runs
+its levels ``replicates`` times, independently (*Replicates* in its module).
+This module holds what the replicates share: their state
+(:class:`ReplicatesState`), the rule that regrows one that ran out of levels
+(:func:`regrowth_fits`), their levels' combined estimate
+(:func:`combined_levels`), the chain numbers of their pooled particles
+(:func:`pooled_chains`), and the checks of disagreement between replicates
+(:func:`replicates_disagree`) and between the levels and an importance sample
+(:func:`estimates_disagree`).
+
+Regrowth. A replicate whose ``max_levels`` sets end above ``gamma`` followed a
+mechanism of low ``f`` that does not end in the event: the chains of a set
+move within the region they are in, and a rarer region that leads to
+``gamma`` survives a level only through its share of the ``p0 N`` survivors.
+Twice the particles keep twice as many of them, so the replicate runs again,
+fresh (new random numbers, its own stages), with twice the particles, while
+the settings' count and cap allow (:func:`regrowth_fits`). The runs it
+replaces are kept in the record (their levels are shown) but not in any
+estimate: their product is that of the wrong mechanism.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from avrisk.rare.families.base import FloatArray
+from avrisk.rare.problem import RareEventProblem
+from avrisk.rare.results import Estimate
+from avrisk.rare.splitting_levels import (
+    Z_CONFIDENCE,
+    SplittingState,
+    lognormal_interval,
+)
+
+__all__ = [
+    "DISAGREEMENT_Z",
+    "ReplicatesState",
+    "combined_levels",
+    "estimates_disagree",
+    "pooled_chains",
+    "regrowth_fits",
+    "replicates_disagree",
+]
+
+#: Standard errors of the difference of two replicates' ``log p`` beyond which
+#: they disagree (*Replicates*): two-sided 0.3% for normal errors, as subset
+#: simulation's own errors are somewhat optimistic.
+DISAGREEMENT_Z = 3.0
+
+
+def replicates_disagree(own: Sequence[Estimate]) -> bool:
+    """Whether two replicates' estimates of ``p`` disagree beyond their errors.
+
+    Two with hits disagree when their ``log p`` differ by more than
+    ``DISAGREEMENT_Z`` standard errors (``Var(log p) = log(1 + cov^2)``); one
+    with hits and one without, when the first's interval lies above the
+    second's bound. Independent searches that end in different places are the
+    sign of a failure region one of them did not find, and so perhaps one
+    that none found.
+    """
+    for i, a in enumerate(own):
+        for b in own[i + 1 :]:
+            if a.n_hits and b.n_hits:
+                var = sum(np.log1p((e.stderr / e.p) ** 2) for e in (a, b))
+                if abs(np.log(a.p / b.p)) > DISAGREEMENT_Z * np.sqrt(var):
+                    return True
+            elif a.n_hits or b.n_hits:
+                hit, bound = (a, b) if a.n_hits else (b, a)
+                if hit.ci[0] > bound.ci[1]:
+                    return True
+    return False
+
+
+def estimates_disagree(sampled: dict[str, Any], levels: dict[str, Any]) -> bool:
+    """Whether the importance-sampling and the levels' estimates of ``p`` disagree.
+
+    Both as ``{"p", "ci"}`` (the sampled one with ``stderr``): their ``log
+    p`` differ by more than ``DISAGREEMENT_Z`` standard errors, the sampled
+    one's ``log(1 + (stderr / p)^2)``, the levels' from their log-normal
+    interval's half-width. An estimate of 0 disagrees with one whose interval
+    lies above its bound.
+    """
+    p, q = sampled["p"], levels["p"]
+    if p <= 0 or q <= 0:
+        return (p > 0 and sampled["ci"][0] > levels["ci"][1]) or (
+            q > 0 and levels["ci"][0] > sampled["ci"][1]
+        )
+    var = np.log1p((sampled["stderr"] / p) ** 2)
+    var += (np.log(levels["ci"][1] / q) / Z_CONFIDENCE) ** 2
+    return bool(abs(np.log(p / q)) > DISAGREEMENT_Z * np.sqrt(var))
+
+
+class ReplicatesState(NamedTuple):
+    """Replicates of the levels: the finished ones and the one under way.
+
+    Attributes
+    ----------
+    finished : tuple of SplittingState
+        Replicates whose levels are over (reached ``gamma`` or ran out of
+        levels), in order.
+    current : SplittingState
+        The replicate under way (the last one once the levels are done).
+    sizes : tuple of int
+        Particles per level of each replicate, ``finished``'s then
+        ``current``'s.
+    filled : int, default=0
+        Replicates (of the ``replicates`` the settings ask for) that are over
+        and will not be regrown: those in ``finished`` that reached ``gamma``,
+        and those that ran out with no regrowth left.
+    """
+
+    finished: tuple[SplittingState, ...]
+    current: SplittingState
+    sizes: tuple[int, ...]
+    filled: int = 0
+
+    @property
+    def all(self) -> tuple[SplittingState, ...]:
+        """Every replicate, ``finished`` then ``current``."""
+        return (*self.finished, self.current)
+
+    def reached(self) -> list[tuple[SplittingState, int]]:
+        """The replicates that reached ``gamma``, each with its particles per level."""
+        return [
+            (r, n) for r, n in zip(self.all, self.sizes, strict=True) if not r.exhausted
+        ]
+
+
+def regrowth_fits(
+    state: ReplicatesState,
+    replicates: int,
+    levels_bound: Callable[[int], int],
+    tail_bound: Callable[[int], int],
+    cap: int,
+) -> bool:
+    """Whether the replicate that just ran out of levels may run again, twice as large.
+
+    Only if the calls so far plus the most the rest can take stay within
+    ``cap``: the regrown replicate's levels (``levels_bound(2 n)``), those of
+    the replicates still to start at the first size, and the moves at
+    ``gamma`` and final stage on every replicate that may reach it
+    (``tail_bound`` of their particles in all).
+
+    Parameters
+    ----------
+    state : ReplicatesState
+        Its ``current`` replicate is over, out of levels.
+    replicates : int
+        Replicates the run fills.
+    levels_bound, tail_bound : callable of int -> int
+        The most calls of one replicate's levels with that many particles per
+        level; of the moves at ``gamma`` and the final stage on that many
+        particles.
+    cap : int
+        The most calls of ``f`` the run may make.
+    """
+    grown, first = 2 * state.sizes[-1], state.sizes[0]
+    fresh = replicates - state.filled - 1  # replicates after the regrown one
+    reached = sum(n for _, n in state.reached())
+    rest = levels_bound(grown) + fresh * levels_bound(first)
+    rest += tail_bound(reached + grown + fresh * first)
+    return state.current.n_evals + rest <= cap
+
+
+def pooled_chains(values: Sequence[FloatArray]) -> np.ndarray:
+    """Chain numbers of the pooled particles of several replicates' moves.
+
+    Parameters
+    ----------
+    values : sequence of ndarray of shape (n_chains_r, length_r)
+        Each replicate's moved states by chain (NaN past a chain's end).
+
+    Returns
+    -------
+    ndarray of int, shape (n,)
+        One number per present state, in the order of the replicates' ``z``:
+        the first half of every replicate's chains (in their ancestors' order)
+        before all second halves, so the fit's two halves
+        (:func:`particle_proposal`) each hold half of every replicate.
+    """
+    keys = []
+    for r, v in enumerate(values):
+        c = np.nonzero(~np.isnan(v))[0]
+        keys.append(np.stack([c >= (v.shape[0] + 1) // 2, np.full_like(c, r), c], 1))
+    key = np.concatenate(keys)
+    _, number = np.unique(key, axis=0, return_inverse=True)
+    return number.ravel()
+
+
+def combined_levels(
+    own: Sequence[Estimate], problem: RareEventProblem, n_particles: int
+) -> Estimate:
+    """Subset simulation's estimate of the run: the replicates' mean.
+
+    Each replicate's product estimate has its own error; their mean has
+    variance ``sum(stderr_r^2) / R^2`` and a log-normal interval as one
+    replicate's. Zero hits in every replicate: the largest of their bounds
+    (each is a 95% bound of ``p`` on its own).
+    """
+    first = own[0]
+    if len(own) == 1:
+        return first
+    by_gamma = {}
+    for g in first.by_gamma:
+        parts = [e.by_gamma[g] for e in own]
+        p = float(np.mean([e.p for e in parts]))
+        stderr = float(np.sqrt(sum(e.stderr**2 for e in parts))) / len(parts)
+        if p > 0:
+            ci = lognormal_interval(p, (stderr / p) ** 2)
+        else:
+            ci = (0.0, max(e.ci[1] for e in parts))
+        by_gamma[g] = dataclasses.replace(
+            parts[0],
+            p=p,
+            stderr=stderr,
+            ci=ci,
+            n_hits=sum(e.n_hits for e in parts),
+            ess=float(sum(e.ess for e in parts)),
+            n_samples=sum(e.n_samples for e in parts),
+        )
+    details = {
+        key: [e.details[key] for e in own]
+        for key in ("levels", "survivors", "level_cov", "first_set_draws")
+    }
+    details |= {
+        "n_particles": n_particles,
+        "bound_only": by_gamma[problem.gamma].n_hits == 0,
+        "n_failed": sum(e.details["n_failed"] for e in own),
+        "stderr_method": first.details["stderr_method"],
+    }
+    return dataclasses.replace(
+        first, by_gamma=by_gamma, n_evals=own[-1].n_evals, details=details
+    )
