@@ -53,9 +53,10 @@ if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
 DEFAULT_SCENARIO = "highway_default"
 #: ``compare``'s: a budget that finishes in minutes on a laptop. splitting_is
 #: keeps its own 2,000 particles per level and takes a final stage of 10,000:
-#: about 19,000 rollouts on highway_default (at most 50,000 if its levels
-#: needed all 12 after a plateau), as much naive MC and a reference of
-#: 50,000, about 90,000 rollouts; CE 5 x 2,000 + 10,000 rollouts, 90,000 too.
+#: about 19,000 rollouts on highway_default (at most 284,000 if its levels
+#: needed all 12 after a plateau and ran out of levels twice in each replicate),
+#: as much naive MC and a reference of 50,000, about 90,000 rollouts; CE 5 x
+#: 2,000 + 10,000 rollouts, 90,000 too.
 COMPARE_DEFAULTS = {"n_iter": 5, "n_per_iter": 2000, "n_final": 10_000}
 COMPARE_REFERENCE = 50_000
 

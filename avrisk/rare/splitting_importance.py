@@ -160,7 +160,6 @@ from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
 from avrisk.rare.results import Estimate, GammaEstimate
 from avrisk.rare.splitting import SplittingInfo, SplittingSettings, SubsetSimulation
 from avrisk.rare.splitting_levels import (
-    exhausted_error,
     levels_estimate,
 )
 from avrisk.rare.splitting_moves import move_chains
@@ -406,7 +405,19 @@ class SplittingImportanceSampling(SubsetSimulation):
             (g for g in estimate.get("by_gamma", ()) if g["gamma"] == gamma), None
         )
         own = details.get("replicates") or []
-        if gamma != estimate.get("gamma") or main is None or not own:
+        exhausted = details.get("replicates_exhausted") or 0
+        if gamma != estimate.get("gamma") or main is None:
+            return ()
+        if not own and exhausted:  # none reached gamma
+            deepest = min(min(levels) for levels in details["levels"])
+            return (
+                f"no replicate of the search reached gamma within max_levels "
+                "levels, regrown as far as regrow and max_calls allow (they "
+                "followed a mechanism that does not end in the event): p is "
+                f"importance sampling's from particles at f <= {deepest:.3g}, a "
+                "bound where it has no hit (raise n_particles, or max_levels)",
+            )
+        if not own:
             return ()
         reasons = []
         if details.get("answer") == "splitting":  # the levels' own doubts
@@ -423,7 +434,6 @@ class SplittingImportanceSampling(SubsetSimulation):
                     "failure set (compare runs with other seeds, or raise "
                     "n_particles)"
                 )
-        exhausted = details.get("replicates_exhausted") or 0
         if exhausted:
             reasons.append(
                 f"{exhausted} of the {len(own) + exhausted} replicates of the search "
@@ -568,13 +578,18 @@ class SplittingImportanceSampling(SubsetSimulation):
         """
         s = self.settings
         reached = state.reached()
-        if not reached:  # none reached gamma: the last one's error
-            raise exhausted_error(state.current, problem.gamma, s.max_levels)
         own = [levels_estimate(r, problem, n) for r, n in reached]
-        combined = combined_levels(own, problem, sum(n for _, n in reached))
-        with_hits = [(r, n) for (r, n), e in zip(reached, own, strict=True) if e.n_hits]
-        if not with_hits:  # no particle to fit: the levels' bound
-            return dataclasses.replace(combined, method="splitting_is")
+        if reached:
+            combined = combined_levels(own, problem, sum(n for _, n in reached))
+            with_hits = [
+                (r, n) for (r, n), e in zip(reached, own, strict=True) if e.n_hits
+            ]
+            if not with_hits:  # no particle to fit: the levels' bound
+                return dataclasses.replace(combined, method="splitting_is")
+        else:  # none reached gamma: sample from the deepest sets they found
+            with_hits = list(zip(state.all, state.sizes, strict=True))
+            deepest = [levels_estimate(r, problem, n) for r, n in with_hits]
+            combined = combined_levels(deepest, problem, sum(state.sizes))
         moves, stage = [], state.current.n_stages
         for r, n in with_hits:  # each on stages of its own, after every replicate's
             moves.append(
@@ -599,7 +614,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             sampled = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
-        from_levels = levels_more_precise(
+        from_levels = bool(reached) and levels_more_precise(
             fitted.held_out, combined.by_gamma[problem.gamma], s.n_final
         )
         if not from_levels:  # the sample's doubts are the answer's
@@ -631,9 +646,10 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "informative_threshold": fitted.threshold,
                 "along_slope": fitted.along_slope,
                 "n_shifted": fitted.n_shifted,
-                "splitting": {
+                "splitting": {  # none where no replicate reached gamma
                     str(g): {"p": e.p, "ci": list(e.ci)}
                     for g, e in combined.by_gamma.items()
+                    if reached
                 },
                 "importance_sampling": {
                     str(g): {k: e.to_dict()[k] for k in SAMPLED_KEYS}

@@ -5,6 +5,9 @@
 * :func:`plateau_problem` -- ``f`` constant (a tie) on 90% to 99.99% of ``P0``
   and continuous elsewhere, as a capped time-to-collision is when nothing
   closes.
+* :func:`decoy_problem` -- a common mechanism of low ``f`` that never ends in
+  the event (a near miss), beside the rare one that does, as the ego's
+  close following beside the corner of ``P0`` that ends in a crash.
 * :func:`beta_product_problem`, :func:`beta_pair_product_problem` -- blocks of
   the engine's :class:`~avrisk.rare.ScaledBeta` family.
 
@@ -29,6 +32,7 @@ __all__ = [
     "PLATEAU_CAP",
     "beta_pair_product_problem",
     "beta_product_problem",
+    "decoy_problem",
     "directions",
     "k_region_problem",
     "plateau_problem",
@@ -172,6 +176,69 @@ def plateau_problem(
         0.0,
         p_exact,
         reference=f"closed form; f ties at {cap:.4g} on {mass:.6g} of P0",
+    )
+
+
+#: Floor of the decoy mechanism's ``f`` (:func:`decoy_problem`): its near
+#: misses come as close as this to the event, never closer.
+DECOY_FLOOR = 0.5
+#: Slope of the true mechanism's ``f`` per standard deviation of ``P0``.
+DECOY_SLOPE = 1.33
+
+
+def decoy_problem(share: float, p: float = 1e-6, dim: int = 10) -> AnalyticProblem:
+    """A rare mechanism that ends in the event beside a common one that does not.
+
+    ``X ~ N(0, I_dim)``, ``a`` and ``b`` orthonormal (a fixed rotation),
+    ``gamma = 0``, ``f = min(f_T, f_D)``:
+
+    * the true mechanism ``f_T = s (beta - a . x)``, ``s = DECOY_SLOPE``, so
+      ``p = Phi(-beta)``;
+    * the decoy ``f_D = FLOOR + exp(s_D (c - b . x))``, ``FLOOR =
+      DECOY_FLOOR``: its values crowd down to ``FLOOR > 0`` and never reach
+      the event.
+
+    ``c`` and ``s_D`` are set so that the true mechanism holds ``share`` of
+    ``P0(f <= 1)`` (the two overlap by the product of their masses) and the
+    two hold equal mass of ``P0(f <= 0.6)``. Levels
+    of subset simulation above ``f = 1`` hold ``p0 N`` survivors, about
+    ``share p0 N`` of them in the true mechanism; chains do not cross between
+    the two, so a run that loses those few follows the decoy down to its
+    floor and runs out of levels (a near-miss mechanism of a scenario).
+
+    Parameters
+    ----------
+    share : float
+        In (0, 1): the true mechanism's share of ``P0(f <= 1)``.
+    p : float
+        The event's probability.
+    dim : int
+        Dimension, at least 2.
+    """
+    if not (0.0 < share < 1.0 and dim >= 2):
+        raise ValueError(f"need 0 < share < 1 and dim >= 2; got {share}, {dim}")
+    a, b = directions(dim, 2)
+    beta, s = float(stats.norm.isf(p)), DECOY_SLOPE
+    at_one = float(stats.norm.sf(beta - 1.0 / s))  # P0(f_T <= 1)
+    at_06 = float(stats.norm.sf(beta - 0.6 / s))  # P0(f_T <= 0.6)
+    # P0(f_D <= l) = Phi(log(l - FLOOR) / s_D - c): solve at l = 1 and l = 0.6
+    z_one = stats.norm.isf(at_one * (1.0 - share) / share)  # P0(f_D <= 1)
+    z_06 = stats.norm.isf(at_06)
+    s_d = (math.log(1.0 - DECOY_FLOOR) - math.log(0.6 - DECOY_FLOOR)) / (z_06 - z_one)
+    c = float(z_one + math.log(1.0 - DECOY_FLOOR) / s_d)
+
+    def f(x: FloatArray) -> FloatArray:
+        decoy = DECOY_FLOOR + np.exp(s_d * (c - x @ b))
+        return np.minimum(s * (beta - x @ a), decoy)
+
+    return AnalyticProblem(
+        f"decoy_s{share:g}_d{dim}_p{p:.0e}",
+        standard_normal(dim),
+        f,
+        0.0,
+        float(stats.norm.sf(beta)),
+        reference=f"closed form; a decoy holding {1 - share:.3g} of P0(f <= 1) "
+        f"never falls below {DECOY_FLOOR}",
     )
 
 

@@ -13,6 +13,9 @@ shapes a user's scenario has and the bundled ones do not:
 * :func:`~avrisk.testing.generated.plateau_problem` -- ``f`` constant (a tie)
   on 90% to 99.99% of ``P0`` and continuous elsewhere, as a capped
   time-to-collision is when nothing closes.
+* :func:`~avrisk.testing.generated.decoy_problem` -- a common mechanism of
+  low ``f`` that never ends in the event beside a rare one that does (a near
+  miss beside the crash).
 * :func:`~avrisk.testing.generated.beta_product_problem`,
   :func:`~avrisk.testing.generated.beta_pair_product_problem` and
   :func:`~avrisk.testing.problems.beta_sum_problem` -- blocks of the engine's
@@ -47,6 +50,7 @@ from collections.abc import Callable
 from avrisk.testing.generated import (
     beta_pair_product_problem,
     beta_product_problem,
+    decoy_problem,
     k_region_problem,
     plateau_problem,
 )
@@ -66,6 +70,10 @@ _PATTERNS: list[tuple[str, Callable[..., AnalyticProblem]]] = [
         lambda kind, share, dim, p: plateau_problem(
             float(share), float(p), int(dim), kind
         ),
+    ),
+    (
+        r"decoy_s(?P<share>[0-9.]+)_d(?P<dim>\d+)_p(?P<p>[0-9.e+-]+)",
+        lambda share, dim, p: decoy_problem(float(share), float(p), int(dim)),
     ),
     (
         r"beta_product_k(?P<k>\d+)_p(?P<p>[0-9.e+-]+)",
@@ -127,6 +135,7 @@ SUITE: tuple[str, ...] = (
     "plateau_self_m0.99_d10_p1e-06",
     "plateau_self_m0.9999_d10_p1e-06",
     "plateau_gate_m0.9999_d10_p1e-06",
+    "decoy_s0.03_d10_p1e-06",
     "beta_sum_k6_p1e-06",
     "beta_product_k4_p1e-06",
     "beta_pair_product_p1e-06",

@@ -42,6 +42,7 @@ from avrisk.testing import (
     four_branch_problem,
     gaussian_linear_problem,
 )
+from avrisk.testing.generated import decoy_problem
 from avrisk.testing.suite import suite_problem
 
 
@@ -431,3 +432,47 @@ def test_a_replicate_whose_levels_run_out_is_left_out_with_a_caution():
     # with one level fewer neither does: the levels' error, as subset simulation's
     with pytest.raises(SplittingError, match="after max_levels=5 levels"):
         splitting_is(f, base, 0.0, n_particles=400, n_final=2000, max_levels=5)
+
+
+def _decoy_run(seed, **options):
+    """splitting_is on a near-miss mechanism that never ends in the event."""
+    problem = decoy_problem(0.03)
+    est = splitting_is(
+        problem.f, problem.base, problem.gamma, seed=seed, n_particles=400,
+        n_final=5000, **options,
+    )  # fmt: skip
+    return problem, est, trust_of(est)
+
+
+def trust_of(est):
+    as_dict = est.to_dict()
+    main = next(g for g in as_dict["by_gamma"] if g["gamma"] == est.gamma)
+    return estimate_trust(estimator_class("splitting_is"), as_dict, main)
+
+
+def test_a_replicate_that_runs_out_of_levels_runs_again_twice_as_large():
+    problem, est, trust = _decoy_run(1)
+    # the first replicate followed the decoy twice (200, then 400 particles)
+    assert est.details["replicates_regrown"] == 2
+    assert est.details["replicates_exhausted"] == 0
+    assert est.details["replicate_particles"] == [200, 800]
+    assert abs(est.p - problem.p_exact) < 3 * est.stderr
+    assert "did not reach gamma" not in str(trust)  # both replicates did
+    planned = get_estimator("splitting_is", n_particles=400, n_final=5000)
+    assert est.n_evals <= planned.budget()
+    # without regrowth the same seed rests on one replicate, and says so
+    _, plain, plain_trust = _decoy_run(1, regrow=0)
+    assert plain.details["replicates_exhausted"] == 1
+    assert "did not reach gamma" in str(plain_trust)
+    # a cap that holds only the plan leaves no room to regrow
+    cap = get_estimator("splitting_is", n_particles=400, n_final=5000, regrow=0)
+    _, capped, _ = _decoy_run(1, max_calls=cap.budget())
+    assert capped.details["replicates_regrown"] == 0
+    assert capped.n_evals <= cap.budget()
+
+
+def test_no_replicate_reaching_gamma_is_an_estimate_with_caution_not_an_error():
+    _, est, trust = _decoy_run(4)
+    assert est.details["replicates_exhausted"] == 2 and est.p == 0.0
+    assert est.details["splitting"] == {}  # the decoy's product is no estimate
+    assert not trust.ok and "no replicate of the search reached gamma" in str(trust)

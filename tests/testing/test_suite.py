@@ -20,6 +20,7 @@ from avrisk.testing.generated import (
     PLATEAU_CAP,
     beta_pair_product_problem,
     beta_product_problem,
+    decoy_problem,
     directions,
     k_region_problem,
     plateau_problem,
@@ -132,6 +133,20 @@ def test_plateau_holds_the_stated_share_at_the_suites_points():
         values = problem.f(x)
         tie = values == values.max()
         assert abs(tie.mean() - share) < 5 * np.sqrt(share * (1 - share) / 2e5) + 1e-5
+
+
+def test_decoy_exact_p_share_and_floor_agree_with_naive_sampling():
+    problem = decoy_problem(0.3, p=1e-3, dim=4)
+    x = problem.base.sample(1_000_000, np.random.default_rng(11))
+    values = problem.f(x)
+    hits = np.count_nonzero(values <= problem.gamma) / len(x)
+    assert _agrees(hits, np.sqrt(hits * (1 - hits) / len(x)), problem)
+    # the true mechanism holds 30% of P0(f <= 1); the decoy none of f <= 0.5
+    a = directions(4, 2)[0]
+    below_one = values <= 1.0
+    true_share = np.mean(1.33 * (stats.norm.isf(1e-3) - x[below_one] @ a) <= 1.0)
+    assert abs(true_share - 0.3) < 5 * np.sqrt(0.3 * 0.7 / below_one.sum())
+    assert np.all((values > 0.5) | (x @ a >= stats.norm.isf(1e-3) - 0.5 / 1.33))
 
 
 @pytest.mark.parametrize(
