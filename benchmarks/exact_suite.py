@@ -21,7 +21,8 @@ factor so that its planned budget (:meth:`Estimator.budget`, an upper bound
 for splitting, every diagnostic included) is at most ``SUITE_BUDGET = 1e5``
 calls of ``f``; for ``splitting_is`` the plan without regrowth, with the cap
 ``max_calls = SUITE_BUDGET`` on its regrowths (a replicate that ran out of
-levels runs again only while the whole run's bound stays within the cap). OpenTURNS's ``SubsetSampling`` and
+levels runs again only while the whole run's bound stays within the cap).
+OpenTURNS's ``SubsetSampling`` and
 ``StandardSpaceCrossEntropyImportanceSampling`` (defaults, probability 0.1 per
 level / quantile level 0.1) run in the base's standard-normal space with
 ``OT_PER_STEP`` samples per level or iteration, stopped with an error past
