@@ -393,10 +393,14 @@ class SplittingImportanceSampling(SubsetSimulation):
         Few particles at a level do not bias the importance-sampling stage
         (its weights' diagnostics speak for it), nor do replicates that ended
         in different places: the proposal holds what either found
-        (*Replicates*). But an importance-sampling answer far from every
+        (*Replicates*). But an importance-sampling answer below every
         replicate's own estimate, beyond both errors, says the proposal misses
         where the particles were (a shift fitted on too few coordinates, a
-        region dropped), which its weights alone may not show. When the levels
+        region dropped), which its weights alone may not show. One above them
+        does not: a proposal cannot add mass the event lacks (the sample is
+        unbiased; a single huge weight is its Pareto k's to show), so the
+        levels lost part of the event, as they do when their chains follow a
+        near miss. When the levels
         answer (*The answer*), their own doubts count (a level held by a
         handful of particles), and so does an importance sample far from them.
         """
@@ -451,7 +455,7 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "details['importance_sampling'], or raise n_particles)"
             )
         if details.get("answer") != "splitting" and all(
-            estimates_disagree(main, r) for r in own
+            main["p"] < r["p"] and estimates_disagree(main, r) for r in own
         ):
             levels = ", ".join(f"{r['p']:.2g}" for r in own)
             reasons.append(
@@ -614,7 +618,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             sampled = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
-        from_levels = bool(reached) and levels_more_precise(
+        from_levels = not any(r.exhausted for r in state.all) and levels_more_precise(
             fitted.held_out, combined.by_gamma[problem.gamma], s.n_final
         )
         if not from_levels:  # the sample's doubts are the answer's

@@ -201,13 +201,13 @@ def combined_levels(
     Each replicate's product estimate has its own error; their mean has
     variance ``sum(stderr_r^2) / R^2`` and a log-normal interval as one
     replicate's. Zero hits in every replicate: the largest of their bounds
-    (each is a 95% bound of ``p`` on its own).
+    (each is a 95% bound of ``p`` on its own). One replicate's estimate is
+    its own. ``details`` hold the levels, survivors, level c.o.v.s and first
+    set draws per replicate (a list each), however many there are.
     """
     first = own[0]
-    if len(own) == 1:
-        return first
-    by_gamma = {}
-    for g in first.by_gamma:
+    by_gamma = dict(first.by_gamma)
+    for g in first.by_gamma if len(own) > 1 else ():
         parts = [e.by_gamma[g] for e in own]
         p = float(np.mean([e.p for e in parts]))
         stderr = float(np.sqrt(sum(e.stderr**2 for e in parts))) / len(parts)

@@ -15,6 +15,7 @@ from avrisk.rare import (
     SplittingError,
     get_estimator,
     splitting_is,
+    subset_simulation,
 )
 from avrisk.rare.cross_entropy import SEARCH_ADVICE, CESettings
 from avrisk.rare.estimator import estimator_class
@@ -421,7 +422,8 @@ def test_a_replicate_whose_levels_run_out_is_left_out_with_a_caution():
     base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
     b = stats.norm.isf(1e-6)
     f = lambda x: b - x.sum(axis=1) / np.sqrt(2)  # noqa: E731
-    est = splitting_is(f, base, 0.0, n_particles=400, n_final=2000, max_levels=6)
+    plan = dict(n_particles=400, n_final=2000, regrow=0)
+    est = splitting_is(f, base, 0.0, **plan, max_levels=6)
     assert est.details["replicates_exhausted"] == 1
     assert len(est.details["replicates"]) == 1
     assert est.ci[0] < 1e-6 < est.ci[1]
@@ -429,9 +431,13 @@ def test_a_replicate_whose_levels_run_out_is_left_out_with_a_caution():
         estimator_class("splitting_is"), est.to_dict(), est.to_dict()["by_gamma"][0]
     )
     assert "1 of the 2 replicates of the search did not reach gamma" in str(trust)
-    # with one level fewer neither does: the levels' error, as subset simulation's
+    # with one level fewer neither does: importance sampling from the deepest
+    # sets, with caution (subset simulation alone raises)
+    deepest = splitting_is(f, base, 0.0, **plan, max_levels=5)
+    assert deepest.details["replicates_exhausted"] == 2
+    assert "no replicate of the search reached gamma" in str(trust_of(deepest))
     with pytest.raises(SplittingError, match="after max_levels=5 levels"):
-        splitting_is(f, base, 0.0, n_particles=400, n_final=2000, max_levels=5)
+        subset_simulation(f, base, 0.0, n_particles=400, max_levels=5)
 
 
 def _decoy_run(seed, **options):

@@ -108,6 +108,14 @@ def test_importance_sampling_far_from_its_own_levels_says_caution():
         estimator_class("splitting_is"), as_dict, as_dict["by_gamma"][0]
     )
     assert "importance sampling found p = 1e-07 but the levels" in str(trust)
+    # above every replicate the levels lost part of the event, not the proposal
+    above = {**sampled, "p": 1e-5, "stderr": 1e-6, "ci": [8e-6, 1.2e-5]}
+    as_dict["by_gamma"] = [{**above, "n_hits": 500, "ess": 400.0, "pareto_k": 0.2}]
+    assert estimates_disagree(above, levels)
+    trust = estimate_trust(
+        estimator_class("splitting_is"), as_dict, as_dict["by_gamma"][0]
+    )
+    assert trust.ok
     # one replicate that bears it out is enough
     as_dict["details"]["replicates"][1] = {"p": 1.1e-7, "ci": [6e-8, 2e-7]}
     assert estimate_trust(
