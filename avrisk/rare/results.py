@@ -87,6 +87,8 @@ class GammaEstimate:
         """
         if self.stderr <= 0 or not 0 < self.p < 1:  # an IS estimate can exceed 1
             return math.nan
+        if self.stderr**2 == 0.0:  # underflows (p about 1e-160 or less)
+            return (self.p / self.stderr) ** 2 * (1 - self.p) / self.n_samples
         return self.p * (1 - self.p) / self.n_samples / self.stderr**2
 
     def to_dict(self) -> dict[str, Any]:

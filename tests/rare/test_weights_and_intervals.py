@@ -200,3 +200,11 @@ def test_every_estimate_names_the_interval_it_reports(method, settings, words):
     est = estimate(method, problem.f, problem.base, problem.gamma, **settings)
     assert words in est.by_gamma[problem.gamma].interval
     assert est.to_dict()["by_gamma"][0]["interval"] == est.main.interval
+
+
+def test_variance_reduction_survives_a_tiny_estimate_whose_variance_underflows():
+    from avrisk.rare import GammaEstimate
+
+    tiny = GammaEstimate(0.0, 2.6e-180, 2.6e-180, (0.0, 7.8e-180), 1, 1.0, 50_000)
+    assert tiny.variance_reduction == pytest.approx(1 / 50_000)
+    assert tiny.to_dict()["variance_reduction"] == pytest.approx(2e-5)
