@@ -234,7 +234,7 @@ class SplittingISSettings(SplittingSettings):
         (:meth:`SplittingImportanceSampling.budget` is then the bound).
     """
 
-    OMIT_IF_DEFAULT = ("min_survivors", "plateau_draws", "regrow", "max_calls")
+    OMIT_IF_DEFAULT = ("min_survivors", "plateau_draws", "max_calls")
 
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
     n_components: int = Field(
