@@ -22,12 +22,20 @@ A test threshold ``g`` is estimated from the deepest set conditioned on a level
 at or above ``g``; below ``gamma`` it may see no particle (``p = 0``; its
 interval then reaches up to that of ``gamma``).
 
-The method is three modules: this one, the estimator and its settings;
+The levels run ``replicates`` times, independently, with ``N / replicates``
+particles each; the answer is their mean, and replicates that disagree beyond
+their errors, or that ran out of levels, make the run say caution. One that
+ran out runs again with twice its particles (*Replicates* and *Regrowth* in
+:mod:`avrisk.rare.splitting_replicates`).
+
+The method is five modules: this one, the estimator; its settings and their
+bounds on the calls of ``f`` (:mod:`avrisk.rare.splitting_settings`);
 :mod:`avrisk.rare.splitting_levels`, the particle sets, the choice of each
 level and the estimate with its error (its sections *Ties*, *Plateaus* and
 *Standard error*, which the sections named here refer to);
 :mod:`avrisk.rare.splitting_moves`, the draws of ``P0`` and the pCN chains
-that make the sets (*Moves*, *Seeds and resume*).
+that make the sets (*Moves*, *Seeds and resume*); and
+:mod:`avrisk.rare.splitting_replicates`, what the replicates share.
 
 Failed samples
 --------------
@@ -45,19 +53,18 @@ dimensions by subset simulation." Probabilistic Engineering Mechanics 16, 2001.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-from pydantic import Field, ValidationInfo, field_validator
 
 from avrisk.rare.black_box import estimate
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimationContext,
-    EstimatorSettings,
     register_estimator,
 )
 from avrisk.rare.families.base import ExponentialFamily
@@ -74,74 +81,16 @@ from avrisk.rare.splitting_levels import (
     on_plateau,
 )
 from avrisk.rare.splitting_moves import draw_p0, drawn_more, move_chains
-
-
-class SplittingSettings(EstimatorSettings):
-    """Settings of subset simulation (module docstring).
-
-    Attributes
-    ----------
-    n_particles : int, default=2000
-        Particles per level ``N``.
-    p0 : float, default=0.1
-        Quantile of ``f`` that sets each next level (share of survivors).
-    p0_max : float, default=0.5
-        Largest share of survivors ties of ``f`` may leave at a level before
-        the level moves below the tied value (at least ``p0``).
-    max_levels : int, default=12
-        Most particle sets, the draws of ``P0`` included; not reaching
-        ``gamma`` within them is a
-        :class:`~avrisk.rare.splitting_levels.SplittingError`.
-    n_moves : int, default=1
-        pCN proposals per kept chain state (``> 1`` thins the chains).
-    initial_beta : float, default=0.6
-        pCN step of the first moves, in (0, 1]; then adapted.
-    min_survivors : int, default=10
-        Fewest of the first ``N`` draws of ``P0`` that must lie below a tie of
-        ``f`` at their level (a plateau, e.g. a capped TTC); fewer, and the
-        first set grows to ``plateau_draws N`` draws (*Plateaus* in
-        :mod:`avrisk.rare.splitting_levels`).
-    plateau_draws : int, default=8
-        Draws of a first set grown on a plateau, in multiples of ``N`` (1:
-        never grown).
-    """
-
-    OMIT_IF_DEFAULT = ("min_survivors", "plateau_draws")
-
-    n_particles: int = Field(2000, ge=10, description="Particles per level N.")
-    p0: float = Field(
-        0.1, gt=0.0, lt=1.0, description="Quantile of f that sets the next level."
-    )
-    p0_max: float = Field(
-        0.5,
-        gt=0.0,
-        lt=1.0,
-        description="Largest share of survivors that ties may leave at a level.",
-    )
-    max_levels: int = Field(
-        12, ge=1, description="Most particle sets (P0 draws included)."
-    )
-    n_moves: int = Field(
-        1, ge=1, description="pCN proposals per kept chain state (thinning)."
-    )
-    initial_beta: float = Field(
-        0.6, gt=0.0, le=1.0, description="pCN step of the first level's moves."
-    )
-    min_survivors: int = Field(
-        10, ge=1, description="Fewest draws of P0 below a plateau of f before more."
-    )
-    plateau_draws: int = Field(
-        8, ge=1, description="Draws of a first set grown on a plateau, times N."
-    )
-
-    @field_validator("p0_max")
-    @classmethod
-    def _at_least_p0(cls, p0_max: float, info: ValidationInfo) -> float:
-        p0 = info.data.get("p0")
-        if p0 is not None and p0_max < p0:
-            raise ValueError(f"p0_max ({p0_max}) must be at least p0 ({p0})")
-        return p0_max
-
+from avrisk.rare.splitting_replicates import (
+    ReplicatesState,
+    combined_levels,
+    exhausted_doubts,
+    per_replicate,
+    regrown_doubts,
+    regrowth_fits,
+    replicates_record,
+)
+from avrisk.rare.splitting_settings import SplittingSettings
 
 #: The levels' diagnostics in plain words (:meth:`SubsetSimulation.diagnostics`).
 LEVELS_NOTE = (
@@ -206,39 +155,19 @@ class SplittingInfo(NamedTuple):
         }
 
 
-@register_estimator
-class SubsetSimulation:
-    """Subset simulation (module docstring) as an Estimator."""
+class OneReplicate:
+    """One replicate's levels, set by set: what :class:`SubsetSimulation` repeats.
 
-    name = "splitting"
-    label = "subset simulation"
-    Settings: type[SplittingSettings] = SplittingSettings
-    weighted = False
-    budget_is_bound = True  # its levels may reach gamma before max_levels
+    Its ``settings`` are the run's with the replicate's particles per level
+    (:meth:`SplittingSettings.one_replicate`).
+    """
 
     def __init__(self, settings: SplittingSettings) -> None:
         self.settings = settings
 
     def budget(self) -> int:
-        """An upper bound for the progress bar: ``max_levels`` full sets.
-
-        ``N`` draws (``plateau_draws N`` on a plateau), then at most ``N
-        n_moves`` proposals per further set; a run that reaches ``gamma``
-        sooner, as most do, makes fewer calls.
-        """
-        s = self.settings
-        first = s.n_particles * s.plateau_draws
-        return first + s.n_particles * (s.max_levels - 1) * s.n_moves
-
-    def budget_not_redrawn(self) -> int:
-        """All of :meth:`budget`: its points are drawn in standard space and moved."""
-        return self.budget()
-
-    def describe(self) -> str:
-        """``"subset simulation, 2,000 particles per level, p0 0.1"``."""
-        s = self.settings
-        text = f"subset simulation, {s.n_particles:,} particles per level, p0 {s.p0:g}"
-        return text + (f", {s.n_moves} moves per state" if s.n_moves > 1 else "")
+        """The most calls of its levels (:meth:`SplittingSettings.levels_bound`)."""
+        return self.settings.levels_bound(self.settings.n_particles)
 
     def init(self, problem: RareEventProblem) -> SplittingState:
         """No particles yet; ``beta`` at its initial value."""
@@ -309,51 +238,161 @@ class SubsetSimulation:
         )
         return new_state, info
 
+
+@register_estimator
+class SubsetSimulation:
+    """Subset simulation (module docstring) as an Estimator, in replicates."""
+
+    name = "splitting"
+    label = "subset simulation"
+    Settings: type[SplittingSettings] = SplittingSettings
+    weighted = False
+    budget_is_bound = True  # its levels may reach gamma before max_levels
+
+    def __init__(self, settings: SplittingSettings) -> None:
+        self.settings = settings
+
+    def budget(self) -> int:
+        """An upper bound for the progress bar: every replicate regrown to the end.
+
+        :meth:`SplittingSettings.bound`, or ``max_calls`` where it is lower; a
+        run that reaches ``gamma`` sooner, as most do, makes fewer calls.
+        """
+        s = self.settings
+        bound = s.bound(s.regrow)
+        return bound if s.max_calls is None else min(bound, s.max_calls)
+
+    def budget_not_redrawn(self) -> int:
+        """All of :meth:`budget`: its points are drawn in standard space and moved."""
+        return self.budget()
+
+    def describe(self) -> str:
+        """``"subset simulation, 2,000 particles per level, p0 0.1, regrown ..."``."""
+        s = self.settings
+        text = f"subset simulation, {s.n_particles:,} particles per level, p0 {s.p0:g}"
+        text += f", {s.n_moves} moves per state" if s.n_moves > 1 else ""
+        return text + (f", regrown up to {s.regrow}x" if s.regrow else "")
+
+    def levels(self, n_particles: int) -> OneReplicate:
+        """One replicate's levels, with ``n_particles`` per level."""
+        return OneReplicate(self.settings.one_replicate(n_particles))
+
+    def init(self, problem: RareEventProblem) -> ReplicatesState:
+        """The first replicate's levels, not yet begun: ``n_particles / replicates``."""
+        n = self.settings.n_particles // self.settings.replicates
+        return ReplicatesState((), self.levels(n).init(problem), (n,))
+
+    def done(self, state: ReplicatesState) -> bool:
+        """Once the last replicate's levels are over, and it is not to be regrown."""
+        return (
+            self.levels(state.sizes[-1]).done(state.current)
+            and not self._regrows(state)
+            and state.filled + 1 == self.settings.replicates
+        )
+
+    def _regrows(self, state: ReplicatesState) -> bool:
+        """Whether the replicate that just ended out of levels runs again, larger."""
+        s = self.settings
+        regrown = round(math.log2(state.sizes[-1] / state.sizes[0]))
+        if not state.current.exhausted or regrown >= s.regrow:
+            return False
+        return regrowth_fits(
+            state, s.replicates, s.levels_bound, s.tail_bound, self.budget()
+        )
+
+    def step(
+        self,
+        state: ReplicatesState,
+        problem: RareEventProblem,
+        context: EstimationContext,
+    ) -> tuple[ReplicatesState, SplittingInfo]:
+        """The next set of the replicate under way, or the first of the next.
+
+        A replicate's stages follow the last one's, so that every stage has
+        its own random numbers and a resumed run replays them in order.
+        """
+        if self.levels(state.sizes[-1]).done(state.current):
+            regrown = self._regrows(state)
+            n = 2 * state.sizes[-1] if regrown else state.sizes[0]
+            fresh = (
+                self.levels(n)
+                .init(problem)
+                ._replace(
+                    n_stages=state.current.n_stages, n_evals=state.current.n_evals
+                )
+            )
+            state = ReplicatesState(
+                state.all, fresh, (*state.sizes, n), state.filled + (not regrown)
+            )
+        current, info = self.levels(state.sizes[-1]).step(
+            state.current, problem, context
+        )
+        return (
+            state._replace(current=current),
+            info._replace(replicate=len(state.finished)),
+        )
+
     def finalize(
         self,
-        state: SplittingState,
+        state: ReplicatesState,
         problem: RareEventProblem,
         context: EstimationContext,
     ) -> Estimate:
-        """The product estimate and its Au & Beck error for every threshold.
+        """The replicates' mean product and its error, for every threshold.
+
+        Each replicate that reached ``gamma`` estimates ``p`` by its product
+        with Au & Beck's error; the answer is their mean
+        (:func:`~avrisk.rare.splitting_replicates.combined_levels`).
 
         Raises
         ------
         SplittingError
-            If ``max_levels`` sets did not reach ``gamma``.
+            If no replicate's ``max_levels`` sets reached ``gamma``.
         """
-        if state.exhausted:
-            raise exhausted_error(state, problem.gamma, self.settings.max_levels)
-        if state.n_failed:
+        reached = state.reached()
+        if not reached:
+            raise exhausted_error(
+                state.current, problem.gamma, self.settings.max_levels
+            )
+        n_failed = sum(r.n_failed for r in state.all)
+        if n_failed:
             warnings.warn(
-                f"{state.n_failed} evaluations of f failed; subset simulation counts "
+                f"{n_failed} evaluations of f failed; subset simulation counts "
                 "them outside every level (a failed proposal is rejected), with no "
                 "bracket: fix what makes f fail (see the 'status' column)",
                 UserWarning,
                 stacklevel=2,
             )
-        return levels_estimate(state, problem, self.settings.n_particles)
+        own = [levels_estimate(r, problem, n) for r, n in reached]
+        combined = combined_levels(own, problem, sum(n for _, n in reached))
+        details = combined.details | replicates_record(state, own, self.settings)
+        return dataclasses.replace(combined, details=details)
 
     def progress(self, info: SplittingInfo) -> str:
-        """``"set 3: f <= 1.23, 212 survivors, accepted 31%, beta 0.42"``."""
+        """``"replicate 2/2, set 3: f <= 1.23, 212 survivors, accepted 31%, ..."``."""
         moves = (
             "independent draws"
             if math.isnan(info.acceptance)
             else f"accepted {info.acceptance:.0%}, beta {info.beta:.2g}"
         )
-        return (
+        text = (
             f"set {info.index}: f <= {info.level:.3g}, "
             f"{info.n_survivors} survivors, {moves}"
         )
+        r, i = self.settings.replicates, info.replicate
+        if r == 1 and not i:
+            return text
+        return f"replicate {i + 1}{f'/{r}' if i < r else ' (regrown)'}, {text}"
 
     def checkpoint(
-        self, state: SplittingState, infos: Sequence[SplittingInfo]
+        self, state: ReplicatesState, infos: Sequence[SplittingInfo]
     ) -> dict[str, Any]:
-        """The levels so far (for inspection and reports)."""
+        """The levels so far, every replicate's (for inspection and reports)."""
         return {
-            "levels_done": len(state.sets),
-            "n_evals": state.n_evals,
-            "beta": state.beta,
+            "replicates_done": len(state.finished),
+            "levels_done": sum(len(r.sets) for r in state.all),
+            "n_evals": state.current.n_evals,
+            "beta": state.current.beta,
             "levels": [i.to_dict() for i in infos],
         }
 
@@ -407,19 +446,47 @@ class SubsetSimulation:
 
     @staticmethod
     def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
-        """A level held by fewer than ``MIN_RELIABLE_ESS`` particles (a plateau).
+        """A level held by a handful of particles, or replicates that disagree.
 
-        Its factor then rests on a handful of draws and its chains on as
-        many seeds: the interval, from normal approximations, is too narrow.
+        A level held by fewer than ``MIN_RELIABLE_ESS`` particles (a plateau):
+        its factor then rests on a handful of draws and its chains on as many
+        seeds, so the interval, from normal approximations, is too narrow.
+        Replicates whose estimates differ beyond their errors
+        (:func:`~avrisk.rare.splitting_replicates.replicates_disagree`)
+        followed different regions or mechanisms: their mean is of products
+        that each miss part of the event. A replicate that ran out of levels
+        leaves the answer to the others, and one regrown after running out
+        leans high (:func:`~avrisk.rare.splitting_replicates.regrown_doubts`).
         """
-        survivors = (estimate.get("details") or {}).get("survivors") or []
-        few = [int(k) for k in survivors[:-1] if k < MIN_RELIABLE_ESS]
-        if not few:
-            return ()
-        return (
-            f"a level of the search held only {min(few)} particles below it (f "
-            "ties on a plateau?): its interval is likely too narrow",
-        )
+        details = estimate.get("details") or {}
+        reasons = list(few_survivors(details.get("survivors") or []))
+        if gamma == estimate.get("gamma") and details.get("replicates_disagree"):
+            found = ", ".join(f"{r['p']:.2g}" for r in details["replicates"])
+            reasons.append(
+                f"the replicates of the search found p = {found}, further apart "
+                "than their errors allow: they followed different parts of the "
+                "failure set, and a part none of them found is as likely (compare "
+                "runs with other seeds, or raise n_particles)"
+            )
+        if gamma == estimate.get("gamma"):
+            reasons.extend(exhausted_doubts(details) + regrown_doubts(details))
+        return tuple(reasons)
+
+
+def few_survivors(survivors: Sequence[Any]) -> tuple[str, ...]:
+    """The doubt of a level held by fewer than ``MIN_RELIABLE_ESS`` particles.
+
+    ``survivors``: each set's survivors, by replicate
+    (:func:`~avrisk.rare.splitting_replicates.per_replicate`).
+    """
+    by_replicate = per_replicate(survivors)
+    few = [int(k) for one in by_replicate for k in one[:-1] if k < MIN_RELIABLE_ESS]
+    if not few:
+        return ()
+    return (
+        f"a level of the search held only {min(few)} particles below it (f "
+        "ties on a plateau?): its interval is likely too narrow",
+    )
 
 
 def subset_simulation(

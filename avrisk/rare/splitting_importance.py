@@ -136,11 +136,10 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from collections.abc import Sequence
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field, ValidationInfo, field_validator, model_validator
+from pydantic import Field
 
 from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy import ShareOfP0
@@ -158,7 +157,7 @@ from avrisk.rare.particle_fit import (
 )
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
 from avrisk.rare.results import Estimate, GammaEstimate
-from avrisk.rare.splitting import SplittingInfo, SplittingSettings, SubsetSimulation
+from avrisk.rare.splitting import SubsetSimulation, few_survivors
 from avrisk.rare.splitting_levels import (
     levels_estimate,
 )
@@ -167,10 +166,12 @@ from avrisk.rare.splitting_replicates import (
     ReplicatesState,
     combined_levels,
     estimates_disagree,
+    exhausted_doubts,
+    per_replicate,
     pooled_chains,
-    regrowth_fits,
-    replicates_disagree,
+    replicates_record,
 )
+from avrisk.rare.splitting_settings import SplittingSettings
 
 __all__ = [
     "SplittingISSettings",
@@ -219,22 +220,7 @@ class SplittingISSettings(SplittingSettings):
         Which standard coordinates the shifts may move: all of them, or only
         those the base's cross-entropy box searches
         (:meth:`~avrisk.rare.families.base.ExponentialFamily.searched_coordinates`).
-    replicates : int, default=2
-        Independent replicates of the levels, ``n_particles / replicates``
-        particles each (*Replicates*).
-    regrow : int, default=2
-        Times a replicate whose ``max_levels`` sets end above ``gamma`` runs
-        again, fresh, with twice its particles (*Replicates*): how far the
-        run may adapt its calls to an event whose levels are harder to follow
-        than the settings planned for.
-    max_calls : int or None, default=None
-        The most calls of ``f`` the run may make, regrowths included: a
-        replicate is regrown only while the most the rest of the run can take
-        stays within it. None: every regrowth ``regrow`` allows
-        (:meth:`SplittingImportanceSampling.budget` is then the bound).
     """
-
-    OMIT_IF_DEFAULT = ("min_survivors", "plateau_draws", "max_calls")
 
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
     n_components: int = Field(
@@ -254,44 +240,10 @@ class SplittingISSettings(SplittingSettings):
         description="Standard coordinates the shifts may move: 'all', or those the "
         "base's CE box searches ('searched').",
     )
-    replicates: int = Field(
-        2, ge=1, description="Independent replicates of the levels (N split)."
-    )
 
-    regrow: int = Field(
-        2,
-        ge=0,
-        description="Times a replicate that ran out of levels runs again with "
-        "twice its particles.",
-    )
-    max_calls: int | None = Field(
-        None,
-        ge=1,
-        description="The most calls of f, regrowths included (None: as regrow allows).",
-    )
-
-    @field_validator("replicates")
-    @classmethod
-    def _particles_each(cls, replicates: int, info: ValidationInfo) -> int:
-        n = info.data.get("n_particles")
-        if n is not None and n // replicates < 10:
-            raise ValueError(
-                f"{replicates} replicates of n_particles={n} leave fewer than 10 "
-                "particles each"
-            )
-        return replicates
-
-    @model_validator(mode="after")
-    def _cap_holds_the_plan(self) -> SplittingISSettings:
-        planned = SplittingImportanceSampling(
-            self.model_copy(update={"regrow": 0, "max_calls": None})
-        )
-        if self.max_calls is not None and self.max_calls < planned.budget():
-            raise ValueError(
-                f"max_calls={self.max_calls:,} is less than the run's bound without "
-                f"regrowth ({planned.budget():,} calls)"
-            )
-        return self
+    def tail_bound(self, n: int) -> int:
+        """The moves at ``gamma`` on ``n`` particles in all, and the final stage."""
+        return n * self.n_moves + self.n_final
 
 
 @register_estimator
@@ -304,87 +256,6 @@ class SplittingImportanceSampling(SubsetSimulation):
     weighted = True
     decomposable = True
     settings: SplittingISSettings
-
-    def budget(self) -> int:
-        """Subset simulation's bound, the moves at ``gamma`` and the final stage.
-
-        The replicates share the ``N`` particles of a level, so they change
-        no bound; each of them regrown ``regrow`` times runs ``2^(regrow + 1)
-        - 1`` times its levels' bound, and ends with ``2^regrow`` times its
-        particles at ``gamma``. ``max_calls``, where it is lower, bounds it.
-        """
-        s = self.settings
-        levels = super().budget() * (2 ** (s.regrow + 1) - 1)
-        bound = levels + s.n_particles * 2**s.regrow * s.n_moves + s.n_final
-        return bound if s.max_calls is None else min(bound, s.max_calls)
-
-    def levels(self, n_particles: int) -> SubsetSimulation:
-        """One replicate's subset simulation, with ``n_particles`` per level."""
-        s = self.settings
-        each = {name: getattr(s, name) for name in SplittingSettings.model_fields}
-        return SubsetSimulation(
-            SplittingSettings(**{**each, "n_particles": n_particles})
-        )
-
-    def init(self, problem: RareEventProblem) -> ReplicatesState:  # type: ignore[override]
-        """The first replicate's levels, not yet begun: ``n_particles / replicates``."""
-        n = self.settings.n_particles // self.settings.replicates
-        return ReplicatesState((), self.levels(n).init(problem), (n,))
-
-    def done(self, state: ReplicatesState) -> bool:  # type: ignore[override]
-        """Once the last replicate's levels are over, and it is not to be regrown."""
-        return (
-            self.levels(state.sizes[-1]).done(state.current)
-            and not self._regrows(state)
-            and state.filled + 1 == self.settings.replicates
-        )
-
-    def _regrows(self, state: ReplicatesState) -> bool:
-        """Whether the replicate that just ended out of levels runs again, larger."""
-        s = self.settings
-        n_first = state.sizes[0]
-        regrown = round(np.log2(state.sizes[-1] / n_first))
-        if not state.current.exhausted or regrown >= s.regrow:
-            return False
-        return regrowth_fits(
-            state,
-            s.replicates,
-            lambda n: self.levels(n).budget(),
-            lambda n: n * s.n_moves + s.n_final,
-            self.budget(),
-        )
-
-    def step(  # type: ignore[override]
-        self,
-        state: ReplicatesState,
-        problem: RareEventProblem,
-        context: EstimationContext,
-    ) -> tuple[ReplicatesState, SplittingInfo]:
-        """The next set of the replicate under way, or the first of the next.
-
-        A replicate's stages follow the last one's, so that every stage has
-        its own random numbers and a resumed run replays them in order.
-        """
-        if self.levels(state.sizes[-1]).done(state.current):
-            regrown = self._regrows(state)
-            n = 2 * state.sizes[-1] if regrown else state.sizes[0]
-            fresh = (
-                self.levels(n)
-                .init(problem)
-                ._replace(
-                    n_stages=state.current.n_stages, n_evals=state.current.n_evals
-                )
-            )
-            state = ReplicatesState(
-                state.all, fresh, (*state.sizes, n), state.filled + (not regrown)
-            )
-        current, info = self.levels(state.sizes[-1]).step(
-            state.current, problem, context
-        )
-        return (
-            state._replace(current=current),
-            info._replace(replicate=len(state.finished)),
-        )
 
     @staticmethod
     def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
@@ -409,54 +280,14 @@ class SplittingImportanceSampling(SubsetSimulation):
             (g for g in estimate.get("by_gamma", ()) if g["gamma"] == gamma), None
         )
         own = details.get("replicates") or []
-        exhausted = details.get("replicates_exhausted") or 0
         if gamma != estimate.get("gamma") or main is None:
             return ()
-        if not own and exhausted:  # none reached gamma
-            deepest = min(min(levels) for levels in details["levels"])
-            return (
-                f"no replicate of the search reached gamma within max_levels "
-                "levels, regrown as far as regrow and max_calls allow (they "
-                "followed a mechanism that does not end in the event): p is "
-                f"importance sampling's from particles at f <= {deepest:.3g}, a "
-                "bound where it has no hit (raise n_particles, or max_levels)",
-            )
-        if not own:
-            return ()
-        reasons = []
-        if details.get("answer") == "splitting":  # the levels' own doubts
-            for survivors in details.get("survivors") or []:  # per replicate
-                one = {"details": {"survivors": survivors}}
-                reasons.extend(SubsetSimulation.doubts(one, gamma)[:1])
-            reasons = list(dict.fromkeys(reasons))
-            sampled = (details.get("importance_sampling") or {}).get(str(gamma))
-            if sampled and "stderr" in sampled and estimates_disagree(sampled, main):
-                reasons.append(
-                    f"the levels found p = {main['p']:.2g} but importance sampling "
-                    f"from their particles {sampled['p']:.2g}, further apart than "
-                    "their errors allow: the levels may have lost part of the "
-                    "failure set (compare runs with other seeds, or raise "
-                    "n_particles)"
-                )
-        if exhausted:
-            reasons.append(
-                f"{exhausted} of the {len(own) + exhausted} replicates of the search "
-                "did not reach gamma within max_levels levels, regrown as far as "
-                "regrow and max_calls allow (they followed a mechanism that does "
-                "not end in the event): the answer rests on the others (compare "
-                "runs with other seeds, or raise n_particles)"
-            )
-        regrown = details.get("replicates_regrown") or 0
-        if regrown and details.get("answer") == "splitting":
-            reasons.append(
-                f"the levels answer, but {regrown} replicates of them ran out of "
-                "levels before larger ones reached gamma: the product of those "
-                "that reached it leans high (compare importance sampling, "
-                "details['importance_sampling'], or raise n_particles)"
-            )
-        if details.get("answer") != "splitting" and all(
-            main["p"] < r["p"] and estimates_disagree(main, r) for r in own
-        ):
+        if not own:  # no replicate reached gamma (or none was recorded)
+            return _none_reached(details)
+        reasons = list(exhausted_doubts(details))
+        if details.get("answer") == "splitting":
+            reasons[:0] = _levels_answer_doubts(details, main, gamma)
+        elif all(main["p"] < r["p"] and estimates_disagree(main, r) for r in own):
             levels = ", ".join(f"{r['p']:.2g}" for r in own)
             reasons.append(
                 f"importance sampling found p = {main['p']:.2g} but the levels of "
@@ -481,27 +312,6 @@ class SplittingImportanceSampling(SubsetSimulation):
             return "the moves at gamma"
         return SubsetSimulation.stage_label(estimate, stage)
 
-    def progress(self, info: SplittingInfo) -> str:
-        """``"replicate 2/2, set 3: f <= 1.23, 212 survivors, ..."``."""
-        text = super().progress(info)
-        r, i = self.settings.replicates, info.replicate
-        if r == 1 and not i:
-            return text
-        return f"replicate {i + 1}{f'/{r}' if i < r else ' (regrown)'}, {text}"
-
-    def checkpoint(  # type: ignore[override]
-        self, state: ReplicatesState, infos: Sequence[SplittingInfo]
-    ) -> dict[str, Any]:
-        """The levels so far, every replicate's (for inspection and reports)."""
-        sets = sum(len(r.sets) for r in (*state.finished, state.current))
-        return {
-            "replicates_done": len(state.finished),
-            "levels_done": sets,
-            "n_evals": state.current.n_evals,
-            "beta": state.current.beta,
-            "levels": [i.to_dict() for i in infos],
-        }
-
     def budget_not_redrawn(self) -> int:
         """All but the final stage, a fresh draw of the fitted proposal."""
         return self.budget() - self.settings.n_final
@@ -509,9 +319,8 @@ class SplittingImportanceSampling(SubsetSimulation):
     def describe(self) -> str:
         """``"subset simulation, 2,000 particles per level, p0 0.1, then IS ..."``."""
         s = self.settings
-        regrowth = f", regrown up to {s.regrow}x" if s.regrow else ""
         return (
-            f"{super().describe()}{regrowth}, then IS {s.n_final:,} "
+            f"{super().describe()}, then IS {s.n_final:,} "
             f"({s.n_components} components, defensive {s.defensive:g})"
         )
 
@@ -662,16 +471,40 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "answer": "splitting" if from_levels else "importance_sampling",
                 "held_out_uncovered": fitted.held_out.uncovered,
                 "held_out_covered_weight": fitted.held_out.covered_mean_weight,
-                "replicates": [
-                    {"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own
-                ],
-                "replicates_disagree": replicates_disagree(own),
-                "replicates_exhausted": s.replicates - len(reached),
-                "replicates_regrown": sum(r.exhausted for r in state.all)
-                - (s.replicates - len(reached)),
-                "replicate_particles": [n for _, n in reached],
+                **replicates_record(state, own, s),
             },
         )
+
+
+def _none_reached(details: dict[str, Any]) -> tuple[str, ...]:
+    """The doubt of a run no replicate of which reached ``gamma``."""
+    if not details.get("replicates_exhausted"):
+        return ()
+    deepest = min(min(levels) for levels in per_replicate(details["levels"]))
+    return (
+        "no replicate of the search reached gamma within max_levels levels, "
+        "regrown as far as regrow and max_calls allow (they followed a "
+        "mechanism that does not end in the event): p is importance sampling's "
+        f"from particles at f <= {deepest:.3g}, a bound where it has no hit "
+        "(raise n_particles, or max_levels)",
+    )
+
+
+def _levels_answer_doubts(
+    details: dict[str, Any], main: dict[str, Any], gamma: float
+) -> list[str]:
+    """The levels' own doubts, and an importance sample far from them."""
+    reasons = list(few_survivors(details.get("survivors") or []))
+    sampled = (details.get("importance_sampling") or {}).get(str(gamma))
+    if sampled and "stderr" in sampled and estimates_disagree(sampled, main):
+        reasons.append(
+            f"the levels found p = {main['p']:.2g} but importance sampling "
+            f"from their particles {sampled['p']:.2g}, further apart than "
+            "their errors allow: the levels may have lost part of the "
+            "failure set (compare runs with other seeds, or raise "
+            "n_particles)"
+        )
+    return reasons
 
 
 def levels_more_precise(

@@ -43,9 +43,13 @@ __all__ = [
     "ReplicatesState",
     "combined_levels",
     "estimates_disagree",
+    "exhausted_doubts",
+    "per_replicate",
     "pooled_chains",
+    "regrown_doubts",
     "regrowth_fits",
     "replicates_disagree",
+    "replicates_record",
 ]
 
 #: Standard errors of the difference of two replicates' ``log p`` beyond which
@@ -201,13 +205,16 @@ def combined_levels(
     Each replicate's product estimate has its own error; their mean has
     variance ``sum(stderr_r^2) / R^2`` and a log-normal interval as one
     replicate's. Zero hits in every replicate: the largest of their bounds
-    (each is a 95% bound of ``p`` on its own). One replicate's estimate is
-    its own. ``details`` hold the levels, survivors, level c.o.v.s and first
-    set draws per replicate (a list each), however many there are.
+    (each is a 95% bound of ``p`` on its own). ``details`` hold the levels,
+    survivors, level c.o.v.s and first set draws per replicate (a list each;
+    one replicate's estimate is its own, with one list each:
+    :func:`per_replicate` reads both).
     """
     first = own[0]
-    by_gamma = dict(first.by_gamma)
-    for g in first.by_gamma if len(own) > 1 else ():
+    if len(own) == 1:
+        return first
+    by_gamma = {}
+    for g in first.by_gamma:
         parts = [e.by_gamma[g] for e in own]
         p = float(np.mean([e.p for e in parts]))
         stderr = float(np.sqrt(sum(e.stderr**2 for e in parts))) / len(parts)
@@ -237,3 +244,68 @@ def combined_levels(
     return dataclasses.replace(
         first, by_gamma=by_gamma, n_evals=own[-1].n_evals, details=details
     )
+
+
+def replicates_record(
+    state: ReplicatesState, own: Sequence[Estimate], settings: Any
+) -> dict[str, Any]:
+    """What ``details`` keep of the replicates, beside their levels.
+
+    ``replicates``: each that reached ``gamma``, its estimate there;
+    ``replicates_disagree`` (:func:`replicates_disagree`);
+    ``replicates_exhausted``: those still above ``gamma`` after every
+    regrowth the settings allowed; ``replicates_regrown``: the runs that ran
+    out of levels and were run again, larger; ``replicate_particles``: the
+    particles per level of each that reached ``gamma``.
+    """
+    reached = state.reached()
+    exhausted = settings.replicates - len(reached)
+    return {
+        "replicates": [{"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own],
+        "replicates_disagree": replicates_disagree(own),
+        "replicates_exhausted": exhausted,
+        "replicates_regrown": sum(r.exhausted for r in state.all) - exhausted,
+        "replicate_particles": [n for _, n in reached],
+    }
+
+
+def exhausted_doubts(details: dict[str, Any]) -> tuple[str, ...]:
+    """The doubt of replicates that ran out of levels with no regrowth left."""
+    exhausted = details.get("replicates_exhausted") or 0
+    if not exhausted:
+        return ()
+    of = len(details.get("replicates") or []) + exhausted
+    return (
+        f"{exhausted} of the {of} replicates of the search did not reach gamma "
+        "within max_levels levels, regrown as far as regrow and max_calls allow "
+        "(they followed a mechanism that does not end in the event): the answer "
+        "rests on the others (compare runs with other seeds, or raise n_particles)",
+    )
+
+
+def regrown_doubts(details: dict[str, Any]) -> tuple[str, ...]:
+    """The doubt of a levels' answer some of whose replicates were regrown.
+
+    A replicate runs again when its levels followed a near miss; the one that
+    reaches ``gamma`` is the luckier of several tries, and its product,
+    chosen for having kept the rarer mechanism, leans high.
+    """
+    regrown = details.get("replicates_regrown") or 0
+    if not regrown:
+        return ()
+    return (
+        f"{regrown} runs of the levels ran out before larger ones reached gamma "
+        "(a near miss the chains followed): the product of those that reached "
+        "it leans high (raise n_particles, or use splitting_is)",
+    )
+
+
+def per_replicate(values: Sequence[Any]) -> list[Sequence[Any]]:
+    """A ``details`` list of the levels (``levels``, ``survivors`` ...) by replicate.
+
+    Several replicates record one list each; one replicate, and subset
+    simulation's summaries of a single run, one flat list.
+    """
+    if values and isinstance(values[0], list):
+        return list(values)
+    return [values]

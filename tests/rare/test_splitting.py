@@ -15,22 +15,35 @@ from avrisk.rare import (
     run_estimator,
     subset_simulation,
 )
+from avrisk.rare.estimator import estimator_class
 from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem
-from avrisk.rare.splitting import SplittingSettings, SubsetSimulation
+from avrisk.rare.splitting import SubsetSimulation
 from avrisk.rare.splitting_levels import level_cov_squared, next_level
 from avrisk.rare.splitting_moves import MAX_ROUNDS_WITHOUT_MOVE
+from avrisk.rare.splitting_settings import SplittingSettings
+from avrisk.rare.trust import estimate_trust
 from avrisk.testing import (
     beta_sum_problem,
     check_estimator,
     four_branch_problem,
     gaussian_linear_problem,
 )
+from avrisk.testing.generated import decoy_problem
 
 NORMAL_1D = FixedCovNormal(np.zeros(1), cov=np.eye(1))
 
 
+#: One replicate's levels, never regrown: the mechanics the tests below check
+#: (the replicates have tests of their own).
+ONE = {"replicates": 1, "regrow": 0}
+
+
+def one_replicate(f, base, gamma, **kw):
+    return subset_simulation(f, base, gamma, **{**ONE, **kw})
+
+
 def sus(problem, seed=0, **kw):
-    return subset_simulation(problem.f, problem.base, problem.gamma, seed=seed, **kw)
+    return one_replicate(problem.f, problem.base, problem.gamma, seed=seed, **kw)
 
 
 def without_clock(estimate):
@@ -118,7 +131,7 @@ def test_a_level_larger_than_a_chunk_goes_out_in_chunks_with_distinct_seeds():
 
     f.needs_seeds = True
     batches = []
-    est = subset_simulation(
+    est = one_replicate(
         f,
         problem.base,
         problem.gamma,
@@ -169,7 +182,7 @@ def test_a_seeded_f_interrupted_mid_level_resumes_to_the_same_summary(tmp_path):
 
 def test_a_coarse_f_with_ties_still_reaches_gamma_and_finds_p():
     # f = floor(2 x): ties at every half-integer of x; P(f <= -6) = Phi(-2.5)
-    est = subset_simulation(
+    est = one_replicate(
         lambda x: np.floor(2 * x[:, 0]), NORMAL_1D, -6.0, n_particles=2000, seed=1
     )
     levels = est.details["levels"]
@@ -184,7 +197,7 @@ def test_a_mostly_infinite_f_starts_below_the_ties_at_infinity():
     def f(x):
         return np.where(x[:, 0] < -1.5, 4.0 + x[:, 0], np.inf)
 
-    est = subset_simulation(f, NORMAL_1D, 0.0, n_particles=2000, seed=2)
+    est = one_replicate(f, NORMAL_1D, 0.0, n_particles=2000, seed=2)
     first = est.history[0]
     assert np.isfinite(first.level) and first.n_survivors < 0.1 * 2000
     assert abs(est.p - stats.norm.cdf(-4.0)) < 5 * est.stderr
@@ -240,7 +253,7 @@ def test_a_plateau_of_f_grows_the_first_set_and_the_levels_go_on(seed):
     # on average; the first set grows to 8,000 and the estimate covers p
     f, p = plateau_f(1e-3)
     base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    est = subset_simulation(f, base, 0.0, n_particles=1000, seed=seed)
+    est = one_replicate(f, base, 0.0, n_particles=1000, seed=seed)
     assert est.details["first_set_draws"] == 8000
     assert not est.details["bound_only"]
     assert est.ci[0] < p < est.ci[1]
@@ -251,7 +264,7 @@ def test_a_plateau_nothing_leaves_gives_an_honest_bound_not_an_error():
     def f(x):
         return np.maximum(np.floor(2 * x[:, 0]), -3.0)
 
-    est = subset_simulation(f, NORMAL_1D, -5.0, n_particles=500)
+    est = one_replicate(f, NORMAL_1D, -5.0, n_particles=500)
     assert est.p == 0.0 and est.details["bound_only"]
     # the share of the draws at f <= -3 (its upper end) times the bound of 0
     # in 500 states
@@ -261,7 +274,7 @@ def test_a_plateau_nothing_leaves_gives_an_honest_bound_not_an_error():
     assert first * zero_hit_bound(500) < est.ci[1] < 1.5 * first * zero_hit_bound(500)
     # an f infinite everywhere: the first set grows, then a bound from the
     # 3,500 draws after the first 500
-    est = subset_simulation(
+    est = one_replicate(
         lambda x: np.full(len(x), np.inf), NORMAL_1D, 0.0, n_particles=500
     )
     assert est.p == 0.0 and est.details["first_set_draws"] == est.n_evals == 4000
@@ -274,7 +287,7 @@ def test_an_event_out_of_reach_of_the_levels_is_an_error_not_a_number():
         return 10.0 + x[:, 0] ** 2
 
     with pytest.raises(SplittingError, match="after max_levels=4 levels"):
-        subset_simulation(f, NORMAL_1D, 5.0, n_particles=500, max_levels=4)
+        one_replicate(f, NORMAL_1D, 5.0, n_particles=500, max_levels=4)
 
 
 def test_chains_that_never_move_are_an_error_once_their_step_is_smallest():
@@ -285,7 +298,7 @@ def test_chains_that_never_move_are_an_error_once_their_step_is_smallest():
         return x[:, 0] if len(calls) == 1 else np.full(len(x), np.inf)
 
     with pytest.raises(SplittingError, match="no chain accepted.*smallest step"):
-        subset_simulation(f, NORMAL_1D, -5.0, n_particles=500)
+        one_replicate(f, NORMAL_1D, -5.0, n_particles=500)
     # beta falls from 0.6 by exp(-0.3) a round to 1e-3, then 10 more rounds
     assert MAX_ROUNDS_WITHOUT_MOVE < len(calls) - 1 < 50
 
@@ -294,7 +307,7 @@ def test_a_single_chain_that_is_refused_a_while_goes_on():
     # two chains in a thin region: runs of rejections are common, not fatal
     f, p = plateau_f(1e-3)
     base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    est = subset_simulation(f, base, 0.0, n_particles=1000, seed=1, plateau_draws=2)
+    est = one_replicate(f, base, 0.0, n_particles=1000, seed=1, plateau_draws=2)
     assert est.details["first_set_draws"] == 2000
     assert est.details["survivors"][0] == 2 and est.ci[0] < p < est.ci[1]
 
@@ -311,7 +324,7 @@ def test_failed_evaluations_count_as_outside_the_level_and_are_reported():
 
     batches = []
     with pytest.warns(UserWarning, match="evaluations of f failed"):
-        est = subset_simulation(
+        est = one_replicate(
             f, problem.base, 0.0, n_particles=2000, seed=1, on_batch=batches.append
         )
     n_failed = sum(int(np.count_nonzero(b.failed)) for b in batches)
@@ -322,7 +335,7 @@ def test_failed_evaluations_count_as_outside_the_level_and_are_reported():
 def test_test_thresholds_come_from_the_deepest_level_that_holds_them():
     problem = gaussian_linear_problem(2, p=1e-4)
     beta = stats.norm.isf(problem.p_exact)
-    est = subset_simulation(
+    est = one_replicate(
         problem.f,
         problem.base,
         0.0,
@@ -358,7 +371,7 @@ def test_settings_are_validated_by_name():
 
 
 def test_protocol_budget_progress_checkpoint_and_diagnostics():
-    method = get_estimator("splitting", n_particles=400, max_levels=6, n_moves=2)
+    method = get_estimator("splitting", n_particles=400, max_levels=6, n_moves=2, **ONE)
     assert method.budget() == 400 * (8 + 5 * 2)  # 8 N draws on a plateau
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, 2 moves per state"
@@ -379,3 +392,37 @@ def test_protocol_budget_progress_checkpoint_and_diagnostics():
     assert table.column("level") == est.details["levels"]
     assert table.column("acceptance")[0] is None
     assert SubsetSimulation.diagnostics({"history": []}) == []
+
+
+def test_subset_simulation_answers_the_mean_of_two_independent_replicates():
+    problem = gaussian_linear_problem(2, p=1e-6)
+    est = subset_simulation(problem.f, problem.base, problem.gamma, seed=0)
+    replicates = est.details["replicates"]
+    assert len(replicates) == 2 and est.details["replicate_particles"] == [1000, 1000]
+    assert est.p == pytest.approx(np.mean([r["p"] for r in replicates]), rel=1e-12)
+    assert abs(est.p - problem.p_exact) < 3 * est.stderr
+    assert {h.replicate for h in est.history} == {0, 1}
+    method = get_estimator("splitting")
+    assert method.progress(est.history[-1]).startswith("replicate 2/2, set ")
+    # each replicate may run 1 + 2 + 4 times its levels' bound: 7 in all
+    levels = 2000 * 8 + 2000 * 11
+    assert method.budget() == 7 * levels and "regrown up to 2x" in method.describe()
+
+
+def test_subset_simulation_on_a_near_miss_says_caution_where_replicates_say_so():
+    problem = decoy_problem(0.03)  # a near miss beside the event, never reaching it
+
+    def trust(seed):
+        est = subset_simulation(
+            problem.f, problem.base, 0.0, seed=seed, n_particles=1000
+        )
+        as_dict = est.to_dict()
+        main = as_dict["by_gamma"][0]
+        return est, estimate_trust(estimator_class("splitting"), as_dict, main)
+
+    est, label = trust(2)  # one replicate kept the event, the other barely
+    assert est.details["replicates_disagree"] and est.p > 2 * problem.p_exact
+    assert "the replicates of the search found p = " in str(label)
+    est, label = trust(6)  # regrown three times: the luckier of several tries
+    assert est.details["replicates_regrown"] == 3
+    assert "ran out before larger ones reached gamma" in str(label)

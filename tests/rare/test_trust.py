@@ -88,8 +88,10 @@ def test_a_level_held_by_a_handful_of_particles_makes_splitting_say_caution():
         return np.where(x[:, 1] >= t, np.minimum(5.0, b - x[:, 0]), 5.0)
 
     base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    est = subset_simulation(f, base, 0.0, n_particles=1000, seed=1, plateau_draws=2)
-    assert est.details["survivors"][0] == 2
+    est = subset_simulation(
+        f, base, 0.0, n_particles=1000, seed=1, plateau_draws=2, replicates=1
+    )
+    assert est.details["survivors"][0] == 2  # one replicate: its first level
     trust = trust_of("splitting", est)
     assert "held only 2 particles" in str(trust)
 
