@@ -24,7 +24,8 @@ from avrisk.rare.families import (
     StandardSpaceShift,
 )
 from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
-from avrisk.rare.mixture import MixtureCrossEntropy, MixtureProposal, mixture_ce
+from avrisk.rare.mixture import MixtureCrossEntropy, mixture_ce
+from avrisk.rare.mixture_em import MixtureProposal
 from avrisk.rare.naive_mc import NaiveMC, naive_mc
 from avrisk.rare.problem import InvalidOutputError, RareEventProblem
 from avrisk.rare.results import CEInfo, Estimate, GammaEstimate, MixtureInfo
