@@ -45,10 +45,6 @@ MODULES_NOT_YET_SPLIT = {
         "the estimator protocol, its settings and its estimation context; the "
         "context to be its own module with the rest of rare/'s split"
     ),
-    "avrisk/rare/cross_entropy.py": (
-        "the CE update, its settings and both CE estimators; split with the "
-        "rest of rare/"
-    ),
 }
 
 #: Functions over FUNCTION_CODE_LINES lines of code not yet split, and why.

@@ -68,12 +68,14 @@ from pydantic import Field
 
 from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy import (
-    SELECTION_RULES,
     CESettings,
-    CEState,
     EliteLevel,
     SearchIterations,
     ShareOfP0,
+)
+from avrisk.rare.cross_entropy_search import (
+    SELECTION_RULES,
+    CEState,
     search_checkpoint,
     search_convergence,
     search_diagnostics,
