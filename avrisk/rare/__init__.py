@@ -9,8 +9,8 @@ point is :func:`estimate`: ``estimate(method, f, base, gamma, **settings)``.
 from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy import CrossEntropy, cross_entropy
 from avrisk.rare.cross_entropy_search import CEState
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
-    EstimationContext,
     Estimator,
     estimator_names,
     get_estimator,

@@ -53,9 +53,9 @@ from avrisk.rare.cross_entropy_search import (
     search_structure,
 )
 from avrisk.rare.defensive import DefensiveMixture
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
-    EstimationContext,
     EstimatorSettings,
     no_doubts,
     register_estimator,

@@ -30,7 +30,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from avrisk.rare.estimator import DiagnosticTable, EstimationContext
+from avrisk.rare.estimation_context import EstimationContext
+from avrisk.rare.estimator import DiagnosticTable
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates

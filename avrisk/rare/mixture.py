@@ -84,9 +84,9 @@ from avrisk.rare.cross_entropy_search import (
     search_stage_label,
     search_structure,
 )
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
-    EstimationContext,
     no_doubts,
     register_estimator,
 )

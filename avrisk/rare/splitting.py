@@ -54,9 +54,9 @@ import numpy as np
 from pydantic import Field, ValidationInfo, field_validator
 
 from avrisk.rare.black_box import estimate
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
-    EstimationContext,
     EstimatorSettings,
     register_estimator,
 )

@@ -141,9 +141,9 @@ from pydantic import Field, ValidationInfo, field_validator
 
 from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy import ShareOfP0
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
-    EstimationContext,
     register_estimator,
 )
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
