@@ -138,8 +138,8 @@ class _Counted:
 
 
 def _run_engine(problem: Any, method: str, seed: int, settings: dict) -> dict:
+    from avrisk.rare.estimation_context import EstimationContext
     from avrisk.rare.estimator import (
-        EstimationContext,
         estimator_class,
         get_estimator,
         run_estimator,

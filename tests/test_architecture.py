@@ -41,17 +41,6 @@ MODULES_NOT_YET_SPLIT = {
         "splitting's particles as an importance-sampling proposal and the "
         "estimator in one; being split into the proposal fit and the estimator"
     ),
-    "avrisk/rare/mixture.py": (
-        "mixture EM and the mixture CE estimator in one; EM to be its own module"
-    ),
-    "avrisk/rare/estimator.py": (
-        "the estimator protocol, its settings and its estimation context; the "
-        "context to be its own module with the rest of rare/'s split"
-    ),
-    "avrisk/rare/cross_entropy.py": (
-        "the CE update, its settings and both CE estimators; split with the "
-        "rest of rare/"
-    ),
 }
 
 #: Functions over FUNCTION_CODE_LINES lines of code not yet split, and why.

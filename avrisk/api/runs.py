@@ -50,7 +50,7 @@ from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.pipeline.repeatability import NotRepeatableError, ReplayCheck
 from avrisk.pipeline.sizing import estimated_row_bytes
 from avrisk.rare import InvalidOutputError
-from avrisk.rare.estimator import TooManyFailuresError
+from avrisk.rare.estimation_context import TooManyFailuresError
 from avrisk.rare.evaluation import Evaluator
 from avrisk.rare.parallel import WorkerError
 from avrisk.rare.splitting_levels import SplittingError

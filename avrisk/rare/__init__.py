@@ -7,9 +7,10 @@ point is :func:`estimate`: ``estimate(method, f, base, gamma, **settings)``.
 """
 
 from avrisk.rare.black_box import estimate
-from avrisk.rare.cross_entropy import CEState, CrossEntropy, cross_entropy
+from avrisk.rare.cross_entropy import CrossEntropy, cross_entropy
+from avrisk.rare.cross_entropy_search import CEState
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
-    EstimationContext,
     Estimator,
     estimator_names,
     get_estimator,
@@ -24,7 +25,8 @@ from avrisk.rare.families import (
     StandardSpaceShift,
 )
 from avrisk.rare.final_stage import UnreliableEstimateWarning, ZeroHitsWarning
-from avrisk.rare.mixture import MixtureCrossEntropy, MixtureProposal, mixture_ce
+from avrisk.rare.mixture import MixtureCrossEntropy, mixture_ce
+from avrisk.rare.mixture_em import MixtureProposal
 from avrisk.rare.naive_mc import NaiveMC, naive_mc
 from avrisk.rare.problem import InvalidOutputError, RareEventProblem
 from avrisk.rare.results import CEInfo, Estimate, GammaEstimate, MixtureInfo

@@ -14,8 +14,8 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
-    EstimationContext,
     Estimator,
     EstimatorSettings,
     estimator_class,

@@ -16,9 +16,9 @@ from typing import Any, Literal, NamedTuple
 from pydantic import Field
 
 from avrisk.rare.black_box import estimate
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
-    EstimationContext,
     EstimatorSettings,
     no_doubts,
     register_estimator,

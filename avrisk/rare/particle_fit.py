@@ -22,7 +22,7 @@ from scipy.special import logsumexp
 from avrisk.rare.chain_moments import block_means, informative_by_moments, moment_errors
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
-from avrisk.rare.mixture import (
+from avrisk.rare.mixture_em import (
     MixtureProposal,
     component_log_kernels,
     fit_mixture,

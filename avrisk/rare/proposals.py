@@ -33,7 +33,7 @@ import numpy as np
 from avrisk.rare.defensive import DefensiveMixture
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
-from avrisk.rare.mixture import MixtureProposal
+from avrisk.rare.mixture_em import MixtureProposal
 
 __all__ = ["Sampler", "proposal_from_record", "proposal_record"]
 

@@ -62,9 +62,9 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from avrisk.rare.black_box import estimate
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
-    EstimationContext,
     register_estimator,
 )
 from avrisk.rare.families.base import ExponentialFamily

@@ -25,7 +25,7 @@ and estimates ``p`` by importance sampling from it:
    depends a little on each of many coordinates); a low one keeps both. Then
    fit mean shifts of ``N(0, I)`` on the kept coordinates, unweighted (the
    particles already follow the target), as mixture cross-entropy fits its
-   elites (:mod:`avrisk.rare.mixture`): k-means++ seeding, EM, merging of
+   elites (:mod:`avrisk.rare.mixture_em`): k-means++ seeding, EM, merging of
    components less than one standard deviation apart. Each fitted shift ``m``
    (of ``pi N`` particles) is then shrunk towards 0, James-Stein fashion, to
    ``c m`` with ``c = max(0, 1 - s^2 / (pi |m|^2))``, ``s^2`` the sum of the
@@ -143,9 +143,9 @@ from pydantic import Field
 
 from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy import ShareOfP0
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
-    EstimationContext,
     register_estimator,
 )
 from avrisk.rare.families.base import ExponentialFamily

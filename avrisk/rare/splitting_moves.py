@@ -57,7 +57,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from avrisk.rare.estimator import EstimationContext
+from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.families.base import FloatArray
 from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem
 from avrisk.rare.splitting_levels import SplittingError, SplittingState

@@ -19,7 +19,7 @@ from avrisk.pipeline.repeatability import (
     UncheckedResumeWarning,
     replayed_rows,
 )
-from avrisk.rare.estimator import TooManyFailuresError
+from avrisk.rare.estimation_context import TooManyFailuresError
 from avrisk.rare.problem import SAMPLE_CHUNK
 from avrisk.testing import gaussian_linear_problem
 from tests.monitors import Counting

@@ -339,7 +339,7 @@ def test_a_rerun_counts_each_rollout_once_replayed_or_simulated_again(tmp_path):
 
 
 def test_too_many_failures_stop_the_run_with_a_clear_message(tmp_path):
-    from avrisk.rare.estimator import TooManyFailuresError
+    from avrisk.rare.estimation_context import TooManyFailuresError
 
     with pytest.raises(TooManyFailuresError, match=r"failed to evaluate .*rerun"):
         run(tmp_path / "run", f=flaky(lambda x: x[:, 1] > 1.5))

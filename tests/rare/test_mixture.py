@@ -12,7 +12,7 @@ from avrisk.rare import (
     mixture_ce,
 )
 from avrisk.rare.estimator import estimator_class
-from avrisk.rare.mixture import (
+from avrisk.rare.mixture_em import (
     MERGE_DIVERGENCE,
     component_log_kernels,
     fit_mixture,

@@ -17,7 +17,8 @@ from avrisk.rare import (
     splitting_is,
     subset_simulation,
 )
-from avrisk.rare.cross_entropy import SEARCH_ADVICE, CESettings
+from avrisk.rare.cross_entropy import CESettings
+from avrisk.rare.cross_entropy_search import SEARCH_ADVICE
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.particle_fit import (

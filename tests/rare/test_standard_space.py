@@ -13,7 +13,8 @@ from avrisk.rare import (
     cross_entropy,
 )
 from avrisk.rare.defensive import DefensiveMixture
-from avrisk.rare.mixture import MixtureProposal, mixture_ce
+from avrisk.rare.mixture import mixture_ce
+from avrisk.rare.mixture_em import MixtureProposal
 from avrisk.rare.proposals import proposal_from_record, proposal_record
 from avrisk.testing import beta_sum_problem, four_branch_problem
 
