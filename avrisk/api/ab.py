@@ -61,7 +61,7 @@ from avrisk.rare.paired_gate import Verdict, gate
 from avrisk.rare.problem import FINAL_STAGE, STATUS
 from avrisk.rare.results import jsonable
 from avrisk.report.ab import AB_REPORT_FILE, write_ab_report
-from avrisk.report.animate import animate_samples
+from avrisk.report.animate import animate_pair, animate_samples
 from avrisk.report.answer import SCENARIO_WORDING
 from avrisk.scenario import ScenarioSpec
 
@@ -382,13 +382,16 @@ def animate_discordant(
     discordant: dict[str, list[dict[str, Any]]],
     n: int,
 ) -> dict[str, list[dict[str, Any]]]:
-    """The first ``n`` of each kind, with each ego's animation on the same row.
+    """The first ``n`` of each kind, with A and B on the same ``X`` animated.
 
-    GIFs go to ``<run_dir>/ab/<kind><i>_<a|b>.gif`` (kept when there already:
-    a read-back does not simulate them again), made by ``simulators`` (A's,
-    B's); the rows get their paths, relative to the run directory, as
-    ``animation_a`` and ``animation_b`` (None for one not there that its
-    simulator, None, cannot make).
+    One GIF, ``<run_dir>/ab/<kind><i>.gif``, plays A's rollout above B's, in
+    step (:func:`~avrisk.report.animate.animate_pair`); the row gets its path,
+    relative to the run directory, as ``animation``. Where one of
+    ``simulators`` (A's, B's) is None (a read-back that cannot build an ego
+    from user code) and that GIF is not there, each ego it can simulate gets
+    a GIF of its own, ``<kind><i>_<a|b>.gif``, as ``animation_a`` and
+    ``animation_b`` (None for the other). A GIF already there is kept: a
+    read-back does not simulate it again.
     """
     out = run_dir.path
     columns = list(run_dir.param_names)
@@ -398,6 +401,12 @@ def animate_discordant(
         for i, row in enumerate(rows[:n], start=1):
             x = run_dir.samples(columns, rows=[row["row"]]).to_pylist()[0]
             sample = {**x, "seed": row["seed"]}
+            pair = out / "ab" / f"{kind}{i}.gif"
+            if not pair.is_file() and None not in simulators:
+                animate_pair(simulators, sample, ("A", "B"), pair)  # type: ignore[arg-type]
+            if pair.is_file():
+                shown[kind].append({**row, "animation": str(pair.relative_to(out))})
+                continue
             paths: dict[str, str | None] = {}
             for side, sim in zip("ab", simulators, strict=True):
                 path = out / "ab" / f"{kind}{i}_{side}.gif"

@@ -10,6 +10,7 @@ last frame, marked in red.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -372,10 +373,55 @@ def animate_samples(
     pathlib.Path
         ``path``.
     """
-    x = np.array([[row[c] for c in sim.layout.columns] for row in rows])
-    seeds = np.array([row["seed"] for row in rows], dtype=np.int64)
-    _, traces = resimulate(sim, x, seeds)
+    traces = _traces(sim, rows)
     spec = sim.spec
     path.parent.mkdir(parents=True, exist_ok=True)
     animate_rollouts(traces, spec.road, spec.simulation.dt, path)
     return path
+
+
+def animate_pair(
+    sims: Sequence[ScenarioSimulator],
+    row: Mapping[str, Any],
+    labels: Sequence[str],
+    path: Path,
+) -> Path:
+    """One sample driven by each of several simulators (egos), played in step.
+
+    The same ``X`` and seed in each (common random numbers), one panel per
+    simulator, top to bottom, every panel at the same time step in every
+    frame: where the egos part is where they differ.
+
+    Parameters
+    ----------
+    sims : sequence of avrisk.assembly.ScenarioSimulator
+        One per ego, of one scenario (the same road and time step).
+    row : mapping
+        A samples-table row: the columns of each ``sim.layout`` and ``seed``.
+    labels : sequence of str
+        One per simulator, shown in its panel's title (``"A"``, ``"B"``).
+    path : Path
+        GIF to write (its folder is created).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
+    traces = [
+        dataclasses.replace(_traces(sim, [row])[0], label=label)
+        for sim, label in zip(sims, labels, strict=True)
+    ]
+    spec = sims[0].spec
+    path.parent.mkdir(parents=True, exist_ok=True)
+    animate_rollouts(traces, spec.road, spec.simulation.dt, path)
+    return path
+
+
+def _traces(
+    sim: ScenarioSimulator, rows: Sequence[Mapping[str, Any]]
+) -> list[RolloutTrace]:
+    """Samples-table rows simulated again, with their traces."""
+    x = np.array([[row[c] for c in sim.layout.columns] for row in rows])
+    seeds = np.array([row["seed"] for row in rows], dtype=np.int64)
+    return resimulate(sim, x, seeds)[1]

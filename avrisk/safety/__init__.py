@@ -4,8 +4,8 @@ Each implements :class:`avrisk.sim.interfaces.SafetyMeasure`; importing the
 package registers them by name (:func:`get_safety_measure`).
 """
 
-from avrisk.safety.registry import get_safety_measure, register_safety_measure
 from avrisk.safety.box_ttc import MinBoxTTC, box_ttc
+from avrisk.safety.registry import get_safety_measure, register_safety_measure
 from avrisk.safety.ttc import MinTTC, ray_ttc
 
 __all__ = [

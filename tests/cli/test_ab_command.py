@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from PIL import Image
 from typer.testing import CliRunner
 
 from avrisk.cli.app import app
@@ -88,7 +89,7 @@ def test_report_rebuilds_the_ab_report_as_ab_wrote_it(short, tmp_path, monkeypat
     made = invoke("ab", short, "--ego-b", HOLD_FAST, "--out", out, *SMALL[:-1], 1)
     assert made.exit_code == 1, made.output
     html, record = (out / "ab_report.html").read_text(), (out / "ab.json").read_text()
-    assert "ab/regressions1_b.gif" in html
+    assert 'src="ab/regressions1.gif"' in html  # A above B, in step
     (out / "ab_report.html").unlink()
     monkeypatch.setitem(sys.modules, "tests.user_components", None)  # B's code
 
@@ -102,9 +103,14 @@ def test_report_rebuilds_the_ab_report_as_ab_wrote_it(short, tmp_path, monkeypat
     assert doc == json.loads(record)
     # an animation lost is made again for A (a registered ego), left out for B
     # (user code, which a run directory never makes avrisk import)
-    for side in "ab":
-        (out / "ab" / f"regressions1_{side}.gif").unlink()
+    with Image.open(out / "ab" / "regressions1.gif") as pair:
+        pair_height, pair_frames = pair.size[1], pair.n_frames
+    (out / "ab" / "regressions1.gif").unlink()
     assert invoke("report", out).exit_code == 0
+    assert not (out / "ab" / "regressions1.gif").exists()
+    with Image.open(out / "ab" / "regressions1_a.gif") as single:
+        # A's panel above B's, the same steps: twice as high, as many frames
+        assert pair_height > 1.8 * single.size[1] and pair_frames == single.n_frames
     assert (out / "ab" / "regressions1_a.gif").is_file()
     assert not (out / "ab" / "regressions1_b.gif").exists()
     html = (out / "ab_report.html").read_text()
