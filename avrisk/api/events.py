@@ -37,6 +37,9 @@ class PlannedRun(NamedTuple):
     stored_in_full : int
         Those of ``rollouts`` whose every column is stored
         (:meth:`~avrisk.rare.estimator.Estimator.budget_not_redrawn`).
+    grows_to : int, default=0
+        The most rollouts where the run may grow its budget beyond
+        ``rollouts`` (subset simulation's regrown replicates; 0: it does not).
     """
 
     label: str
@@ -44,6 +47,7 @@ class PlannedRun(NamedTuple):
     rollouts: int
     at_most: bool = False
     stored_in_full: int = 0
+    grows_to: int = 0
 
 
 @dataclass(frozen=True)

@@ -177,13 +177,15 @@ def execute(
 
 
 def planned(label: str, s: RunSettings) -> PlannedRun:
-    """A run of ``s`` in a plan: its rollouts, and whether they are only a bound."""
+    """A run of ``s`` in a plan: its rollouts, a bound or not, and its growth."""
+    growth = s.most_rollouts - s.total_rollouts  # levels: stored in full
     return PlannedRun(
         label,
         s.estimator.describe(),
         s.total_rollouts,
         s.estimator.budget_is_bound,
-        s.rollouts_not_redrawn,
+        max(s.rollouts_not_redrawn - growth, 0),
+        s.most_rollouts if growth > 0 else 0,
     )
 
 

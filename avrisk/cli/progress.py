@@ -148,9 +148,17 @@ class CostMeter:
         self._announced = True
         runs = ", ".join(f"{run.label} ({run.what})" for run in self.plan)
         in_all = " in all" if len(self.plan) > 1 else ""
+        grows = sum(max(run.grows_to, run.rollouts) for run in self.plan)
+        if grows == self.total:
+            sooner = " (fewer if the levels reach gamma sooner)"
+        else:
+            sooner = (
+                " (fewer if the levels reach gamma sooner; up to "
+                f"{grows:,} if levels that run out are run again, larger)"
+            )
         self.console.print(
             f"plan: {escape(runs)}: {self.at_most}{self.total:,} rollouts{in_all}"
-            + ("" if not self.at_most else " (fewer if the levels reach gamma sooner)")
+            + ("" if not self.at_most else sooner)
             + f"; samples take {self.at_most}about "
             f"{megabytes(self.total_bytes)} on disk "
             f"(an estimate: {self._per_rollout_text()})",
@@ -248,6 +256,7 @@ class RichRunMonitor:
         self.simulated = 0
         self._progress: Progress | None = None
         self._task = 0
+        self._total = 0
         self._last = 0.0
 
     def __enter__(self) -> RichRunMonitor:
@@ -292,6 +301,7 @@ class RichRunMonitor:
         used += len("0:00:00") * (2 if self.console.width >= WIDE else 1) + 7
         self._status.width = max(self.console.width - used, 10)
         self._task = self._progress.add_task(self.label, total=total, status="")
+        self._total = total
         self._last = time.perf_counter()
 
     def advance(self, n: int, *, replayed: bool) -> None:
@@ -305,6 +315,10 @@ class RichRunMonitor:
         if self.cost is not None:
             self.cost.count(n, None if replayed else now - self._last)
         self._last = now
+        done = self.replayed + self.simulated
+        if done > self._total:  # a run that grew its budget (regrown levels)
+            self._total = done
+            self._progress.update(self._task, total=done)
         self._progress.update(self._task, advance=n)
 
     def status(self, text: str) -> None:

@@ -117,7 +117,18 @@ class RunSettings:
 
     @property
     def total_rollouts(self) -> int:
-        """Calls of ``f`` the run plans to make."""
+        """Calls of ``f`` the run plans to make, before it adapts its budget.
+
+        An estimator that may grow its budget as the event turns out harder
+        (subset simulation's regrown replicates) says what it plans without
+        growing by ``planned_budget()``; :attr:`most_rollouts` is the bound.
+        """
+        planned = getattr(self.estimator, "planned_budget", self.estimator.budget)
+        return planned()
+
+    @property
+    def most_rollouts(self) -> int:
+        """Calls of ``f`` the run may make at most, growth included."""
         return self.estimator.budget()
 
     @property

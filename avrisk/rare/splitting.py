@@ -262,6 +262,14 @@ class SubsetSimulation:
         bound = s.bound(s.regrow)
         return bound if s.max_calls is None else min(bound, s.max_calls)
 
+    def planned_budget(self) -> int:
+        """The bound of a run none of whose replicates is regrown.
+
+        What the plan and the progress bar show; :meth:`budget` adds every
+        regrowth the settings allow.
+        """
+        return min(self.settings.bound(regrow=0), self.budget())
+
     def budget_not_redrawn(self) -> int:
         """All of :meth:`budget`: its points are drawn in standard space and moved."""
         return self.budget()

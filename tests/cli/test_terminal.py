@@ -123,18 +123,19 @@ def test_the_default_method_is_splitting_is_its_plan_a_bound_and_its_tables_show
         "splitting_is"
     )
     err = words(result.stderr)
-    # max_levels=12 sets of 100 (the first of 800 on a plateau), 7 times (each
-    # replicate regrown twice, to 2 and 4 times its particles), the moves at
-    # gamma (4 x 100) and the final stage: a bound
+    # max_levels=12 sets of 100 (the first of 800 on a plateau), the moves at
+    # gamma and the final stage: a bound; 7 times the sets (each replicate
+    # regrown twice, to 2 and 4 times its particles) and 4 x 100 moves at gamma
+    # if its levels run out
     assert (
         "plan: splitting + IS (subset simulation, 100 particles per level, p0 0.1, "
         "regrown up to 2x, then IS 100 (4 components, defensive 0.1)): at most "
-        "13,800 rollouts (fewer if the levels reach gamma sooner); samples take at "
-        "most about"
+        "2,100 rollouts (fewer if the levels reach gamma sooner; up to 13,800 if "
+        "levels that run out are run again, larger); samples take at most about"
     ) in err
     # its first batch: the first replicate's first set, 50 particles
     assert "rollouts/s on the first 50: at most about" in err
-    assert "for at most 13,750 more" in err
+    assert "for at most 2,050 more" in err
     assert_whole_at_80_columns(result.stdout)
     estimate = json.loads((out / "summary.json").read_text())["estimate"]
     n = estimate["n_evals"]
@@ -186,11 +187,11 @@ def test_the_plan_counts_the_rollouts_splitting_stores_in_full(tmp_path):
         float(x.replace(",", "")) for x in estimates.split(" B a rollout, ")
     )
     assert compact < 400 < 2000 < full  # xi's 404 float32 columns
-    # 12 sets of 30 (the first of 240 on a plateau), 7 times over (each replicate
-    # regrown twice), and 4 x 30 moves at gamma in full; the final 30 without xi
+    # 12 sets of 30 (the first of 240 on a plateau) and 30 moves at gamma in
+    # full, the final 30 without xi (the plan before any regrowth)
     planned = err.split("samples take at most about ")[1].split(" on disk")[0]
-    assert planned == "9 MB"  # (4,110 full + 30 compact) rows, about 8.6 MB
-    assert 8.5e6 <= 4110 * full + 30 * compact < 9.5e6
+    assert planned == "1 MB"  # (600 full + 30 compact) rows, about 1.4 MB
+    assert 1e6 <= 600 * full + 30 * compact < 2e6
     measured = float(err.split("; disk: ")[1].split(" B a rollout")[0].replace(",", ""))
     assert measured == pytest.approx(full, rel=0.15)  # the first chunk: a level
     assert " B a rollout stored in full, at most about " in err.split("; disk: ")[1]
