@@ -113,7 +113,8 @@ class ParticleFit(NamedTuple):
         Coordinates shifted.
     along_slope : bool
         Whether the shift is the particles' mean along the direction in which
-        ``f`` falls (:func:`slope_direction`) rather than per coordinate.
+        ``f`` falls (:func:`~avrisk.rare.particle_shifts.slope_direction`)
+        rather than per coordinate.
     held_out : HeldOutWeights
         What the particles' importance weights ``p0 / q`` under fits that did
         not see them predict of the importance-sampling stage, before it is
