@@ -36,22 +36,10 @@ MODULE_LINES = code_shape.MODULE_LINES
 FUNCTION_CODE_LINES = code_shape.FUNCTION_CODE_LINES
 
 #: Modules over MODULE_LINES lines not yet split (issue 43, step 4), and why.
-MODULES_NOT_YET_SPLIT = {
-    "avrisk/rare/splitting_importance.py": (
-        "splitting's particles as an importance-sampling proposal and the "
-        "estimator in one; being split into the proposal fit and the estimator"
-    ),
-}
+MODULES_NOT_YET_SPLIT: dict[str, str] = {}
 
 #: Functions over FUNCTION_CODE_LINES lines of code not yet split, and why.
-FUNCTIONS_NOT_YET_SPLIT = {
-    "avrisk/rare/particle_fit.py:particle_proposal": (
-        "fits the proposal in several nested steps; split with rare/"
-    ),
-    "avrisk/rare/splitting_importance.py:SplittingImportanceSampling.finalize": (
-        "the IS stage and its diagnostics; split with rare/"
-    ),
-}
+FUNCTIONS_NOT_YET_SPLIT: dict[str, str] = {}
 
 # subpackage -> the only avrisk subpackages (or top-level modules) it may import
 ALLOWED = {

@@ -62,7 +62,7 @@ def moment_errors(
 
     Under ``N(0, 1)`` both moments are 0: what :func:`informative_coordinates`
     tests, and the first one's standard errors are the noise of a fitted
-    shift (:func:`avrisk.rare.particle_fit.shrink`).
+    shift (:func:`avrisk.rare.particle_shifts.shrink`).
     """
     return block_means(z, chain), block_means(z * z - 1.0, chain)
 

@@ -5,45 +5,42 @@ what the fit does and why): mean shifts of the base's standard normals on the
 coordinates the particles say something about, components chosen by the
 held-out likelihood of one half of the chains under a fit to the other half,
 shrunk by their noise, plus a component for each region the fit leaves out.
-The fit knows nothing of how the particles were made: particles of ``P0(. |
-f <= gamma)`` in standard-normal space, and the chain of each.
+The shifts themselves are fitted in :mod:`avrisk.rare.particle_shifts`; this
+module chooses among them and predicts, from the particles, how the
+importance sample will fare. The fit knows nothing of how the particles were
+made: particles of ``P0(. | f <= gamma)`` in standard-normal space, and the
+chain of each.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from typing import Literal, NamedTuple, Protocol
 
 import numpy as np
-from scipy import stats
 from scipy.special import logsumexp
 
-from avrisk.rare.chain_moments import block_means, informative_by_moments, moment_errors
+from avrisk.rare.chain_moments import block_means
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
-from avrisk.rare.families.standard_space import StandardSpaceShift
-from avrisk.rare.mixture_em import (
-    MixtureProposal,
-    component_log_kernels,
-    fit_mixture,
-    merge_overlapping,
-    seed_components,
+from avrisk.rare.mixture_em import MixtureProposal, component_log_kernels
+from avrisk.rare.particle_shifts import (
+    fit_along_direction,
+    fit_per_coordinate,
+    with_light_regions,
 )
 
 __all__ = [
-    "LIGHT_REGION_SHARE",
-    "MIN_REGION_PARTICLES",
-    "OUTLIER_TAIL",
     "PREDICTION_FOLDS",
     "THRESHOLDS",
+    "ChainHalves",
     "HeldOutWeights",
     "ParticleFit",
     "ProposalSettings",
+    "choose_fit",
     "held_out_weights",
     "particle_proposal",
-    "shrink",
-    "slope_direction",
-    "with_light_regions",
 ]
 
 #: Candidate thresholds, in standard errors, beyond which a coordinate's particle
@@ -52,18 +49,12 @@ __all__ = [
 #: keeps every coordinate.
 THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
 
-#: A particle farther from every fitted shift than a draw of it is with this
-#: probability lies in a region of its own (:func:`with_light_regions`).
-OUTLIER_TAIL = 1e-6
-#: Fewest such particles that make a region of their own.
-MIN_REGION_PARTICLES = 3
-#: Least proposal weight of a region kept for its separation alone.
-LIGHT_REGION_SHARE = 0.02
 #: Folds of the chains in :func:`held_out_weights`.
 PREDICTION_FOLDS = 10
 
 #: A proposal's fit to particles and their chains: its components, their
-#: weights and the coordinates it shifts (inside :func:`particle_proposal`).
+#: weights and the coordinates it shifts (the fits of
+#: :mod:`avrisk.rare.particle_shifts` with their settings bound).
 Fitter = Callable[
     [FloatArray, np.ndarray],
     tuple[list[ExponentialFamily], FloatArray, np.ndarray],
@@ -122,7 +113,8 @@ class ParticleFit(NamedTuple):
         Coordinates shifted.
     along_slope : bool
         Whether the shift is the particles' mean along the direction in which
-        ``f`` falls (:func:`slope_direction`) rather than per coordinate.
+        ``f`` falls (:func:`~avrisk.rare.particle_shifts.slope_direction`)
+        rather than per coordinate.
     held_out : HeldOutWeights
         What the particles' importance weights ``p0 / q`` under fits that did
         not see them predict of the importance-sampling stage, before it is
@@ -134,46 +126,6 @@ class ParticleFit(NamedTuple):
     n_shifted: int
     along_slope: bool = False
     held_out: HeldOutWeights = HeldOutWeights(float("nan"), float("nan"))
-
-
-def slope_direction(z: FloatArray, values: FloatArray) -> FloatArray | None:
-    """The unit direction in which ``f`` falls, by least squares over particles.
-
-    ``f ~ b + w . z`` fitted to the particles with finite values; the direction
-    is ``-w / |w|``. For a linear limit state it is exact (whatever the
-    particles' correlation, once they span the space); otherwise it is ``f``'s
-    average slope over the particles, a candidate the held-out likelihood of
-    :func:`particle_proposal` weighs against the per-coordinate fits.
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        Particles in standard-normal space (e.g. the last level's).
-    values : ndarray of shape (n,)
-        Their ``f``.
-
-    Returns
-    -------
-    ndarray of shape (D,) or None
-        None with fewer than ``D + 2`` finite values or ``f`` constant on them.
-
-    Examples
-    --------
-    >>> rng = np.random.default_rng(0)
-    >>> z = rng.standard_normal((50, 3))
-    >>> (slope_direction(z, 5.0 - 2.0 * z[:, 0]).round(6) + 0.0).tolist()
-    [1.0, 0.0, 0.0]
-    """
-    finite = np.isfinite(values)
-    if np.count_nonzero(finite) < z.shape[1] + 2:
-        return None
-    points, f = z[finite], values[finite]
-    f = f - f.mean()
-    if not f.any():
-        return None
-    w, *_ = np.linalg.lstsq(points - points.mean(axis=0), f, rcond=None)
-    norm = float(np.linalg.norm(w))
-    return None if norm == 0.0 or not np.isfinite(norm) else -w / norm
 
 
 def particle_proposal(
@@ -201,7 +153,8 @@ def particle_proposal(
     rng : numpy.random.Generator
         For the k-means++ seeding.
     slope : ndarray of shape (D,), optional
-        A unit direction in which ``f`` falls (:func:`slope_direction`): one
+        A unit direction in which ``f`` falls
+        (:func:`~avrisk.rare.particle_shifts.slope_direction`): one
         more candidate, a single shift along it by the particles' mean, shrunk
         by its noise. It wins where many coordinates each matter a little and
         the per-coordinate mean is mostly noise (``D / n_eff`` in squared norm
@@ -234,77 +187,27 @@ def particle_proposal(
     if slope is not None and np.any(allowed & (slope != 0)):
         along = np.where(allowed, slope, 0.0)
         along = along / np.linalg.norm(along)
-
-    def fit_along(
-        points: FloatArray, point_chain: np.ndarray
-    ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
-        """One shift along ``along``: the particles' mean there, shrunk."""
-        shifted = along != 0
-        mean, stderr = block_means(points @ along[:, None], point_chain)
-        shift = StandardSpaceShift(base, mean[0] * along, searched=shifted)
-        noise = float(np.nan_to_num(stderr[0] ** 2))
-        return [shrink(shift, 1.0, noise)], np.ones(1), shifted
-
-    def fit(
-        points: FloatArray, point_chain: np.ndarray, threshold: float, k: int
-    ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
-        """Shifts of the informative coordinates, ``k`` components, shrunk."""
-        moments = moment_errors(points, point_chain)
-        shifted = allowed & informative_by_moments(moments, threshold)
-        structure = StandardSpaceShift(base, searched=shifted)
-        masked = np.where(shifted, points, 0.0)  # the others play no part in it
-        weights = np.full(len(points), 1.0 / len(points))
-        start = seed_components(structure, masked, weights, k, rng)
-        mixture = fit_mixture(*start, masked, weights, settings.min_weight)
-        components, shares = merge_overlapping(mixture.components, mixture.weights)
-        noise = float(np.nansum(moments[0][1][shifted] ** 2))
-        shrunk = [
-            shrink(c, share, noise) for c, share in zip(components, shares, strict=True)
-        ]
-        return shrunk, shares, shifted
-
-    first = chain < (chain.max() + 1) / 2
-
-    def held_out_points(fitter: Fitter) -> FloatArray:
-        """Each particle's log-likelihood under the fit to the other half, (n,)."""
-        return cross_fitted_log_ratios(
-            z, chain, (~first, first), lambda p, c: fitter(p, c)[:2]
-        )
-
-    def summed(scores: FloatArray) -> float:
-        """Mean held-out log-likelihood of each half, summed over the halves."""
-        return float(scores[~first].mean() + scores[first].mean())
-
-    def clearly_better(a: FloatArray, b: FloatArray) -> bool:
-        """Whether held-out scores ``a`` beat ``b`` by two standard errors.
-
-        The paired differences' mean over particles, its standard error from
-        blocks of chains (:func:`block_means`, the chains' correlation in it).
-        """
-        mean, stderr = block_means((a - b)[:, None], chain)
-        return bool(mean[0] > 2.0 * np.nan_to_num(stderr[0], nan=np.inf))
+    fit_along = (
+        None
+        if along is None
+        else functools.partial(fit_along_direction, base=base, along=along)
+    )
 
     def per_coordinate(threshold: float, k: int) -> Fitter:
-        """:func:`fit` with its threshold and number of components set."""
-        return lambda points, point_chain: fit(points, point_chain, threshold, k)
-
-    threshold = THRESHOLDS[0]
-    chosen = per_coordinate(threshold, 1)
-    along_slope = False
-    if first.any() and not first.all():  # max keeps the first of ties
-        threshold = max(
-            THRESHOLDS, key=lambda t: summed(held_out_points(per_coordinate(t, 1)))
+        """:func:`fit_per_coordinate` with its threshold and components set."""
+        return functools.partial(
+            fit_per_coordinate,
+            base=base,
+            allowed=allowed,
+            threshold=threshold,
+            k=k,
+            min_weight=settings.min_weight,
+            rng=rng,
         )
-        points = {
-            k: held_out_points(per_coordinate(threshold, k))
-            for k in range(1, settings.n_components + 1)
-        }
-        k = max(points, key=lambda k: summed(points[k]))
-        chosen = per_coordinate(threshold, k)
-        # the shift along the slope, if clearly better than the best
-        # per-coordinate mixture (a close call goes to the mixture)
-        if along is not None and clearly_better(held_out_points(fit_along), points[k]):
-            chosen, threshold, along_slope = fit_along, 0.0, True
+
+    chosen, threshold, along_slope = choose_fit(
+        ChainHalves.of(z, chain), per_coordinate, settings.n_components, fit_along
+    )
     components, weights, shifted = chosen(z, chain)
     components, weights = with_light_regions(z, components, weights, shifted, base, rng)
     proposal = MixtureProposal(components, weights, base, settings.defensive)
@@ -315,6 +218,114 @@ def particle_proposal(
         along_slope=along_slope,
         held_out=held_out_weights(z, chain, chosen, base, settings.defensive, rng),
     )
+
+
+class ChainHalves(NamedTuple):
+    """The particles in two halves of the chains, each scored by a fit to the other.
+
+    Chains are numbered in the order of their ancestors, so the halves (the
+    lower and the upper numbers) descend from different draws of ``P0`` and
+    are close to independent.
+
+    Attributes
+    ----------
+    z : ndarray of shape (n, D)
+        The particles in standard-normal space.
+    chain : ndarray of int, shape (n,)
+        Each particle's chain.
+    first : ndarray of bool, shape (n,)
+        The particles of the first half.
+    """
+
+    z: FloatArray
+    chain: np.ndarray
+    first: np.ndarray
+
+    @classmethod
+    def of(cls, z: FloatArray, chain: np.ndarray) -> ChainHalves:
+        """The halves of the chains ``chain`` (the lower numbers first)."""
+        return cls(z, chain, chain < (chain.max() + 1) / 2)
+
+    def both_held(self) -> bool:
+        """Whether each half holds particles (else nothing can be scored)."""
+        return bool(self.first.any() and not self.first.all())
+
+    def log_likelihoods(self, fitter: Fitter) -> FloatArray:
+        """Each particle's log-likelihood under the fit to the other half, (n,)."""
+        return cross_fitted_log_ratios(
+            self.z,
+            self.chain,
+            (~self.first, self.first),
+            lambda p, c: fitter(p, c)[:2],
+        )
+
+    def summed(self, scores: FloatArray) -> float:
+        """Mean held-out log-likelihood of each half, summed over the halves."""
+        return float(scores[~self.first].mean() + scores[self.first].mean())
+
+    def clearly_better(self, a: FloatArray, b: FloatArray) -> bool:
+        """Whether held-out scores ``a`` beat ``b`` by two standard errors.
+
+        The paired differences' mean over particles, its standard error from
+        blocks of chains (:func:`block_means`, the chains' correlation in it).
+        """
+        mean, stderr = block_means((a - b)[:, None], self.chain)
+        return bool(mean[0] > 2.0 * np.nan_to_num(stderr[0], nan=np.inf))
+
+
+def choose_fit(
+    halves: ChainHalves,
+    per_coordinate: Callable[[float, int], Fitter],
+    n_components: int,
+    fit_along: Fitter | None,
+) -> tuple[Fitter, float, bool]:
+    """The fit whose halves score the other half's particles best.
+
+    First the threshold (one component; ties to the sparsest, the first of
+    ``THRESHOLDS``), then the number of components from 1 to
+    ``n_components`` (ties to the fewest), then the shift along the slope if
+    it is clearly better than that mixture (a close call goes to the
+    mixture). With every particle in one half, nothing is scored: the
+    sparsest threshold with one component.
+
+    Parameters
+    ----------
+    halves : ChainHalves
+        The particles and their chains, halved.
+    per_coordinate : callable
+        ``per_coordinate(threshold, k)``: the per-coordinate fitter.
+    n_components : int
+        Most components tried.
+    fit_along : callable or None
+        The fitter along ``f``'s slope, if there is one.
+
+    Returns
+    -------
+    fitter : callable
+        The chosen fit.
+    threshold : float
+        Its threshold in standard errors (0 along the slope).
+    along_slope : bool
+        Whether it is the shift along the slope.
+    """
+    threshold = THRESHOLDS[0]
+    if not halves.both_held():
+        return per_coordinate(threshold, 1), threshold, False
+    # max keeps the first of ties
+    threshold = max(
+        THRESHOLDS,
+        key=lambda t: halves.summed(halves.log_likelihoods(per_coordinate(t, 1))),
+    )
+    scores = {
+        k: halves.log_likelihoods(per_coordinate(threshold, k))
+        for k in range(1, n_components + 1)
+    }
+    k = max(scores, key=lambda k: halves.summed(scores[k]))
+    if fit_along is not None and halves.clearly_better(
+        halves.log_likelihoods(fit_along), scores[k]
+    ):
+        return fit_along, 0.0, True
+    return per_coordinate(threshold, k), threshold, False
 
 
 def cross_fitted_log_ratios(
@@ -406,93 +417,3 @@ def held_out_weights(
         uncovered=float(np.mean(~covered)),
         covered_mean_weight=float(np.mean(np.where(covered, w, 0.0))),
     )
-
-
-def with_light_regions(
-    z: FloatArray,
-    components: Sequence[ExponentialFamily],
-    weights: FloatArray,
-    shifted: np.ndarray,
-    base: ExponentialFamily,
-    rng: np.random.Generator,
-) -> tuple[list[ExponentialFamily], FloatArray]:
-    """The fit, plus a component for each region its components leave out.
-
-    A particle farther from every fitted shift than a draw of it would be
-    with probability ``OUTLIER_TAIL`` (its squared distance over the shifted
-    coordinates against ``chi^2`` of as many degrees of freedom) lies in a
-    region of its own: a region few chains reached, which the held-out halves
-    cannot vouch for (one half holds it, the other not) and EM drops under
-    ``min_weight``. With at least ``MIN_REGION_PARTICLES`` such particles,
-    shifts are fitted to them alone (k-means++ seeding, EM, merging) and kept
-    unshrunk, each with a weight of its particles' share but at least
-    ``LIGHT_REGION_SHARE``: their share of the particles is that of ``p``
-    only on average, and a region a search barely reached may hold more.
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        The particles in standard-normal space.
-    components : sequence of StandardSpaceShift
-        The fitted shifts; ``weights`` their weights, shape (K,).
-    shifted : ndarray of bool, shape (D,)
-        The coordinates the shifts move.
-    base : ExponentialFamily
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    components : list of ExponentialFamily
-    weights : ndarray of shape (K',), summing to 1
-    """
-    d = int(np.count_nonzero(shifted))
-    if d == 0:
-        return list(components), weights
-    masked = np.where(shifted, z, 0.0)
-    means = np.array([c.mean for c in components])
-    far = ((masked[:, None, :] - means[None]) ** 2).sum(axis=2).min(axis=1)
-    outside = far > stats.chi2.isf(OUTLIER_TAIL, d)
-    n_out = int(np.count_nonzero(outside))
-    if n_out < MIN_REGION_PARTICLES:
-        return list(components), weights
-    structure = StandardSpaceShift(base, searched=shifted)
-    points = masked[outside]
-    even = np.full(n_out, 1.0 / n_out)
-    k = max(1, n_out // MIN_REGION_PARTICLES)
-    start = seed_components(structure, points, even, k, rng)
-    fit = fit_mixture(*start, points, even, 1.0 / n_out)
-    light, shares = merge_overlapping(fit.components, fit.weights)
-    light_weights = np.maximum(shares * n_out / len(z), LIGHT_REGION_SHARE)
-    kept = np.asarray(weights) * (1.0 - light_weights.sum())
-    return [*components, *light], np.concatenate([kept, light_weights])
-
-
-def shrink(
-    component: StandardSpaceShift, share: float, noise: float
-) -> StandardSpaceShift:
-    """A fitted shift ``m`` scaled by ``c = max(0, 1 - noise / (share |m|^2))``.
-
-    Parameters
-    ----------
-    component : StandardSpaceShift
-        The fit, of ``share`` of the particles.
-    share : float
-        Its mixture weight, in (0, 1].
-    noise : float
-        Sum of the shifted coordinates' squared standard errors of the mean
-        of all particles (a component of a share ``pi`` has ``1 / pi`` times
-        that noise).
-
-    Examples
-    --------
-    >>> from avrisk.rare import FixedCovNormal
-    >>> base = FixedCovNormal(np.zeros(2), cov=np.eye(2))
-    >>> fit = StandardSpaceShift(base, [3.0, 4.0])
-    >>> shrink(fit, 0.5, 2.5).mean.round(6).tolist()  # c = 1 - 2.5 / (0.5 * 25)
-    [2.4, 3.2]
-    """
-    size = float(component.mean @ component.mean)
-    if size == 0.0:
-        return component
-    scale = max(0.0, 1.0 - noise / (share * size))
-    return component.with_natural_params(scale * component.mean)

@@ -101,23 +101,10 @@ when none reaches ``gamma`` is it subset simulation's error.
 
 The answer
 ----------
-The importance-sampling estimate: the proposal is fixed before its samples
-are drawn, so it is unbiased whatever the particles, and its standard error
-is the weighted mean's (the usual CLT interval, trusted while the hits'
-weights have Pareto ``k <= 0.7``). Unless the particles say beforehand that
-the levels' own product (the replicates' mean) will be more precise
-(:func:`levels_more_precise`): the particles' weights under fits to the
-other folds of the chains predict the importance sample's error, both the
-share of ``p`` it will miss (where its proposal is no denser than ``P0``)
-and its variance on the rest, and a proposal that cannot hold what they
-found (many regions with few particles each in many dimensions; a set that
-narrows ``P0``'s spread rather than shifting it) predicts a large one.
-``details["answer"]`` says which (``"importance_sampling"`` or
-``"splitting"``); both estimates are kept in
-``details`` (``importance_sampling``, ``splitting``, each replicate's in
-``details["replicates"]``) as a cross-check from the same budget: the two
-are not independent (the run's particles made the proposal) but have
-different errors.
+The importance-sampling estimate, unless the particles say beforehand that
+the levels' own product (the replicates' mean) will be more precise;
+``details["answer"]`` says which, and both are kept in ``details``
+(:mod:`avrisk.rare.splitting_is_answer` says how and why).
 
 :class:`SplittingImportanceSampling` is registered as ``"splitting_is"``;
 :func:`splitting_is` is the top-level function.
@@ -134,8 +121,6 @@ using Gaussian densities revisited." Structural Safety 76, 2019.
 from __future__ import annotations
 
 import dataclasses
-import math
-import warnings
 from typing import Any, Literal
 
 import numpy as np
@@ -149,25 +134,22 @@ from avrisk.rare.estimator import (
     register_estimator,
 )
 from avrisk.rare.families.base import ExponentialFamily
-from avrisk.rare.final_stage import Advice, weighted_stage_estimates
-from avrisk.rare.particle_fit import (
-    HeldOutWeights,
-    particle_proposal,
-    slope_direction,
-)
+from avrisk.rare.particle_fit import ParticleFit, particle_proposal
+from avrisk.rare.particle_shifts import slope_direction
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
-from avrisk.rare.results import Estimate, GammaEstimate
-from avrisk.rare.splitting import SubsetSimulation, few_survivors
-from avrisk.rare.splitting_levels import (
-    levels_estimate,
+from avrisk.rare.results import Estimate
+from avrisk.rare.splitting import SubsetSimulation
+from avrisk.rare.splitting_is_answer import (
+    SAMPLED_KEYS,
+    answer_doubts,
+    importance_stage,
 )
-from avrisk.rare.splitting_moves import move_chains
+from avrisk.rare.splitting_is_tables import importance_sampling_tables
+from avrisk.rare.splitting_levels import SplittingState, levels_estimate
+from avrisk.rare.splitting_moves import MovedSet, move_chains
 from avrisk.rare.splitting_replicates import (
     ReplicatesState,
     combined_levels,
-    estimates_disagree,
-    exhausted_doubts,
-    per_replicate,
     pooled_chains,
     replicates_record,
 )
@@ -178,20 +160,6 @@ __all__ = [
     "SplittingImportanceSampling",
     "splitting_is",
 ]
-
-#: Remedies of an unreliable importance-sampling stage, in its settings' names.
-ADVICE = Advice(
-    no_hit="raise n_final, or n_particles (the proposal is fitted to them)",
-    degenerate="the proposal fitted to the particles is degenerate: raise "
-    "n_particles or defensive, and compare subset simulation's own estimate of "
-    "the run (details['splitting'])",
-    heavy_tail="raise n_particles and n_final, or compare subset simulation's own "
-    "estimate of the run (details['splitting']) and runs with other seeds",
-)
-
-#: What ``details["importance_sampling"]`` keeps of the sample's estimate at
-#: each threshold (the answer's may be the levels').
-SAMPLED_KEYS = ("p", "stderr", "ci", "n_hits", "ess", "pareto_k")
 
 #: Extra key of the fit's generator (k-means++ seeding), so that it draws no
 #: chunk's stream.
@@ -261,41 +229,10 @@ class SplittingImportanceSampling(SubsetSimulation):
     def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
         """Replicates that ran out of levels, or an answer the other estimate belies.
 
-        Few particles at a level do not bias the importance-sampling stage
-        (its weights' diagnostics speak for it), nor do replicates that ended
-        in different places: the proposal holds what either found
-        (*Replicates*). But an importance-sampling answer below every
-        replicate's own estimate, beyond both errors, says the proposal misses
-        where the particles were (a shift fitted on too few coordinates, a
-        region dropped), which its weights alone may not show. One above them
-        does not: a proposal cannot add mass the event lacks (the sample is
-        unbiased; a single huge weight is its Pareto k's to show), so the
-        levels lost part of the event, as they do when their chains follow a
-        near miss. When the levels
-        answer (*The answer*), their own doubts count (a level held by a
-        handful of particles), and so does an importance sample far from them.
+        :func:`~avrisk.rare.splitting_is_answer.answer_doubts`: which doubts
+        count depends on which estimate answers (*The answer*).
         """
-        details = estimate.get("details") or {}
-        main = next(
-            (g for g in estimate.get("by_gamma", ()) if g["gamma"] == gamma), None
-        )
-        own = details.get("replicates") or []
-        if gamma != estimate.get("gamma") or main is None:
-            return ()
-        if not own:  # no replicate reached gamma (or none was recorded)
-            return _none_reached(details)
-        reasons = list(exhausted_doubts(details))
-        if details.get("answer") == "splitting":
-            reasons[:0] = _levels_answer_doubts(details, main, gamma)
-        elif all(main["p"] < r["p"] and estimates_disagree(main, r) for r in own):
-            levels = ", ".join(f"{r['p']:.2g}" for r in own)
-            reasons.append(
-                f"importance sampling found p = {main['p']:.2g} but the levels of "
-                f"the same run {levels}, further apart than their errors allow: "
-                "the proposal may miss part of the failure set (compare runs with "
-                "other seeds, or raise n_particles)"
-            )
-        return tuple(reasons)
+        return answer_doubts(estimate, gamma)
 
     @staticmethod
     def stage_label(estimate: dict[str, Any], stage: int) -> str:
@@ -337,42 +274,9 @@ class SplittingImportanceSampling(SubsetSimulation):
         simulation's own of the same run (``details["splitting"]``).
         """
         levels = SubsetSimulation.diagnostics(estimate)
-        details = estimate.get("details") or {}
-        if "splitting" not in details:
+        if "splitting" not in (estimate.get("details") or {}):
             return levels
-        by_gamma = sorted(estimate["by_gamma"], key=lambda g: g["gamma"])
-        sampled = details.get("importance_sampling")
-        if sampled:  # the sample's own estimates, whichever is the answer
-            by_gamma = [{**g, **sampled[str(g["gamma"])]} for g in by_gamma]
-        main = next(g for g in by_gamma if g["gamma"] == estimate["gamma"])
-        own = [details["splitting"].get(str(g["gamma"]), {}) for g in by_gamma]
-        return [
-            *levels,
-            _proposal_table(details, main),
-            DiagnosticTable(
-                "Importance sampling vs subset simulation's own estimate",
-                ("gamma", "p", "95% CI", "p, subset simulation", "its 95% CI"),
-                [
-                    (g["gamma"], g["p"], g["ci"], s.get("p"), s.get("ci"))
-                    for g, s in zip(by_gamma, own, strict=True)
-                ],
-                note=(
-                    "A cross-check from the same run: importance sampling beside "
-                    "the product of the levels' shares. The two are not "
-                    "independent (the levels made the proposal) but err "
-                    "differently: intervals far apart say one of them missed part "
-                    "of the event. "
-                    + (
-                        "The answer is the levels' product: before the final "
-                        "samples were drawn, the particles predicted them further "
-                        "from p (the proposal cannot hold everything the levels "
-                        "found)."
-                        if details.get("answer") == "splitting"
-                        else "The answer is importance sampling's."
-                    )
-                ),
-            ),
-        ]
+        return [*levels, *importance_sampling_tables(estimate)]
 
     def finalize(  # type: ignore[override]
         self,
@@ -389,7 +293,6 @@ class SplittingImportanceSampling(SubsetSimulation):
         generator comes from the run seed, so a resumed run fits the same
         proposal and replays the recorded final stage.
         """
-        s = self.settings
         reached = state.reached()
         own = [levels_estimate(r, problem, n) for r, n in reached]
         if reached:
@@ -403,62 +306,30 @@ class SplittingImportanceSampling(SubsetSimulation):
             with_hits = list(zip(state.all, state.sizes, strict=True))
             deepest = [levels_estimate(r, problem, n) for r, n in with_hits]
             combined = combined_levels(deepest, problem, sum(state.sizes))
-        moves, stage = [], state.current.n_stages
-        for r, n in with_hits:  # each on stages of its own, after every replicate's
-            moves.append(
-                move_chains(r._replace(n_stages=stage), problem, context, s.n_moves, n)
-            )
-            stage = moves[-1].n_stages
-        rng = np.random.default_rng(
-            np.random.SeedSequence([context.seed], spawn_key=(FIT_STREAM,))
+        moves = _moves_at_gamma(
+            with_hits, state.current.n_stages, problem, context, self.settings.n_moves
         )
-        z = np.concatenate([m.z for m in moves])
-        chain = pooled_chains([m.values for m in moves])
-        slope = slope_direction(
-            np.concatenate([r.z for r, _ in with_hits]),
-            np.concatenate([r.sets[-1].flat for r, _ in with_hits]),
-        )
-        fitted = particle_proposal(z, chain, problem.base, s, rng, slope)
-        proposal = fitted.proposal
+        fitted = _fitted_proposal(moves, with_hits, problem, context, self.settings)
         n_evals = state.current.n_evals + sum(m.n_calls for m in moves)
-        stage = context.stage(
-            problem, proposal, s.n_final, FINAL_STAGE, final_after=n_evals
+        stage, sampled, from_levels = importance_stage(
+            fitted,
+            problem,
+            context,
+            self.settings.n_final,
+            n_evals,
+            # the levels' answer, unless a replicate ran out of levels
+            None if any(r.exhausted for r in state.all) else combined,
         )
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            sampled = weighted_stage_estimates(stage, problem.thresholds, ADVICE)
-        from_levels = not any(r.exhausted for r in state.all) and levels_more_precise(
-            fitted.held_out, combined.by_gamma[problem.gamma], s.n_final
-        )
-        if not from_levels:  # the sample's doubts are the answer's
-            for caught_warning in caught:
-                warnings.warn_explicit(
-                    caught_warning.message,
-                    caught_warning.category,
-                    caught_warning.filename,
-                    caught_warning.lineno,
-                )
         return Estimate(
             method="splitting_is",
             gamma=problem.gamma,
             by_gamma=dict(combined.by_gamma) if from_levels else sampled,
             n_evals=n_evals + stage.values.size,
-            proposal=proposal,
+            proposal=fitted.proposal,
             stopped_by=stage.stopped_by or "budget",
             details={
                 **combined.details,
-                "n_failed": combined.details["n_failed"]
-                + sum(m.n_failed for m in moves),  # the moves at gamma too
-                "fit_acceptance": float(
-                    np.mean(
-                        [m.acceptance for m in moves if not np.isnan(m.acceptance)]
-                        or [np.nan]
-                    )
-                ),
-                "n_components": proposal.n_components,
-                "informative_threshold": fitted.threshold,
-                "along_slope": fitted.along_slope,
-                "n_shifted": fitted.n_shifted,
+                **_fit_record(combined, moves, fitted),
                 "splitting": {  # none where no replicate reached gamma
                     str(g): {"p": e.p, "ci": list(e.ci)}
                     for g, e in combined.by_gamma.items()
@@ -471,101 +342,74 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "answer": "splitting" if from_levels else "importance_sampling",
                 "held_out_uncovered": fitted.held_out.uncovered,
                 "held_out_covered_weight": fitted.held_out.covered_mean_weight,
-                **replicates_record(state, own, s),
+                **replicates_record(state, own, self.settings),
             },
         )
 
 
-def _none_reached(details: dict[str, Any]) -> tuple[str, ...]:
-    """The doubt of a run no replicate of which reached ``gamma``."""
-    if not details.get("replicates_exhausted"):
-        return ()
-    deepest = min(min(levels) for levels in per_replicate(details["levels"]))
-    return (
-        "no replicate of the search reached gamma within max_levels levels, "
-        "regrown as far as regrow and max_calls allow (they followed a "
-        "mechanism that does not end in the event): p is importance sampling's "
-        f"from particles at f <= {deepest:.3g}, a bound where it has no hit "
-        "(raise n_particles, or max_levels)",
-    )
+def _moves_at_gamma(
+    with_hits: list[tuple[SplittingState, int]],
+    first_stage: int,
+    problem: RareEventProblem,
+    context: EstimationContext,
+    n_moves: int,
+) -> list[MovedSet]:
+    """Each replicate's chains moved once more at ``gamma``: the particles to fit.
 
-
-def _levels_answer_doubts(
-    details: dict[str, Any], main: dict[str, Any], gamma: float
-) -> list[str]:
-    """The levels' own doubts, and an importance sample far from them."""
-    reasons = list(few_survivors(details.get("survivors") or []))
-    sampled = (details.get("importance_sampling") or {}).get(str(gamma))
-    if sampled and "stderr" in sampled and estimates_disagree(sampled, main):
-        reasons.append(
-            f"the levels found p = {main['p']:.2g} but importance sampling "
-            f"from their particles {sampled['p']:.2g}, further apart than "
-            "their errors allow: the levels may have lost part of the "
-            "failure set (compare runs with other seeds, or raise "
-            "n_particles)"
-        )
-    return reasons
-
-
-def levels_more_precise(
-    held_out: HeldOutWeights, levels: GammaEstimate, n_final: int
-) -> bool:
-    """Whether the levels' estimate is expected to be nearer ``p`` than the IS stage's.
-
-    Decided before the importance sample is drawn, from the particles'
-    held-out weights (:class:`~avrisk.rare.particle_fit.HeldOutWeights`):
-    the importance sample misses the share ``s`` of ``p`` where its proposal
-    is no denser than ``P0``, and on the rest its ``n_final`` draws have
-    relative variance ``(E[w 1{w < 1} | F] / p - (1 - s)^2) / n_final``, so
-    its expected squared relative error is ``s^2`` plus that; the levels'
-    is ``(stderr / p)^2``, with ``p`` the levels' estimate. Where the
-    proposal cannot hold what the particles found (many regions with few
-    particles each in many dimensions; a set that narrows ``P0``'s spread
-    rather than shifting it) the levels' product is the better answer; where
-    it can, the importance sample's. The decision uses the particles only,
-    never the importance sample, so it selects no draw of it. It does use the
-    levels' ``p``: a low one favours the levels, but only near the break-even
-    point, where the two are about equally precise.
+    Each replicate ``(state, n)`` moves ``n`` states on stages of its own,
+    numbered from ``first_stage`` (after every replicate's levels) in turn.
     """
-    p, stderr = levels.p, levels.stderr
-    s, covered = held_out
-    if not (math.isfinite(s) and p > 0 and math.isfinite(stderr)):
-        return False
-    sampled = max(covered / p - (1.0 - s) ** 2, 0.0) / n_final
-    return s**2 + sampled > (stderr / p) ** 2
+    moves, stage = [], first_stage
+    for r, n in with_hits:
+        moves.append(
+            move_chains(r._replace(n_stages=stage), problem, context, n_moves, n)
+        )
+        stage = moves[-1].n_stages
+    return moves
 
 
-def _proposal_table(details: dict[str, Any], main: dict[str, Any]) -> DiagnosticTable:
-    """The fitted proposal's choices and its sample's diagnostics at ``gamma``."""
-    fit = (
-        details["n_components"],
-        "slope" if details.get("along_slope") else "coords",
-        details["n_shifted"],
-        details["informative_threshold"],
-        details["fit_acceptance"],
-        main["n_hits"],
-        main["ess"],
-        main["pareto_k"],
+def _fitted_proposal(
+    moves: list[MovedSet],
+    with_hits: list[tuple[SplittingState, int]],
+    problem: RareEventProblem,
+    context: EstimationContext,
+    settings: SplittingISSettings,
+) -> ParticleFit:
+    """The proposal fitted to every replicate's moved particles at once.
+
+    The shift along ``f``'s slope is fitted to the replicates' last sets
+    (their particles and values); the fit's generator comes from the run
+    seed (``FIT_STREAM``), so a resumed run fits the same proposal.
+    """
+    rng = np.random.default_rng(
+        np.random.SeedSequence([context.seed], spawn_key=(FIT_STREAM,))
     )
-    columns = ("components", "shift", "shifted coordinates", "threshold [SE]")
-    columns += ("acceptance at gamma", "hits", "ESS", "Pareto k")
-    return DiagnosticTable(
-        "Importance-sampling proposal",
-        columns,
-        [fit],
-        note=(
-            "The distribution the final samples were drawn from, fitted "
-            "to the dangerous samples the levels found (moved once more, "
-            "at gamma, after the last set: the moves at gamma): its components "
-            "(regions), its shift (coords: coordinate by coordinate; "
-            "slope: along f's average slope), how many of P0's "
-            "coordinates it shifts (those the dangerous samples differ "
-            "on by more than the threshold, in standard errors; the rest "
-            "stay as in P0), and the share of moves accepted at gamma "
-            "when those samples were made. Hits, ESS and Pareto k are "
-            "its samples' at gamma."
+    z = np.concatenate([m.z for m in moves])
+    chain = pooled_chains([m.values for m in moves])
+    slope = slope_direction(
+        np.concatenate([r.z for r, _ in with_hits]),
+        np.concatenate([r.sets[-1].flat for r, _ in with_hits]),
+    )
+    return particle_proposal(z, chain, problem.base, settings, rng, slope)
+
+
+def _fit_record(
+    combined: Estimate, moves: list[MovedSet], fitted: ParticleFit
+) -> dict[str, Any]:
+    """The moves' failures and acceptance at ``gamma``, and the fit's choices."""
+    return {
+        "n_failed": combined.details["n_failed"]
+        + sum(m.n_failed for m in moves),  # the moves at gamma too
+        "fit_acceptance": float(
+            np.mean(
+                [m.acceptance for m in moves if not np.isnan(m.acceptance)] or [np.nan]
+            )
         ),
-    )
+        "n_components": fitted.proposal.n_components,
+        "informative_threshold": fitted.threshold,
+        "along_slope": fitted.along_slope,
+        "n_shifted": fitted.n_shifted,
+    }
 
 
 def splitting_is(

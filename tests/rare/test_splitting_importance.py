@@ -26,16 +26,15 @@ from avrisk.rare.particle_fit import (
     HeldOutWeights,
     held_out_weights,
     particle_proposal,
-    slope_direction,
 )
+from avrisk.rare.particle_shifts import slope_direction
 from avrisk.rare.results import GammaEstimate
 from avrisk.rare.splitting import SubsetSimulation
 from avrisk.rare.splitting_importance import (
-    ADVICE,
     SplittingImportanceSampling,
     SplittingISSettings,
-    levels_more_precise,
 )
+from avrisk.rare.splitting_is_answer import ADVICE, levels_more_precise
 from avrisk.rare.trust import estimate_trust
 from avrisk.report.plots import table_cells
 from avrisk.testing import (
