@@ -68,7 +68,6 @@ from avrisk.rare.estimator import (
     register_estimator,
 )
 from avrisk.rare.families.base import ExponentialFamily
-from avrisk.rare.final_stage import MIN_RELIABLE_ESS
 from avrisk.rare.problem import BatchFunction, RareEventProblem
 from avrisk.rare.results import Estimate, SearchConvergence
 from avrisk.rare.splitting_levels import (
@@ -85,7 +84,7 @@ from avrisk.rare.splitting_replicates import (
     ReplicatesState,
     combined_levels,
     exhausted_doubts,
-    per_replicate,
+    few_survivors,
     regrown_doubts,
     regrowth_fits,
     replicates_record,
@@ -479,22 +478,6 @@ class SubsetSimulation:
         if gamma == estimate.get("gamma"):
             reasons.extend(exhausted_doubts(details) + regrown_doubts(details))
         return tuple(reasons)
-
-
-def few_survivors(survivors: Sequence[Any]) -> tuple[str, ...]:
-    """The doubt of a level held by fewer than ``MIN_RELIABLE_ESS`` particles.
-
-    ``survivors``: each set's survivors, by replicate
-    (:func:`~avrisk.rare.splitting_replicates.per_replicate`).
-    """
-    by_replicate = per_replicate(survivors)
-    few = [int(k) for one in by_replicate for k in one[:-1] if k < MIN_RELIABLE_ESS]
-    if not few:
-        return ()
-    return (
-        f"a level of the search held only {min(few)} particles below it (f "
-        "ties on a plateau?): its interval is likely too narrow",
-    )
 
 
 def subset_simulation(

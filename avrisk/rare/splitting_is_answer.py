@@ -34,10 +34,10 @@ from avrisk.rare.final_stage import Advice, weighted_stage_estimates
 from avrisk.rare.particle_fit import HeldOutWeights, ParticleFit
 from avrisk.rare.problem import FINAL_STAGE, RareEventProblem
 from avrisk.rare.results import Estimate, GammaEstimate
-from avrisk.rare.splitting import few_survivors
 from avrisk.rare.splitting_replicates import (
     estimates_disagree,
     exhausted_doubts,
+    few_survivors,
     per_replicate,
 )
 from avrisk.rare.stages import StageResult

@@ -30,6 +30,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from avrisk.rare.families.base import FloatArray
+from avrisk.rare.final_stage import MIN_RELIABLE_ESS
 from avrisk.rare.problem import RareEventProblem
 from avrisk.rare.results import Estimate
 from avrisk.rare.splitting_levels import (
@@ -44,6 +45,7 @@ __all__ = [
     "combined_levels",
     "estimates_disagree",
     "exhausted_doubts",
+    "few_survivors",
     "per_replicate",
     "pooled_chains",
     "regrown_doubts",
@@ -309,3 +311,19 @@ def per_replicate(values: Sequence[Any]) -> list[Sequence[Any]]:
     if values and isinstance(values[0], list):
         return list(values)
     return [values]
+
+
+def few_survivors(survivors: Sequence[Any]) -> tuple[str, ...]:
+    """The doubt of a level held by fewer than ``MIN_RELIABLE_ESS`` particles.
+
+    ``survivors``: each set's survivors, by replicate
+    (:func:`per_replicate`).
+    """
+    by_replicate = per_replicate(survivors)
+    few = [int(k) for one in by_replicate for k in one[:-1] if k < MIN_RELIABLE_ESS]
+    if not few:
+        return ()
+    return (
+        f"a level of the search held only {min(few)} particles below it (f "
+        "ties on a plateau?): its interval is likely too narrow",
+    )
