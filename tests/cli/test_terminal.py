@@ -352,3 +352,15 @@ def test_each_command_is_listed_by_its_docstring_and_loads_for_its_help(name):
     result = invoke(name, "--help")
     assert result.exit_code == 0, result.output
     assert summary in words(result.stdout)
+
+
+def test_the_bar_of_a_run_that_grows_past_its_plan_grows_with_it():
+    from avrisk.cli.progress import RichRunMonitor
+
+    console = Console(file=io.StringIO(), width=80, force_terminal=False)
+    with RichRunMonitor(console, "splitting + IS") as monitor:
+        monitor.start(100, "a plan of 100 rollouts")
+        monitor.advance(80, replayed=False)
+        monitor.advance(70, replayed=False)  # a replicate regrown: past the plan
+        task = monitor._progress.tasks[0]
+        assert task.total == task.completed == 150
