@@ -86,18 +86,21 @@ replicates`` particles each (the same calls of ``f`` as one run of
 A failure region one replicate's levels never reach (a region that holds most
 of ``p`` but whose intermediate levels are rarer than another's) is then in
 the proposal if another reached it. Replicates whose own estimates differ
-beyond their errors (:func:`replicates_disagree`, in
+beyond their errors
+(:func:`~avrisk.rare.splitting_replicates.replicates_disagree`, in
 ``details["replicates_disagree"]``, each replicate's estimate in
-``details["replicates"]``) show a search that can
-miss a region; the run says caution only when its importance-sampling
-estimate is borne out by no replicate's (:meth:`doubts`). One run cannot see
-a region no replicate reached. A replicate whose ``max_levels`` sets end above
-``gamma`` (its levels followed a mechanism that does not end in the event)
-runs again, fresh, with twice its particles, up to ``regrow`` times and
-within ``max_calls`` (*Regrowth* in :mod:`avrisk.rare.splitting_replicates`);
-the runs it replaces are in the record but in no estimate. One that still
-ends above ``gamma`` is left out of the fit and the run says caution; only
-when none reaches ``gamma`` is it subset simulation's error.
+``details["replicates"]``) show a search that can miss a region; the run
+says caution only when its importance-sampling estimate lies below every
+replicate's, beyond both errors (:meth:`doubts`): a proposal can miss mass
+the particles found, not add mass. One run cannot see a region no replicate
+reached. A replicate whose ``max_levels`` sets end above ``gamma`` (its
+levels followed a mechanism that does not end in the event) runs again,
+fresh, with twice its particles, up to ``regrow`` times and within
+``max_calls`` (*Regrowth* in :mod:`avrisk.rare.splitting_replicates`); the
+runs it replaces are in the record but in no estimate. One that still ends
+above ``gamma`` is left out of the fit and the run says caution; when none
+reaches ``gamma``, the proposal is fitted to the deepest sets they found and
+its sample answers, a bound where it has no hit, with caution.
 
 The answer
 ----------
