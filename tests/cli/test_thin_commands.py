@@ -40,10 +40,6 @@ DISPLAY = {"typer", "click", "rich"}
 
 #: Commands that make more than one library call, and why they still do.
 NOT_YET_THIN: dict[str, str] = {
-    "simulate": (
-        "loads the spec for its progress bar's label, sets torch's threads and "
-        "writes the Parquet file around avrisk.api.rollouts.simulate_rollouts"
-    ),
     "demo": (
         "its exact-problem part (the problems of avrisk.testing, naive_mc and "
         "cross_entropy) has no avrisk.api call"
