@@ -32,9 +32,9 @@ FAST = dict(n_final=64, batch_size=64, seed=4, failures=0)
 def plain_mc(monkeypatch):
     """``tests.user_estimator`` imported afresh; its registration gone after."""
     for table in ("_factories", "_descriptions"):
-        monkeypatch.setattr(
-            estimator.ESTIMATORS, table, copy.copy(getattr(estimator.ESTIMATORS, table))
-        )
+        own = copy.copy(getattr(estimator.ESTIMATORS, table))
+        assert "plain_mc" not in own, "tests.user_estimator was imported elsewhere"
+        monkeypatch.setattr(estimator.ESTIMATORS, table, own)
     monkeypatch.delitem(sys.modules, "tests.user_estimator", raising=False)
     module = importlib.import_module("tests.user_estimator")
     yield module
