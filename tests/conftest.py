@@ -5,6 +5,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+#: Not collected (``--doctest-modules`` would import it): importing it registers
+#: an estimator, which ``tests/api/test_user_components.py`` does in a registry
+#: of its own.
+collect_ignore = ["user_estimator.py"]
+
 
 @pytest.fixture
 def rng():

@@ -197,7 +197,7 @@ def compare_methods(
 
 def compare_egos(
     scenario: Scenario,
-    ego_a: str | Mapping[str, Any],
+    ego_a: str | Mapping[str, Any] | None,
     ego_b: str | Mapping[str, Any],
     *,
     out: str | Path = "runs/ab",
@@ -230,7 +230,8 @@ def compare_egos(
         Each ego as :func:`estimate`'s ``ego``: a registered policy name, an
         import path ``"package.module:Class"``, or ``{"policy": ...,
         "params": {...}}`` (an external ZeroMQ server: ``{"policy":
-        "external", "params": {"address": ...}}``).
+        "external", "params": {"address": ...}}``); ``ego_a`` None: the
+        scenario's own ego.
     out : str or Path, default="runs/ab"
         The run directory: created, resumed, or read back when complete.
     max_ratio : float, default=1.0
@@ -260,11 +261,15 @@ def compare_egos(
         For settings, egos, a scenario or a run directory that cannot be used.
     """
     from avrisk.api.ab import compare_specs
+    from avrisk.api.result import scenario_spec
     from avrisk.rare.paired import UNION_METHOD
 
+    spec = scenario_spec(scenario)
+    if ego_a is None:
+        ego_a = spec.ego.model_dump(mode="json")
     return compare_specs(
-        _spec(scenario, ego_a),
-        _spec(scenario, ego_b),
+        _spec(spec, ego_a),
+        _spec(spec, ego_b),
         _settings(UNION_METHOD, gamma, (), seed, batch_size, options),
         Path(out),
         max_ratio=max_ratio,

@@ -36,6 +36,7 @@ from avrisk.api.readback import (
     read_table,
     stored_params,
 )
+from avrisk.api.result import Scenario, scenario_spec
 from avrisk.assembly import (
     RolloutTrace,
     ScenarioSimulator,
@@ -44,6 +45,7 @@ from avrisk.assembly import (
     param_layout,
     resimulate,
 )
+from avrisk.pipeline.files import write_parquet_atomic
 from avrisk.pipeline.layout import CONFIG_FILE
 from avrisk.pipeline.samples import samples_table
 from avrisk.pipeline.store import RunDirectory
@@ -143,6 +145,46 @@ def simulate_rollouts(
         }
     )
     return SimulationRun(table=table, wall_s=wall_s)
+
+
+def write_rollouts(
+    scenario: Scenario,
+    n: int,
+    out: Path,
+    *,
+    seed: int = 0,
+    batch_size: int = 1024,
+    device: str = "cpu",
+    threads: int | None = None,
+    on_start: Callable[[str], None] | None = None,
+    on_batch: Callable[[int], None] | None = None,
+) -> SimulationRun:
+    """:func:`simulate_rollouts` of ``scenario``, its table written to ``out``.
+
+    What ``avrisk simulate`` does: ``threads`` sets torch's CPU threads first
+    (None: leaves them); ``on_start`` is called with the scenario's name before
+    the first rollout; the Parquet file is replaced atomically.
+
+    Raises
+    ------
+    UserError
+        If ``out`` cannot be written.
+    """
+    spec = scenario_spec(scenario)
+    if threads is not None:
+        import torch
+
+        torch.set_num_threads(threads)
+    if on_start is not None:
+        on_start(spec.name)
+    run = simulate_rollouts(
+        spec, n, seed=seed, batch_size=batch_size, device=device, on_batch=on_batch
+    )
+    try:
+        write_parquet_atomic(run.table, out)
+    except OSError as exc:
+        raise UserError(f"--out {out}: cannot write: {exc}") from None
+    return run
 
 
 def spec_from_parquet(path: Path) -> ScenarioSpec:

@@ -216,7 +216,7 @@ IN_PROCESS: BackendChoice = (DEFAULT_BACKEND, None, None)
 
 
 def estimate_spec(
-    spec: ScenarioSpec,
+    scenario: Scenario,
     run_settings: RunSettings,
     out: Path,
     *,
@@ -226,13 +226,16 @@ def estimate_spec(
     backend: BackendChoice = IN_PROCESS,
     progress: Progress = ignore,
 ) -> EstimationResult:
-    """Run (or resume, or read back) an estimation of ``spec`` into ``out``; report.
+    """Run (or resume, or read back) an estimation of ``scenario`` into ``out``.
 
-    The plan goes to ``progress`` before the first rollout, then the run's
-    events (:func:`execute`); the report (``out/report.html``) animates the
-    ``failures`` most likely dangerous rollouts. ``backend``: where the
-    rollouts are simulated (:data:`BackendChoice`).
+    ``scenario``: a bundled name, a YAML path, a spec or its data (the result's
+    ``spec`` is the one loaded). The plan goes to ``progress`` before the first
+    rollout, then the run's events (:func:`execute`); the report
+    (``out/report.html``) animates the ``failures`` most likely dangerous
+    rollouts. ``backend``: where the rollouts are simulated
+    (:data:`BackendChoice`).
     """
+    spec = scenario_spec(scenario)
     check_thresholds(spec, run_settings)
     objective = SimulationObjective(spec, device=device, allow_import=True)
     label = method_label(run_settings.method)

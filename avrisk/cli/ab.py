@@ -40,7 +40,6 @@ from avrisk.cli.progress import RichProgress
 from avrisk.cli.results import show_comparison
 from avrisk.cli.run import Gamma, Scenario, Seed, Set, estimator_options
 from avrisk.rare.paired import UNION_METHOD
-from avrisk.scenario import load_spec
 
 #: The exit status of each outcome of the gate.
 EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 3}
@@ -148,12 +147,9 @@ def ab(
         options = estimator_options(
             UNION_METHOD, {"n_final": n_final}, set_, cli_defaults={}
         )
-        spec = load_spec(scenario)
         result = avrisk.compare_egos(
-            spec,
-            spec.ego.model_dump(mode="json")
-            if ego_a is None
-            else ego_option(ego_a, "--ego-a"),
+            scenario,
+            None if ego_a is None else ego_option(ego_a, "--ego-a"),
             ego_option(ego_b, "--ego-b"),
             out=out,
             max_ratio=max_ratio,

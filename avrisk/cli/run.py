@@ -45,7 +45,6 @@ from avrisk.cli.results import show_comparison, show_results
 from avrisk.pipeline import RunSettings
 from avrisk.rare import estimator_names
 from avrisk.rare.estimator import DEFAULT_METHOD
-from avrisk.scenario import load_spec
 
 if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
     from avrisk.api.result import EstimationResult
@@ -239,7 +238,6 @@ def run(
 
     with user_errors(*EXPECTED), resumable(ctx):
         check_output_folder(out)
-        spec = load_spec(scenario)
         run_settings = _run_settings(
             method,
             gamma,
@@ -261,7 +259,7 @@ def run(
             max_seconds=max_time,
         )
         result = estimate_spec(
-            spec,
+            scenario,
             run_settings,
             out,
             failures=failures,
@@ -270,7 +268,7 @@ def run(
             backend=(backend, workers, address),
             progress=RichProgress(err_console),
         )
-        show_results("run", result.runs, spec, as_json=as_json, report=result.report)
+        show_outcome(result, as_json)
 
 
 def compare(

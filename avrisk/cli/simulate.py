@@ -13,7 +13,7 @@ starts without it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Annotated
 
@@ -24,6 +24,7 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    TaskID,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
@@ -40,11 +41,10 @@ from avrisk.cli.common import (
 )
 from avrisk.cli.tables import add_columns, compact_table
 from avrisk.extras import MissingExtraError
-from avrisk.pipeline.files import write_parquet_atomic
 from avrisk.pipeline.layout import SAMPLES_FILE
 from avrisk.pipeline.regenerate import RegenerationError
 from avrisk.registry import ComponentError
-from avrisk.scenario import ScenarioSpecError, load_spec
+from avrisk.scenario import ScenarioSpecError
 
 #: Thresholds on the minimum TTC [s] counted in the summary.
 SUMMARY_GAMMAS: tuple[float, ...] = (0.1, 0.2, 0.3)
@@ -86,6 +86,16 @@ def _summary_table(table: pa.Table, wall_s: float) -> Table:
     return summary
 
 
+def _shown_as(progress: Progress, task: TaskID) -> Callable[[str], None]:
+    """Shows ``progress`` once the scenario is loaded, ``task`` labelled by its name."""
+
+    def start(name: str) -> None:
+        progress.update(task, description=name)
+        progress.start()
+
+    return start
+
+
 def simulate(
     scenario: Annotated[
         str, typer.Argument(help="Scenario YAML file, or a bundled name.")
@@ -109,15 +119,10 @@ def simulate(
     ] = None,
 ) -> None:
     """Sample scenarios from P0, simulate them, write one Parquet row per rollout."""
-    from avrisk.api.rollouts import simulate_rollouts
+    from avrisk.api.rollouts import write_rollouts
 
     with user_errors(ScenarioSpecError, ComponentError, MissingExtraError):
-        spec = load_spec(scenario)
         out = _out_path(out, DEFAULT_ROLLOUTS, (".parquet", ".pq"))
-        if threads is not None:
-            import torch
-
-            torch.set_num_threads(threads)
         progress = Progress(
             TextColumn("[bold]simulate[/] {task.description}"),
             BarColumn(),
@@ -127,20 +132,21 @@ def simulate(
             console=err_console,
             transient=False,
         )
-        with progress:
-            task = progress.add_task(spec.name, total=n)
-            run = simulate_rollouts(
-                spec,
+        task = progress.add_task("", total=n)
+        try:
+            run = write_rollouts(
+                scenario,
                 n,
+                out,
                 seed=seed,
                 batch_size=batch_size,
                 device=device,
+                threads=threads,
+                on_start=_shown_as(progress, task),
                 on_batch=lambda k: progress.advance(task, k),
             )
-        try:
-            write_parquet_atomic(run.table, out)
-        except OSError as exc:
-            raise CliError(f"--out {out}: cannot write: {exc}") from None
+        finally:
+            progress.stop()
     out_console.print(_summary_table(run.table, run.wall_s))
     out_console.print(f"wrote {out}", highlight=False)
 
