@@ -15,8 +15,9 @@ variance on the rest, and a proposal that cannot hold what they found (many
 regions with few particles each in many dimensions; a set that narrows
 ``P0``'s spread rather than shifting it) predicts a large one. The levels
 never answer once a replicate ran out of levels, regrown or not: their error
-does not see the near miss its chains followed. ``details["answer"]`` says which (``"importance_sampling"`` or
-``"splitting"``); both estimates are kept in ``details``
+does not see the near miss its chains followed. ``details["answer"]`` says
+which (``"importance_sampling"`` or ``"splitting"``); both estimates are kept
+in ``details``
 (``importance_sampling``, ``splitting``, each replicate's in
 ``details["replicates"]``) as a cross-check: the two are not independent (the
 run's particles made the proposal) but have different errors.
