@@ -17,6 +17,7 @@ import typer
 from rich.markup import escape
 from rich.padding import Padding
 
+from avrisk.api.scenarios import bundled, scenario_yaml
 from avrisk.cli.common import (
     CliError,
     check_output_file,
@@ -24,14 +25,7 @@ from avrisk.cli.common import (
     out_console,
     user_errors,
 )
-from avrisk.pipeline.files import write_atomic
-from avrisk.scenario import (
-    ScenarioSpecError,
-    bundled_folder,
-    bundled_scenario_text,
-    bundled_scenarios,
-    load_spec,
-)
+from avrisk.scenario import ScenarioSpecError
 
 
 def list_scenarios() -> None:
@@ -40,9 +34,9 @@ def list_scenarios() -> None:
     The description wraps at the console's width, indented under its name.
     """
     with user_errors(ScenarioSpecError):
-        specs = {name: load_spec(name) for name in bundled_scenarios()}
-    width = max(map(len, specs))
-    for name, spec in specs.items():
+        scenarios = bundled()
+    width = max(map(len, scenarios.specs))
+    for name, spec in scenarios.specs.items():
         out_console.print(
             f"[bold]{escape(f'{name:{width}}')}[/]  {spec.n_vehicles} vehicles, "
             f"{spec.simulation.horizon:g} s, ego {escape(spec.ego.policy)}",
@@ -54,7 +48,7 @@ def list_scenarios() -> None:
         )
     # The folder on a line of its own, whole (to copy), however long.
     err_console.print(
-        f"bundled in {escape(str(bundled_folder()))}", highlight=False, soft_wrap=True
+        f"bundled in {escape(str(scenarios.folder))}", highlight=False, soft_wrap=True
     )
     err_console.print(
         "start your own with: avrisk scenarios show NAME --write my_scenario.yaml",
@@ -78,19 +72,19 @@ def show_scenario(
 ) -> None:
     """Print a bundled scenario's YAML, or write it out as a starting file."""
     with user_errors(ScenarioSpecError):
-        text = bundled_scenario_text(name)
+        if write is not None:
+            check_output_file(write, "--write")
+            if write.exists() and not force:
+                raise CliError(
+                    f"--write {write}: exists already; give --force to overwrite it"
+                )
+        try:
+            text = scenario_yaml(name, write)
+        except OSError as exc:
+            raise CliError(f"--write {write}: cannot write: {exc.strerror}") from None
         if write is None:
             typer.echo(text, nl=False)
             return
-        check_output_file(write, "--write")
-        if write.exists() and not force:
-            raise CliError(
-                f"--write {write}: exists already; give --force to overwrite it"
-            )
-        try:
-            write_atomic(write, text)
-        except OSError as exc:
-            raise CliError(f"--write {write}: cannot write: {exc.strerror}") from None
     err_console.print(
         f"wrote {escape(str(write))} (bundled scenario {name}); edit it, then: "
         f"avrisk run {escape(str(write))} --out runs/{name}",

@@ -60,13 +60,6 @@ NOT_YET_THIN: dict[str, str] = {
         "builds RealismSettings, runs, writes the report and sets torch's threads: "
         "no avrisk.api call for realism"
     ),
-    "scenarios": (
-        "lists the bundled scenarios from avrisk.scenario (names, specs, folder): "
-        "no avrisk.api call for them"
-    ),
-    "scenarios show": (
-        "reads a bundled scenario's text and writes the copy: no avrisk.api call"
-    ),
 }
 
 
