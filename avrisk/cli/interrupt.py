@@ -16,9 +16,28 @@ __all__ = ["INTERRUPTED", "loading"]
 
 @contextmanager
 def loading() -> Iterator[None]:
-    """Imports of a command's code: a Ctrl-C meanwhile is one line and status 130."""
+    """Imports of a command's code: a Ctrl-C meanwhile is one line and status 130.
+
+    A Ctrl-C that lands while a compiled extension initialises (SciPy's, as
+    torch loads) comes out as that import's ``ImportError``, raised from the
+    ``KeyboardInterrupt``: an interruption too.
+    """
     try:
         yield
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ImportError) as exc:
+        if isinstance(exc, ImportError) and not _interrupted(exc):
+            raise
         sys.stderr.write("interrupted while loading: nothing was run\n")
         raise SystemExit(INTERRUPTED) from None
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """Whether ``exc`` was raised from a Ctrl-C, directly or further down."""
+    seen: set[int] = set()
+    cause: BaseException | None = exc
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return False

@@ -201,3 +201,20 @@ def test_ctrl_c_stops_the_workers_and_the_resumed_run_gives_the_same_estimate(
     assert invoke("run", tiny_scenario, "--out", reference, *CE_ARGS).exit_code == 0
     (_, estimate), (_, expected) = run_table(out), run_table(reference)
     assert estimate == expected
+
+
+def test_a_ctrl_c_inside_an_extension_s_import_is_an_interruption_too(capsys):
+    from avrisk.cli.interrupt import INTERRUPTED, loading
+
+    def extension_import():  # as SciPy's pybind11 modules raise it
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as ctrl_c:
+            raise ImportError("initialization failed") from ctrl_c
+
+    with pytest.raises(SystemExit) as stopped, loading():
+        extension_import()
+    assert stopped.value.code == INTERRUPTED
+    assert capsys.readouterr().err == "interrupted while loading: nothing was run\n"
+    with pytest.raises(ImportError, match="no module named x"), loading():
+        raise ImportError("no module named x")  # a real import failure stays one
