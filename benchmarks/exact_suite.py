@@ -106,19 +106,18 @@ def suite_settings(method: str) -> dict[str, Any]:
     if method in OT_METHODS:
         return {"per_step": OT_PER_STEP, "block": OT_BLOCK, "max_calls": SUITE_BUDGET}
     from avrisk.cli.estimator_options import CLI_DEFAULTS
-    from avrisk.rare.estimator import estimator_class, get_estimator
+    from avrisk.rare.estimator import estimator_class, get_estimator, planned_budget
 
     fields = estimator_class(method).Settings.model_fields
     base = {k: v for k, v in CLI_DEFAULTS.items() if k in fields}
-    plan = {"regrow": 0} if "regrow" in fields else {}  # the plan without regrowth
-    default = get_estimator(method, **base, **plan)
-    scale = SUITE_BUDGET / default.budget()
+    default = get_estimator(method, **base)
+    scale = SUITE_BUDGET / planned_budget(default)  # the plan without regrowth
     counts = {
         k: max(100, int(getattr(default.settings, k) * scale) // 100 * 100)
         for k in COUNT_SETTINGS
         if k in fields
     }
-    while get_estimator(method, **base, **plan, **counts).budget() > SUITE_BUDGET:
+    while planned_budget(get_estimator(method, **base, **counts)) > SUITE_BUDGET:
         counts = {k: v - 100 for k, v in counts.items()}
     cap = {"max_calls": SUITE_BUDGET} if "max_calls" in fields else {}
     return {**base, **counts, **cap}

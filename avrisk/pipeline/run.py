@@ -35,7 +35,7 @@ from avrisk.rare import (
     get_estimator,
     run_estimator,
 )
-from avrisk.rare.estimator import DEFAULT_METHOD
+from avrisk.rare.estimator import DEFAULT_METHOD, planned_budget
 from avrisk.rare.evaluation import EvalResult, EvalTask, Evaluator, LocalEvaluator
 from avrisk.rare.problem import threshold_list
 from avrisk.rare.stopping import StoppingRule
@@ -123,8 +123,7 @@ class RunSettings:
         (subset simulation's regrown replicates) says what it plans without
         growing by ``planned_budget()``; :attr:`most_rollouts` is the bound.
         """
-        planned = getattr(self.estimator, "planned_budget", self.estimator.budget)
-        return planned()
+        return planned_budget(self.estimator)
 
     @property
     def most_rollouts(self) -> int:

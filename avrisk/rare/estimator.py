@@ -48,6 +48,7 @@ __all__ = [
     "estimator_names",
     "get_estimator",
     "no_doubts",
+    "planned_budget",
     "register_estimator",
     "run_estimator",
 ]
@@ -351,6 +352,17 @@ def get_estimator(name: str, **settings: Any) -> Estimator[Any, Any]:
         return cls(cls.Settings.validated(**settings))
     except ValueError as err:
         raise ValueError(f"estimator {name!r}: {err}") from None
+
+
+def planned_budget(estimator: Estimator[Any, Any]) -> int:
+    """Calls of ``f`` the estimator plans before it grows its budget.
+
+    An estimator that may grow its budget as the event turns out harder
+    (subset simulation's regrown replicates) says what it plans without
+    growing by a ``planned_budget()`` method; for the others it is
+    :meth:`Estimator.budget`.
+    """
+    return int(getattr(estimator, "planned_budget", estimator.budget)())
 
 
 def run_estimator(

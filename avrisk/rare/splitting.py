@@ -372,8 +372,8 @@ class SubsetSimulation:
             )
         own = [levels_estimate(r, problem, n) for r, n in reached]
         combined = combined_levels(own, problem, sum(n for _, n in reached))
-        details = combined.details | replicates_record(state, own, self.settings)
-        return dataclasses.replace(combined, details=details)
+        record = replicates_record(state, own, self.settings.replicates)
+        return dataclasses.replace(combined, details=combined.details | record)
 
     def progress(self, info: SplittingInfo) -> str:
         """``"replicate 2/2, set 3: f <= 1.23, 212 survivors, accepted 31%, ..."``."""

@@ -345,7 +345,7 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "answer": "splitting" if from_levels else "importance_sampling",
                 "held_out_uncovered": fitted.held_out.uncovered,
                 "held_out_covered_weight": fitted.held_out.covered_mean_weight,
-                **replicates_record(state, own, self.settings),
+                **replicates_record(state, own, self.settings.replicates),
             },
         )
 

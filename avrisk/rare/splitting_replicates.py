@@ -249,19 +249,20 @@ def combined_levels(
 
 
 def replicates_record(
-    state: ReplicatesState, own: Sequence[Estimate], settings: Any
+    state: ReplicatesState, own: Sequence[Estimate], replicates: int
 ) -> dict[str, Any]:
     """What ``details`` keep of the replicates, beside their levels.
 
     ``replicates``: each that reached ``gamma``, its estimate there;
     ``replicates_disagree`` (:func:`replicates_disagree`);
     ``replicates_exhausted``: those still above ``gamma`` after every
-    regrowth the settings allowed; ``replicates_regrown``: the runs that ran
-    out of levels and were run again, larger; ``replicate_particles``: the
-    particles per level of each that reached ``gamma``.
+    regrowth the settings allowed (of the ``replicates`` the run fills);
+    ``replicates_regrown``: the runs that ran out of levels and were run
+    again, larger; ``replicate_particles``: the particles per level of each
+    that reached ``gamma``.
     """
     reached = state.reached()
-    exhausted = settings.replicates - len(reached)
+    exhausted = replicates - len(reached)
     return {
         "replicates": [{"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own],
         "replicates_disagree": replicates_disagree(own),
