@@ -24,10 +24,12 @@ from scipy.special import logsumexp
 
 from avrisk.rare.chain_moments import block_means
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
-from avrisk.rare.mixture_em import MixtureProposal, component_log_kernels
+from avrisk.rare.mixture_em import MixtureProposal
 from avrisk.rare.particle_shifts import (
     fit_along_direction,
     fit_per_coordinate,
+    log_ratios_to_base,
+    with_fitted_variances,
     with_light_regions,
 )
 
@@ -35,6 +37,7 @@ __all__ = [
     "PREDICTION_FOLDS",
     "THRESHOLDS",
     "ChainHalves",
+    "FitChoice",
     "HeldOutWeights",
     "ParticleFit",
     "ProposalSettings",
@@ -71,6 +74,7 @@ class ProposalSettings(Protocol):
     min_weight: float
     defensive: float
     shift: Literal["all", "searched"]
+    fit_variances: bool
 
 
 class HeldOutWeights(NamedTuple):
@@ -115,6 +119,9 @@ class ParticleFit(NamedTuple):
         Whether the shift is the particles' mean along the direction in which
         ``f`` falls (:func:`~avrisk.rare.particle_shifts.slope_direction`)
         rather than per coordinate.
+    variances : bool
+        Whether the components also fit each shifted coordinate's variance
+        (:class:`~avrisk.rare.families.standard_space_normal.StandardSpaceNormal`).
     held_out : HeldOutWeights
         What the particles' importance weights ``p0 / q`` under fits that did
         not see them predict of the importance-sampling stage, before it is
@@ -125,6 +132,7 @@ class ParticleFit(NamedTuple):
     threshold: float
     n_shifted: int
     along_slope: bool = False
+    variances: bool = False
     held_out: HeldOutWeights = HeldOutWeights(float("nan"), float("nan"))
 
 
@@ -205,18 +213,25 @@ def particle_proposal(
             rng=rng,
         )
 
-    chosen, threshold, along_slope = choose_fit(
-        ChainHalves.of(z, chain), per_coordinate, settings.n_components, fit_along
+    choice = choose_fit(
+        ChainHalves.of(z, chain),
+        per_coordinate,
+        settings.n_components,
+        fit_along,
+        settings.fit_variances,
     )
-    components, weights, shifted = chosen(z, chain)
+    components, weights, shifted = choice.fitter(z, chain)
     components, weights = with_light_regions(z, components, weights, shifted, base, rng)
     proposal = MixtureProposal(components, weights, base, settings.defensive)
     return ParticleFit(
         proposal,
-        threshold,
+        choice.threshold,
         int(np.count_nonzero(shifted)),
-        along_slope=along_slope,
-        held_out=held_out_weights(z, chain, chosen, base, settings.defensive, rng),
+        along_slope=choice.along_slope,
+        variances=choice.variances,
+        held_out=held_out_weights(
+            z, chain, choice.fitter, base, settings.defensive, rng
+        ),
     )
 
 
@@ -273,20 +288,46 @@ class ChainHalves(NamedTuple):
         return bool(mean[0] > 2.0 * np.nan_to_num(stderr[0], nan=np.inf))
 
 
+class FitChoice(NamedTuple):
+    """The fit :func:`choose_fit` chose, and what it is.
+
+    Attributes
+    ----------
+    fitter : callable
+        The chosen fit.
+    threshold : float
+        Its threshold in standard errors (0 along the slope).
+    along_slope : bool
+        Whether it is the shift along the slope.
+    variances : bool
+        Whether its components also fit each shifted coordinate's variance.
+    """
+
+    fitter: Fitter
+    threshold: float
+    along_slope: bool = False
+    variances: bool = False
+
+
 def choose_fit(
     halves: ChainHalves,
     per_coordinate: Callable[[float, int], Fitter],
     n_components: int,
     fit_along: Fitter | None,
-) -> tuple[Fitter, float, bool]:
+    fit_variances: bool,
+) -> FitChoice:
     """The fit whose halves score the other half's particles best.
 
     First the threshold (one component; ties to the sparsest, the first of
     ``THRESHOLDS``), then the number of components from 1 to
-    ``n_components`` (ties to the fewest), then the shift along the slope if
-    it is clearly better than that mixture (a close call goes to the
-    mixture). With every particle in one half, nothing is scored: the
-    sparsest threshold with one component.
+    ``n_components`` (ties to the fewest), then, with ``fit_variances``, the
+    same components with their coordinates' variances fitted too
+    (:func:`~avrisk.rare.particle_shifts.with_fitted_variances`) if that is
+    clearly better, then the shift along the slope if it is clearly better
+    than the fit so far. A close call goes to the simpler fit: better means
+    by two standard errors of the paired difference
+    (:meth:`ChainHalves.clearly_better`). With every particle in one half,
+    nothing is scored: the sparsest threshold with one component.
 
     Parameters
     ----------
@@ -298,19 +339,16 @@ def choose_fit(
         Most components tried.
     fit_along : callable or None
         The fitter along ``f``'s slope, if there is one.
+    fit_variances : bool
+        Whether fitted variances are a candidate.
 
     Returns
     -------
-    fitter : callable
-        The chosen fit.
-    threshold : float
-        Its threshold in standard errors (0 along the slope).
-    along_slope : bool
-        Whether it is the shift along the slope.
+    FitChoice
     """
     threshold = THRESHOLDS[0]
     if not halves.both_held():
-        return per_coordinate(threshold, 1), threshold, False
+        return FitChoice(per_coordinate(threshold, 1), threshold)
     # max keeps the first of ties
     threshold = max(
         THRESHOLDS,
@@ -321,11 +359,37 @@ def choose_fit(
         for k in range(1, n_components + 1)
     }
     k = max(scores, key=lambda k: halves.summed(scores[k]))
+    choice = FitChoice(per_coordinate(threshold, k), threshold)
+    best = scores[k]
+    if fit_variances:
+        # the coordinates whose variance alone is off count only here
+        scaled_threshold = max(
+            THRESHOLDS,
+            key=lambda t: halves.summed(
+                halves.log_likelihoods(with_variances(per_coordinate(t, 1)))
+            ),
+        )
+        scaled = with_variances(per_coordinate(scaled_threshold, k))
+        scaled_scores = halves.log_likelihoods(scaled)
+        if halves.clearly_better(scaled_scores, best):
+            choice = FitChoice(scaled, scaled_threshold, variances=True)
+            best = scaled_scores
     if fit_along is not None and halves.clearly_better(
-        halves.log_likelihoods(fit_along), scores[k]
+        halves.log_likelihoods(fit_along), best
     ):
-        return fit_along, 0.0, True
-    return per_coordinate(threshold, k), threshold, False
+        return FitChoice(fit_along, 0.0, along_slope=True)
+    return choice
+
+
+def with_variances(fitter: Fitter) -> Fitter:
+    """``fitter`` with each component's variances fitted around its shift."""
+
+    def fit(
+        points: FloatArray, point_chain: np.ndarray
+    ) -> tuple[list[ExponentialFamily], FloatArray, np.ndarray]:
+        return with_fitted_variances(points, point_chain, *fitter(points, point_chain))
+
+    return fit
 
 
 def cross_fitted_log_ratios(
@@ -354,7 +418,7 @@ def cross_fitted_log_ratios(
     log_ratios = np.empty(len(z))
     for test in held_out:
         components, weights = fit(z[~test], chain[~test])
-        log_joint = np.log(weights) + component_log_kernels(components, z[test])
+        log_joint = np.log(weights) + log_ratios_to_base(components, z[test])
         log_ratios[test] = logsumexp(log_joint, axis=1)
     return log_ratios
 

@@ -5,7 +5,9 @@ simulation's particles: shifts of the coordinates the particles say something
 about, ``k`` components (:func:`fit_per_coordinate`), or one shift along the
 direction in which ``f`` falls (:func:`slope_direction`,
 :func:`fit_along_direction`), each shrunk by its noise (:func:`shrink`), plus
-a component for each region the fit leaves out (:func:`with_light_regions`).
+a component for each region the fit leaves out (:func:`with_light_regions`);
+and the variance of each shifted coordinate, fitted around the shifts
+(:func:`with_fitted_variances`).
 Which of them the proposal uses is :mod:`avrisk.rare.particle_fit`'s choice.
 """
 
@@ -15,11 +17,21 @@ from collections.abc import Sequence
 
 import numpy as np
 from scipy import stats
+from scipy.special import logsumexp
 
 from avrisk.rare.chain_moments import block_means, informative_by_moments, moment_errors
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
-from avrisk.rare.mixture_em import fit_mixture, merge_overlapping, seed_components
+from avrisk.rare.families.standard_space_normal import (
+    VARIANCE_RANGE,
+    StandardSpaceNormal,
+)
+from avrisk.rare.mixture_em import (
+    component_log_kernels,
+    fit_mixture,
+    merge_overlapping,
+    seed_components,
+)
 
 __all__ = [
     "LIGHT_REGION_SHARE",
@@ -27,7 +39,9 @@ __all__ = [
     "OUTLIER_TAIL",
     "fit_along_direction",
     "fit_per_coordinate",
+    "log_ratios_to_base",
     "shrink",
+    "with_fitted_variances",
     "slope_direction",
     "with_light_regions",
 ]
@@ -259,3 +273,90 @@ def shrink(
         return component
     scale = max(0.0, 1.0 - noise / (share * size))
     return component.with_natural_params(scale * component.mean)
+
+
+def with_fitted_variances(
+    points: FloatArray,
+    point_chain: np.ndarray,
+    components: Sequence[StandardSpaceShift],
+    weights: FloatArray,
+    shifted: np.ndarray,
+) -> tuple[list[StandardSpaceNormal], FloatArray, np.ndarray]:
+    """The fitted shifts, each with the variance of its particles around it.
+
+    Each particle is shared among the shifts by its responsibilities under
+    them; a component's variance of coordinate ``i`` is its share's mean of
+    ``(z_i - mu_i)^2`` on the shifted coordinates (1 elsewhere). The log
+    variances are shrunk towards 0 as :func:`shrink` shrinks a shift, by
+    their noise: ``(se / v)^2`` summed over the coordinates, ``se`` from
+    blocks of chains (:func:`~avrisk.rare.chain_moments.block_means`).
+
+    Parameters
+    ----------
+    points : ndarray of shape (n, D)
+        Particles in the base's standard-normal space.
+    point_chain : ndarray of int, shape (n,)
+        The chain of each.
+    components : sequence of StandardSpaceShift
+        The fitted (shrunk) shifts; ``weights`` their weights, shape (K,).
+    shifted : ndarray of bool, shape (D,)
+        The coordinates the shifts move.
+
+    Returns
+    -------
+    components : list of StandardSpaceNormal
+    weights : ndarray of shape (K,)
+        As given.
+    shifted : ndarray of bool, shape (D,)
+        As given.
+    """
+    masked = np.where(shifted, points, 0.0)
+    log_joint = np.log(weights) + component_log_kernels(components, masked)
+    responsibility = np.exp(log_joint - logsumexp(log_joint, axis=1, keepdims=True))
+    scaled = []
+    for k, component in enumerate(components):
+        share = responsibility[:, k] / responsibility[:, k].mean()
+        squares = share[:, None] * (masked - component.mean) ** 2
+        variance, stderr = block_means(squares[:, shifted], point_chain)
+        variance = np.clip(variance, *VARIANCE_RANGE)
+        log_variance = np.log(variance)
+        noise = float(np.nansum((stderr / variance) ** 2))
+        size = float(log_variance @ log_variance)
+        scale = max(0.0, 1.0 - noise / size) if size > 0 else 0.0
+        full = np.ones(len(shifted))
+        full[shifted] = np.exp(scale * log_variance)
+        scaled.append(
+            StandardSpaceNormal(
+                component.base,
+                component.mean,
+                full,
+                max_shift=component.max_shift,
+                searched=component.searched,
+            )
+        )
+    return scaled, weights, shifted
+
+
+def log_ratios_to_base(
+    components: Sequence[ExponentialFamily], z: FloatArray
+) -> FloatArray:
+    """``log(q_k / p0)`` of each standard-space component at ``z``, shape (n, K).
+
+    Parameters
+    ----------
+    components : sequence of StandardSpaceShift or StandardSpaceNormal
+    z : ndarray of shape (n, D)
+        Points in the base's standard-normal space.
+    """
+    if all(isinstance(c, StandardSpaceShift) for c in components):
+        return component_log_kernels(components, z)  # their carrier is p0
+    return np.stack([as_normal(c).log_ratio(z) for c in components], axis=1)
+
+
+def as_normal(component: ExponentialFamily) -> StandardSpaceNormal:
+    """A standard-space component as a :class:`StandardSpaceNormal`."""
+    if isinstance(component, StandardSpaceShift):
+        return StandardSpaceNormal.of_shift(component)
+    if not isinstance(component, StandardSpaceNormal):
+        raise TypeError(f"not a standard-space component: {type(component).__name__}")
+    return component

@@ -191,6 +191,9 @@ class SplittingISSettings(SplittingSettings):
         Which standard coordinates the shifts may move: all of them, or only
         those the base's cross-entropy box searches
         (:meth:`~avrisk.rare.families.base.ExponentialFamily.searched_coordinates`).
+    fit_variances : bool, default=True
+        Whether the proposal may also fit each shifted coordinate's variance
+        (where the held-out likelihood clearly prefers it; step 3).
     """
 
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
@@ -210,6 +213,12 @@ class SplittingISSettings(SplittingSettings):
         "all",
         description="Standard coordinates the shifts may move: 'all', or those the "
         "base's CE box searches ('searched').",
+    )
+
+    fit_variances: bool = Field(
+        True,
+        description="Whether the proposal may fit each shifted coordinate's "
+        "variance too (where held-out particles clearly prefer it).",
     )
 
     def tail_bound(self, n: int) -> int:
@@ -412,6 +421,7 @@ def _fit_record(
         "informative_threshold": fitted.threshold,
         "along_slope": fitted.along_slope,
         "n_shifted": fitted.n_shifted,
+        "fitted_variances": fitted.variances,
     }
 
 

@@ -65,11 +65,18 @@ def cross_check_table(
     )
 
 
+def shift_kind(details: dict[str, Any]) -> str:
+    """``"slope"``, ``"coords+var"`` or ``"coords"``: how the proposal moves P0."""
+    if details.get("along_slope"):
+        return "slope"
+    return "coords+var" if details.get("fitted_variances") else "coords"
+
+
 def proposal_table(details: dict[str, Any], main: dict[str, Any]) -> DiagnosticTable:
     """The fitted proposal's choices and its sample's diagnostics at ``gamma``."""
     fit = (
         details["n_components"],
-        "slope" if details.get("along_slope") else "coords",
+        shift_kind(details),
         details["n_shifted"],
         details["informative_threshold"],
         details["fit_acceptance"],
@@ -88,7 +95,8 @@ def proposal_table(details: dict[str, Any], main: dict[str, Any]) -> DiagnosticT
             "to the dangerous samples the levels found (moved once more, "
             "at gamma, after the last set: the moves at gamma): its components "
             "(regions), its shift (coords: coordinate by coordinate; "
-            "slope: along f's average slope), how many of P0's "
+            "coords+var: the same with each coordinate's variance fitted "
+            "too; slope: along f's average slope), how many of P0's "
             "coordinates it shifts (those the dangerous samples differ "
             "on by more than the threshold, in standard errors; the rest "
             "stay as in P0), and the share of moves accepted at gamma "
