@@ -6,7 +6,10 @@
 * Every citation of a BENCHMARKS.md section in the code, tests, benchmarks,
   scripts, bundled data and docs (``BENCHMARKS.md, "Title"``,
   ``BENCHMARKS.md "Title"`` or ``BENCHMARKS.md ("Title"``) starts a heading
-  of BENCHMARKS.md.
+  of BENCHMARKS.md or of its archive (``docs/benchmarks-history.md``, the
+  superseded sections), and BENCHMARKS.md links every archived section.
+* Every ``benchmarks/...`` path that BENCHMARKS.md, its archive, the README or
+  ``docs/*.md`` name exists: a results file, folder or script.
 * ``docs/design.md`` states the import rules that ``tests/test_architecture.py``
   checks, and its layout lists every package.
 * The Python examples of ``docs/*.md`` run, each page in a fresh interpreter
@@ -24,6 +27,8 @@ from tests.test_architecture import ALLOWED
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS = ROOT / "BENCHMARKS.md"
+#: The superseded sections of BENCHMARKS.md, word for word.
+ARCHIVE = ROOT / "docs" / "benchmarks-history.md"
 DESIGN = ROOT / "docs" / "design.md"
 PAGES = sorted([ROOT / "README.md", BENCHMARKS, *(ROOT / "docs").glob("*.md")])
 
@@ -121,13 +126,97 @@ def test_the_sources_cite_benchmark_sections():
 
 
 def test_every_cited_benchmark_section_exists():
-    titles = [normalized(h) for h in headings(BENCHMARKS)]
+    titles = [normalized(h) for h in headings(BENCHMARKS) + headings(ARCHIVE)]
     missing = [
         f"{file}: {title!r}"
         for file, title in citations()
         if not any(h.startswith(normalized(title)) for h in titles)
     ]
     assert not missing, missing
+
+
+def test_benchmarks_links_every_archived_section():
+    # The archive keeps the headings its sections stood under; every other
+    # heading there is a moved section that BENCHMARKS.md must point to.
+    here = set(headings(BENCHMARKS))
+    text = BENCHMARKS.read_text(encoding="utf-8")
+    linked = set(re.findall(r"\]\(docs/benchmarks-history\.md#([^)\s]+)\)", text))
+    moved = [h for h in headings(ARCHIVE)[1:] if h not in here]
+    unlisted = [h for h in moved if slug(h) not in linked]
+    assert not unlisted, unlisted
+
+
+#: ``benchmarks/...`` as prose names it; the trailing punctuation is the prose's.
+RESULTS_PATH = re.compile(r"(?<![\w/.])benchmarks/[\w./{},*<>-]*[\w*}/]")
+#: Files renamed after a section named them: the files of the drivers
+#: ``a3228f24`` got the suffix ``_drivers_a3228f24`` when the drivers changed
+#: (the sections naming the first and the last say so).
+RENAMED = {
+    "benchmarks/results/coverage/highway_default_shrunk.jsonl": (
+        "benchmarks/results/coverage/highway_default_shrunk_drivers_a3228f24.jsonl"
+    ),
+    "benchmarks/results/coverage/highway_default_slope.jsonl": (
+        "benchmarks/results/coverage/highway_default_slope_drivers_a3228f24.jsonl"
+    ),
+    "benchmarks/results/references/highway_vision": (
+        "benchmarks/results/references/highway_vision_drivers_a3228f24.json"
+    ),
+}
+#: Placeholders of the commands' prose: any name.
+PLACEHOLDER = re.compile(r"<[^>]*>|(?<![A-Za-z])SCENARIO(?![A-Za-z])")
+
+
+def _named_paths(page):
+    """``(as written, glob pattern)`` for the ``benchmarks/...`` paths of a page.
+
+    A brace list expands; ``SCENARIO`` or ``<...>`` stands for any name; a
+    reference's ``--out`` prefix names the files it writes (``PREFIX.json``).
+    """
+    out = []
+    for path in sorted(set(RESULTS_PATH.findall(page.read_text(encoding="utf-8")))):
+        for name in _expand_braces(path):
+            out.append((path, PLACEHOLDER.sub("*", RENAMED.get(name, name))))
+    return out
+
+
+def _expand_braces(path):
+    """``a_{x,y}_b`` as ``[a_x_b, a_y_b]``; a path without braces alone."""
+    brace = re.search(r"\{([^}]*)\}", path)
+    if not brace:
+        return [path]
+    head, tail = path[: brace.start()], path[brace.end() :]
+    return [head + option + tail for option in brace.group(1).split(",")]
+
+
+@pytest.mark.parametrize(
+    "page",
+    [ROOT / "README.md", BENCHMARKS, *(ROOT / "docs").glob("*.md")],
+    ids=lambda p: p.relative_to(ROOT).as_posix(),
+)
+def test_every_benchmarks_path_named_exists(page):
+    missing = _unresolved(_named_paths(page))
+    assert not missing, missing
+
+
+def _unresolved(named):
+    """The paths as written of ``named`` that no file or folder matches."""
+    return [
+        written
+        for written, pattern in named
+        if not any(ROOT.glob(pattern)) and not any(ROOT.glob(pattern + ".*"))
+    ]
+
+
+def test_named_paths_are_checked_at_all():
+    named = dict(_named_paths(BENCHMARKS))
+    assert "benchmarks/results/exact_suite/after51_splitting_is.jsonl" in named
+    assert "benchmarks/results/coverage/highway_{idm,default}_slope.jsonl" in named
+    assert named["benchmarks/results/references/SCENARIO.json"] == (
+        "benchmarks/results/references/*.json"
+    )
+    absent = ("x", "benchmarks/results/references/no_such_scenario.json")
+    prefix = ("y", "benchmarks/results/references/highway_idm")
+    assert _unresolved([absent, prefix]) == ["x"]
 
 
 def _design_rules():
