@@ -1,10 +1,11 @@
 """GAIL with PPO of human car following, after BC + DAgger: a tried idea, not shipped.
 
 ``benchmarks/gail_realism.py`` fine-tunes the shipped network with
-:func:`gail_finetune` and scores it as ``avrisk realism`` does (BENCHMARKS.md,
-"GAIL fine-tuning of the acceleration head (not shipped)"); it did not reduce
-the rear-end collisions, so ``avrisk train-drivers`` does not run it and the
-method lives here, beside that benchmark, rather than in the package.
+:func:`gail_finetune` and scores it as ``avrisk realism`` does
+(docs/benchmarks-history.md, "GAIL fine-tuning of the acceleration head (not
+shipped)"); it did not reduce the rear-end collisions, so ``avrisk
+train-drivers`` does not run it and the method lives here, beside that
+benchmark, rather than in the package.
 
 GAIL (Ho and Ermon 2016) trains a discriminator ``D`` to tell human
 transitions from the policy's and rewards the policy for transitions that

@@ -65,7 +65,7 @@ same barriers, and fewer still with the stressed replays, at the cost of
 longer gaps (BENCHMARKS.md, "Learned drivers"). Model-free GAIL with PPO
 (``benchmarks/gail_ppo.py``, the acceleration rows of the shared head only) is
 not run by ``train_drivers``; it did not reduce the rear-end collisions
-(BENCHMARKS.md, "GAIL fine-tuning of the acceleration head"). The ensemble is
-one trunk with ``m`` bootstrap heads, refitted with the trunk frozen so that
-they are comparable, not ``m`` independently trained generators.
+(docs/benchmarks-history.md, "GAIL fine-tuning of the acceleration head"). The
+ensemble is one trunk with ``m`` bootstrap heads, refitted with the trunk
+frozen so that they are comparable, not ``m`` independently trained generators.
 """

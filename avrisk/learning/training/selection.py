@@ -1,8 +1,8 @@
 """The safest of several trainings of one recipe, chosen on training data alone.
 
 Trainings of the same recipe that differ only in their seed crash on the
-held-out windows very differently (BENCHMARKS.md, "The shipped recipe over
-training seeds"), and the closed-loop stage's early stopping does not see it
+held-out windows very differently (docs/benchmarks-history.md, "The shipped
+recipe over training seeds"), and the closed-loop stage's early stopping does not see it
 (one replay per validation window). What does: replaying the closed-loop
 stage's own validation windows (the share ``validation_fraction`` of the
 training windows that the stage held out, drawn with the training's seed)
