@@ -162,6 +162,7 @@ def run(args: argparse.Namespace) -> None:
                 for key in (
                     "informative_threshold",
                     "along_slope",
+                    "fitted_variances",
                     "n_components",
                     "answer",
                 )

@@ -2,7 +2,8 @@
 
 Step 3 of :mod:`avrisk.rare.splitting_importance` (its module docstring says
 what the fit does and why): mean shifts of the base's standard normals on the
-coordinates the particles say something about, components chosen by the
+coordinates the particles say something about, with their variances where
+that clearly fits better, components chosen by the
 held-out likelihood of one half of the chains under a fit to the other half,
 shrunk by their noise, plus a component for each region the fit leaves out.
 The shifts themselves are fitted in :mod:`avrisk.rare.particle_shifts`; this
@@ -26,6 +27,7 @@ from avrisk.rare.chain_moments import block_means
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.mixture_em import MixtureProposal
 from avrisk.rare.particle_shifts import (
+    as_normal,
     fit_along_direction,
     fit_per_coordinate,
     log_ratios_to_base,
@@ -222,6 +224,8 @@ def particle_proposal(
     )
     components, weights, shifted = choice.fitter(z, chain)
     components, weights = with_light_regions(z, components, weights, shifted, base, rng)
+    if choice.variances:  # one structure, so that a run directory records it
+        components = [as_normal(c) for c in components]
     proposal = MixtureProposal(components, weights, base, settings.defensive)
     return ParticleFit(
         proposal,

@@ -16,7 +16,10 @@ mixture of such members with the base:
 
 A record with ``"space": "standard"`` holds members that shift the base's
 standard normals (:class:`~avrisk.rare.families.StandardSpaceShift`) by
-their shift ``mu``.
+their shift ``mu``; one with ``"space": "standard-scaled"`` members that also
+scale them
+(:class:`~avrisk.rare.families.standard_space_normal.StandardSpaceNormal`),
+by ``mu`` followed by the variances ``v``.
 
 The record holds numbers only (floats written by ``json`` round-trip
 exactly); the structure (covariances, supports, search boxes) comes from the
@@ -33,9 +36,13 @@ import numpy as np
 from avrisk.rare.defensive import DefensiveMixture
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
+from avrisk.rare.families.standard_space_normal import StandardSpaceNormal
 from avrisk.rare.mixture_em import MixtureProposal
 
 __all__ = ["Sampler", "proposal_from_record", "proposal_record"]
+
+#: The spaces a record's members may live in.
+SPACES = ("natural", "standard", "standard-scaled")
 
 #: What a stage samples from.
 Sampler = ExponentialFamily | DefensiveMixture | MixtureProposal
@@ -70,7 +77,7 @@ def proposal_record(
         if any(r is None for r in records) or len(spaces) != 1:
             return None
         params = [r[1] for r in records if r is not None]
-        space = {"space": "standard"} if spaces == {"standard"} else {}
+        space = _space_field(spaces.pop())
         if isinstance(proposal, DefensiveMixture):
             return {
                 "kind": "defensive",
@@ -88,8 +95,12 @@ def proposal_record(
     record = _member_record(proposal, base)
     if record is None:
         return None
-    space = {"space": "standard"} if record[0] == "standard" else {}
-    return {"kind": "family", "params": record[1], **space}
+    return {"kind": "family", "params": record[1], **_space_field(record[0])}
+
+
+def _space_field(space: str) -> dict[str, str]:
+    """The record's ``"space"`` entry (none for the natural space)."""
+    return {} if space == "natural" else {"space": space}
 
 
 def _member_record(
@@ -98,6 +109,10 @@ def _member_record(
     """``(space, params)`` of one member of ``base``'s families, or None."""
     if isinstance(member, StandardSpaceShift) and _same_kind(member.base, base):
         return "standard", _floats(member.mean)
+    if isinstance(member, StandardSpaceNormal) and _same_kind(member.base, base):
+        return "standard-scaled", _floats(
+            np.concatenate([member.mean, member.variance])
+        )
     if isinstance(member, ExponentialFamily) and type(member) is type(base):
         return "natural", _floats(member.exact_params())
     return None
@@ -122,7 +137,7 @@ def proposal_from_record(record: Any, base: ExponentialFamily) -> Sampler:
         )
     kind = record["kind"]
     space = record.get("space", "natural")
-    if space not in ("natural", "standard"):
+    if space not in SPACES:
         raise ValueError(f"proposal record: unknown space {space!r:.40}")
     if kind == "family":
         return _member(record.get("params"), base, space)
@@ -151,6 +166,11 @@ def proposal_from_record(record: Any, base: ExponentialFamily) -> Sampler:
 def _member(params: Any, base: ExponentialFamily, space: str) -> ExponentialFamily:
     if space == "standard":
         return StandardSpaceShift(base, _vector(params, base.dim, "params"))
+    if space == "standard-scaled":
+        values = _vector(params, 2 * base.dim, "params")
+        if not (values[base.dim :] > 0).all():
+            raise ValueError("proposal record: variances must be positive")
+        return StandardSpaceNormal(base, values[: base.dim], values[base.dim :])
     return base.with_exact_params(_vector(params, base.n_stats, "params"))
 
 

@@ -21,6 +21,7 @@ from avrisk.rare.cross_entropy import CESettings
 from avrisk.rare.cross_entropy_search import SEARCH_ADVICE
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.families.standard_space import StandardSpaceShift
+from avrisk.rare.families.standard_space_normal import VARIANCE_RANGE
 from avrisk.rare.particle_fit import (
     PREDICTION_FOLDS,
     HeldOutWeights,
@@ -35,6 +36,7 @@ from avrisk.rare.splitting_importance import (
     SplittingISSettings,
 )
 from avrisk.rare.splitting_is_answer import ADVICE, levels_more_precise
+from avrisk.rare.splitting_is_tables import shift_kind
 from avrisk.rare.trust import estimate_trust
 from avrisk.report.plots import table_cells
 from avrisk.testing import (
@@ -98,6 +100,25 @@ def test_one_region_in_high_dimension_is_one_component():
     assert q.components[0].mean[0] == pytest.approx(4.0, abs=0.2)
 
 
+def test_where_the_event_narrows_p0_the_proposal_fits_the_variances():
+    # RP63: x1 >= 0.1 sum(x2..x100 ^ 2) - 4.5 holds the 99 squares small, so
+    # P0(. | F) is narrower than P0 in 99 coordinates; unit-variance shifts pay
+    # for it in each of them
+    problem = suite_problem("RP63")
+    runs = {
+        fit: sis(problem, n_particles=4000, n_final=20_000, fit_variances=fit)
+        for fit in (True, False)
+    }
+    assert runs[True].details["fitted_variances"]
+    assert not runs[False].details["fitted_variances"]
+    assert runs[True].main.ess > 10 * runs[False].main.ess
+    assert abs(runs[True].p - problem.p_exact) < 4 * runs[True].stderr
+    table = runs[True].proposal.to_dict()["components"][0]
+    assert table["family"] == "StandardSpaceNormal"
+    assert np.median(table["variance"][1:]) < 0.9  # narrower, not at the floor
+    assert min(table["variance"]) >= VARIANCE_RANGE[0]
+
+
 def _mean_shift_fitter(base, scale=1.0):
     """A fitter of one shift, the mean of the points it is given (times scale)."""
 
@@ -151,9 +172,11 @@ def test_the_levels_answer_when_the_particles_predict_them_more_precise():
 def test_five_regions_in_fifty_dimensions_are_answered_by_the_levels():
     # five half-space regions of unequal mass in d = 50: a few mean shifts
     # cannot hold them all (the importance sample came out 18% low, 8 of 20
-    # covered); the particles predict it, and the levels' product answers
+    # covered); the particles predict it, and the levels' product answers.
+    # Shifts alone: fitted variances hold this seed's regions well enough
+    # that its sample answers, which is not the choice tested here
     problem = suite_problem("kregions_k5_d50_p1e-06")
-    est = sis(problem, seed=0, n_particles=4000, n_final=20_000)
+    est = sis(problem, seed=0, n_particles=4000, n_final=20_000, fit_variances=False)
     assert est.details["answer"] == "splitting"
     levels = est.details["splitting"][str(problem.gamma)]
     assert est.p == levels["p"] and list(est.ci) == levels["ci"]
@@ -360,7 +383,9 @@ def test_diagnostics_show_the_levels_the_proposal_and_the_cross_check():
     assert shown["components"] == details["n_components"] >= 1
     assert shown["shifted coordinates"] == details["n_shifted"] <= 2
     assert shown["threshold [SE]"] == details["informative_threshold"]
-    assert shown["shift"] == ("slope" if details["along_slope"] else "coords")
+    assert shown["shift"] == shift_kind(details)
+    assert shift_kind({"along_slope": False, "fitted_variances": True}) == "coords+var"
+    assert shift_kind({"along_slope": True}) == "slope"
     assert shown["acceptance at gamma"] == details["fit_acceptance"]
     assert shown["hits"] == est.n_hits > 0
     assert shown["ESS"] == pytest.approx(est.ess)
@@ -426,7 +451,7 @@ def test_a_replicate_whose_levels_run_out_is_left_out_with_a_caution():
     est = splitting_is(f, base, 0.0, **plan, max_levels=6)
     assert est.details["replicates_exhausted"] == 1
     assert len(est.details["replicates"]) == 1
-    assert est.ci[0] < 1e-6 < est.ci[1]
+    assert abs(est.p - 1e-6) < 4 * est.stderr  # one seed: not a 95% check
     trust = estimate_trust(
         estimator_class("splitting_is"), est.to_dict(), est.to_dict()["by_gamma"][0]
     )

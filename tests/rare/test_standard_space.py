@@ -1,5 +1,6 @@
 """CE proposals in the base's standard-normal space (StandardSpaceShift)."""
 
+import json
 import warnings
 
 import numpy as np
@@ -13,10 +14,14 @@ from avrisk.rare import (
     cross_entropy,
 )
 from avrisk.rare.defensive import DefensiveMixture
+from avrisk.rare.families.standard_space_normal import (
+    VARIANCE_RANGE,
+    StandardSpaceNormal,
+)
 from avrisk.rare.mixture import mixture_ce
 from avrisk.rare.mixture_em import MixtureProposal
 from avrisk.rare.proposals import proposal_from_record, proposal_record
-from avrisk.testing import beta_sum_problem, four_branch_problem
+from avrisk.testing import beta_sum_problem, check_family, four_branch_problem
 
 
 @pytest.fixture
@@ -132,3 +137,66 @@ def test_mixture_ce_in_standard_space_finds_every_branch():
         )  # fmt: skip
     assert abs(est.p - problem.p_exact) < 4 * est.stderr
     assert est.stderr / est.p < 0.05
+
+
+@pytest.fixture
+def scaled(base):
+    """A member that shifts and narrows the Betas' standard normals."""
+    return StandardSpaceNormal(base).project(
+        np.array([2.0, -1.0, 0.0, 0.0, 4.0 + 0.7, 1.0 + 1.5, 1.0, 1.0])
+    )
+
+
+def test_the_scaled_family_passes_the_conformance_check(scaled, rng):
+    check_family(scaled, rng)
+
+
+def test_the_scaled_family_at_unit_variance_is_the_shift(base):
+    shift = StandardSpaceShift(base, [2.0, -1.0, 0.0, 0.0])
+    scaled = StandardSpaceNormal.of_shift(shift)
+    x = shift.sample(200, np.random.default_rng(2))
+    np.testing.assert_allclose(scaled.log_prob(x), shift.log_prob(x), atol=1e-10)
+    np.testing.assert_array_equal(
+        scaled.sample(50, np.random.default_rng(3)),
+        shift.sample(50, np.random.default_rng(3)),
+    )
+
+
+def test_scaled_weights_are_the_closed_form_and_average_one(scaled, base):
+    x = scaled.sample(50_000, np.random.default_rng(1))
+    z = base.to_standard_normal(x)
+    mu, v = scaled.mean, scaled.variance
+    np.testing.assert_allclose(scaled.variance, [0.7, 1.5, 1.0, 1.0], rtol=1e-12)
+    log_normal_ratio = (-0.5 * (z - mu) ** 2 / v - 0.5 * np.log(v) + 0.5 * z * z).sum(1)
+    np.testing.assert_allclose(
+        base.log_prob(x) - scaled.log_prob(x), -log_normal_ratio, atol=1e-9
+    )
+    w = np.exp(base.log_prob(x) - scaled.log_prob(x))
+    assert abs(w.mean() - 1.0) < 4 * w.std() / np.sqrt(w.size)
+
+
+def test_scaled_projection_clips_variances_and_keeps_unsearched_coordinates(base):
+    low, high = VARIANCE_RANGE
+    m = np.array([1.0, 0.0, 3.0, 0.0, 1.0 + 0.01, 100.0, 9.0 + 0.2, 5.0])
+    q = StandardSpaceNormal(base).project(m)
+    np.testing.assert_array_equal(q.mean, [1.0, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(q.variance, [low, high, 1.0, 1.0])
+    assert q.in_search_box()
+    with pytest.raises(ValueError, match="positive"):
+        StandardSpaceNormal(base, variance=[1.0, 0.0, 1.0, 1.0])
+
+
+def test_a_scaled_mixture_record_draws_the_same_samples_again(scaled, base):
+    other = StandardSpaceNormal(base, [-1.0, 3.0, 0.0, 0.0], [1.2, 0.8, 1.0, 1.0])
+    mixture = MixtureProposal([scaled, other], [0.3, 0.7], base, 0.1)
+    record = proposal_record(mixture, base)
+    assert record is not None and record["space"] == "standard-scaled"
+    again = proposal_from_record(json.loads(json.dumps(record)), base)
+    rng = np.random.default_rng
+    np.testing.assert_array_equal(again.sample(64, rng(5)), mixture.sample(64, rng(5)))
+    x = mixture.sample(64, rng(6))
+    np.testing.assert_array_equal(again.log_prob(x), mixture.log_prob(x))
+    # variances that are not positive, from an untrusted record, are refused
+    record["components"][0][base.dim] = -1.0
+    with pytest.raises(ValueError, match="variances must be positive"):
+        proposal_from_record(record, base)
