@@ -167,6 +167,8 @@ def _run_engine(problem: Any, method: str, seed: int, settings: dict) -> dict:
         "reasons": list(trust.reasons),
         # which of its estimates answered, where a method has two
         "answer": (estimate.details or {}).get("answer"),
+        # whether splitting_is's proposal fitted variances too
+        "fitted_variances": (estimate.details or {}).get("fitted_variances"),
     }
 
 
