@@ -52,10 +52,6 @@ NOT_YET_THIN: dict[str, str] = {
         "looks up the shipped PilotNet's folder, to warn before replacing it, "
         "beside train_vision"
     ),
-    "serve-ego": (
-        "checks the address, builds the reference controller and its server and "
-        "serves it: no avrisk.api call serves an ego"
-    ),
     "realism": (
         "builds RealismSettings, runs, writes the report and sets torch's threads: "
         "no avrisk.api call for realism"
