@@ -1,4 +1,4 @@
-"""The reference AV's server through the API: the address it may bind, what it serves."""
+"""The reference AV served through the API: the address it may bind, what it serves."""
 
 import pytest
 

@@ -44,14 +44,6 @@ NOT_YET_THIN: dict[str, str] = {
         "its exact-problem part (the problems of avrisk.testing, naive_mc and "
         "cross_entropy) has no avrisk.api call"
     ),
-    "train-drivers": (
-        "looks up the shipped drivers' folder (to warn before replacing them, and "
-        "for their CPU kernels) beside train_drivers"
-    ),
-    "train-vision": (
-        "looks up the shipped PilotNet's folder, to warn before replacing it, "
-        "beside train_vision"
-    ),
     "realism": (
         "builds RealismSettings, runs, writes the report and sets torch's threads: "
         "no avrisk.api call for realism"
