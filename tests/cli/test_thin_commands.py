@@ -44,10 +44,6 @@ NOT_YET_THIN: dict[str, str] = {
         "its exact-problem part (the problems of avrisk.testing, naive_mc and "
         "cross_entropy) has no avrisk.api call"
     ),
-    "realism": (
-        "builds RealismSettings, runs, writes the report and sets torch's threads: "
-        "no avrisk.api call for realism"
-    ),
 }
 
 
