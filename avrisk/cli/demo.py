@@ -146,15 +146,14 @@ class DemoDisplay:
         if not isinstance(event, ExactEstimates):
             self.runs(event)
             return
-        console = out_console
-        console.print(analytic_table(event.budget, event.seed, event.problems))
-        console.print(
+        out_console.print(analytic_table(event.budget, event.seed, event.problems))
+        out_console.print(
             "Naive Monte Carlo needs about 1/(p eps^2) calls for relative error "
             "eps; cross-entropy importance sampling reaches a few percent with "
             "the same budget."
         )
         if event.written is not None:
-            console.print(f"wrote {event.written}")
+            out_console.print(f"wrote {event.written}")
         if self.show_rule:
-            console.rule("bundled scenario highway_default: P(min TTC <= gamma)")
+            out_console.rule("bundled scenario highway_default: P(min TTC <= gamma)")
         self.runs = RichProgress(err_console)
