@@ -65,7 +65,9 @@ ALLOWED = {
     # the run driver serves any black box: it knows nothing of the simulator
     "pipeline": {"rare", "registry", "fingerprint", "version"},
     "report": {"pipeline", "rare", "assembly", "scenario"},
-    # the scenario-level calls the command line is a shell over
+    # the scenario-level calls the command line is a shell over, and the
+    # calls of its other commands: training (learning), the reference AV's
+    # server (agents), the realism report, the demo's exact problems (testing)
     "api": {
         "pipeline",
         "rare",
@@ -75,6 +77,10 @@ ALLOWED = {
         "registry",
         "extras",
         "version",
+        "agents",
+        "learning",
+        "realism",
+        "testing",
     },
     "testing": {"rare"},
     # the Gymnasium environment: a scenario built and stepped by hand

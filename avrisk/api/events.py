@@ -67,10 +67,13 @@ class Plan:
 
 @dataclass(frozen=True)
 class RunOpened:
-    """Run ``label`` begins (or resumes, or is read back) in ``out``."""
+    """Run ``label`` begins (or resumes, or is read back) in ``out``.
+
+    ``out`` is None for a run that records nothing (the demo's exact problems).
+    """
 
     label: str
-    out: Path
+    out: Path | None
 
 
 @dataclass(frozen=True)
@@ -116,7 +119,7 @@ class RunClosed:
     """Run ``label`` ended: ``error`` is what stopped it, None when it finished."""
 
     label: str
-    out: Path
+    out: Path | None
     error: BaseException | None = None
 
 
@@ -158,7 +161,9 @@ class MonitorEvents:
 
 
 @contextmanager
-def run_events(label: str, out: Path, progress: Progress) -> Iterator[MonitorEvents]:
+def run_events(
+    label: str, out: Path | None, progress: Progress
+) -> Iterator[MonitorEvents]:
     """A run's :class:`RunOpened`, its monitor, then its :class:`RunClosed`."""
     progress(RunOpened(label, out))
     try:

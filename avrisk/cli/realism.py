@@ -1,8 +1,9 @@
 """``avrisk realism``: how human-like the learned drivers are, on held-out data.
 
-Runs the realism report (:mod:`avrisk.realism`) for the shipped drivers or
-those ``avrisk train-drivers`` wrote in ``--drivers``, on the held-out human
-data shipped with the package (no ``$AVRISK_NGSIM_DIR`` needed):
+Runs the realism report (:func:`avrisk.api.realism.realism_report`) for the
+shipped drivers or those ``avrisk train-drivers`` wrote in ``--drivers``, on
+the held-out human data shipped with the package (no ``$AVRISK_NGSIM_DIR``
+needed):
 
 * part A, car following on the held-out NGSIM I-80 windows (each replayed
   ``--replicates`` times per model: 24 by default, the benchmark's setting,
@@ -18,19 +19,17 @@ settings give the same figures on a machine.
 
 from __future__ import annotations
 
-import time
-import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Literal
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.markup import escape
-from rich.progress import Progress
+from rich.progress import Progress, TaskID
 
+from avrisk.api.realism import realism_report
 from avrisk.cli.common import (
-    CliError,
     check_output_folder,
     command_line,
     err_console,
@@ -43,74 +42,43 @@ from avrisk.cli.tables import add_columns, compact_table
 if TYPE_CHECKING:
     from rich.table import Table
 
-    from avrisk.agents.drivers.guard import BrakeGuard
-    from avrisk.realism import DriverFiles, RealismResult
+    from avrisk.realism import RealismResult
     from avrisk.realism.car_following import Progress as PartProgress
 
 #: Where ``realism`` writes by default.
 DEFAULT_OUT = Path("realism")
 
-#: What a corrupt driver file raises when read.
-_UNREADABLE = (
-    OSError,
-    EOFError,
-    ValueError,
-    KeyError,
-    TypeError,
-    IndexError,
-    RuntimeError,
-    zipfile.BadZipFile,
-)
-
-
-def driver_files(folder: Path | None) -> DriverFiles:
-    """The driver model to evaluate, each file read once to check it.
-
-    Raises
-    ------
-    CliError
-        For a missing folder or file, or a file that is not what it should be.
-    """
-    from avrisk.agents.drivers.store import load_driver_net, load_xi_prior
-    from avrisk.realism import DriverFiles
-
-    if folder is not None and not folder.is_dir():
-        raise CliError(f"--drivers {folder}: no such folder")
-    files = DriverFiles.in_folder(folder)
-    for path, load, what in (
-        (files.net, load_driver_net, "a driver network"),
-        (files.prior, load_xi_prior, "an xi prior"),
-    ):
-        if not path.is_file():
-            raise CliError(
-                f"--drivers {folder}: lacks {path.name} (avrisk train-drivers "
-                "writes driver_net.npz and xi_prior.npz)"
-            )
-        try:
-            load(path)
-        except _UNREADABLE as exc:
-            reason = str(exc).splitlines()[0][:200] if str(exc) else ""
-            raise CliError(
-                f"--drivers {path}: not {what} ({reason or type(exc).__name__})"
-            ) from None
-    return files
-
 
 @contextmanager
 def part_progress() -> Iterator[tuple[PartProgress, PartProgress]]:
-    """A bar per part, naming the model being simulated; yields both callbacks."""
-    with Progress(*stage_columns("model"), console=err_console) as progress:
+    """A bar per part, naming the model being simulated; yields both callbacks.
 
-        def bar(label: str) -> PartProgress:
-            task = progress.add_task(label, total=None, model="", start=False)
+    The bars show from the first call of either: an error or a warning before
+    the parts start is a line of its own.
+    """
+    progress = Progress(*stage_columns("model"), console=err_console)
+    tasks: list[TaskID] = []
 
-            def update(model: str, done: int, total: int) -> None:
-                progress.start_task(task)
-                progress.update(task, completed=done, total=total, model=escape(model))
+    def bar(part: int) -> PartProgress:
+        def update(model: str, done: int, total: int) -> None:
+            if not tasks:
+                progress.start()
+                for label in ("A. car following", "B. lane changes"):
+                    tasks.append(
+                        progress.add_task(label, total=None, model="", start=False)
+                    )
+            progress.start_task(tasks[part])
+            progress.update(
+                tasks[part], completed=done, total=total, model=escape(model)
+            )
 
-            return update
+        return update
 
-        yield bar("A. car following"), bar("B. lane changes")
+    try:
+        yield bar(0), bar(1)
+    finally:
+        if progress.live.is_started:
+            progress.stop()
 
 
 def targets_summary(result: RealismResult) -> Table:
@@ -234,76 +202,27 @@ def realism_command(
     avrisk. Its cost at the defaults is in BENCHMARKS.md ("The report: avrisk
     realism").
     """
-    with user_errors(ValueError):
-        guard = _brake_guard(brake_guard)
-        _check_held_out(held_out)
     with user_errors(OSError):
-        files = driver_files(drivers)
-        _warn_trained_on(files, held_out)
         check_output_folder(out)
-        import torch
-
-        from avrisk.realism import RealismSettings, run_realism, write_report
-
-        torch.set_num_threads(threads)
-        settings = RealismSettings(
-            seed=seed,
-            replicates=replicates,
-            windows=windows,
-            scenes=scenes,
-            guard=guard,
-            held_out=held_out,
-        )
-        t0 = time.perf_counter()
         with part_progress() as (progress_a, progress_b):
-            result = run_realism(files, settings, progress_a, progress_b)
-        written = write_report(result, out, command_line(ctx))
-        out_console.print(targets_summary(result))
-        out_console.print(lane_change_summary(result))
-        names = ", ".join(p.name for p in written)
+            run = realism_report(
+                out,
+                drivers=drivers,
+                replicates=replicates,
+                scenes=scenes,
+                windows=windows,
+                seed=seed,
+                threads=threads,
+                brake_guard=brake_guard,
+                held_out=held_out,
+                command=command_line(ctx),
+                progress_a=progress_a,
+                progress_b=progress_b,
+            )
+        out_console.print(targets_summary(run.result))
+        out_console.print(lane_change_summary(run.result))
+        names = ", ".join(p.name for p in run.files)
         out_console.print(
-            f"wrote {escape(names)} to {escape(str(out))} "
-            f"({duration(time.perf_counter() - t0)})",
+            f"wrote {escape(names)} to {escape(str(out))} ({duration(run.wall_s)})",
             highlight=False,
         )
-
-
-def _check_held_out(held_out: str) -> None:
-    """Raise ValueError for a ``--held-out`` that is neither test nor a period."""
-    from avrisk.realism.held_out import HELD_OUT_TEST, held_out_periods
-
-    periods = held_out_periods()
-    if held_out != HELD_OUT_TEST and held_out not in periods:
-        raise ValueError(
-            f"--held-out {held_out}: not {HELD_OUT_TEST} nor one of the periods "
-            f"{', '.join(periods)}"
-        )
-
-
-def _warn_trained_on(files: DriverFiles, held_out: str) -> None:
-    """Warn when the drivers' training report says they trained on ``held_out``."""
-    import json
-
-    from avrisk.realism.held_out import HELD_OUT_TEST
-
-    if held_out == HELD_OUT_TEST:
-        return
-    report = files.net.parent / "training_report.json"
-    try:
-        periods = json.loads(report.read_text())["config"].get("periods")
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        periods = None  # no report: all periods, as the shipped drivers
-    if periods is None or held_out in periods:
-        err_console.print(
-            f"[yellow]warning:[/] these drivers were trained on {escape(held_out)} "
-            "(its train split): part A is not held out",
-            highlight=False,
-        )
-
-
-def _brake_guard(text: str | None) -> BrakeGuard | Literal["drivers"] | None:
-    """``--brake-guard``: the drivers' own brake (absent), none, or GAP,DECEL."""
-    from avrisk.agents.drivers.guard import parse_guard
-    from avrisk.realism.report import DRIVERS_GUARD
-
-    return DRIVERS_GUARD if text is None else parse_guard(text)

@@ -7,7 +7,8 @@ from typing import Annotated
 
 import typer
 
-from avrisk.agents.external.params import DEFAULT_ADDRESS, is_loopback
+from avrisk.agents.external.params import DEFAULT_ADDRESS
+from avrisk.api.ego_server import NotLoopbackError, serve_reference_ego
 from avrisk.cli.common import user_errors
 from avrisk.extras import MissingExtraError
 
@@ -31,13 +32,16 @@ def serve_ego(
     until interrupted; test it with a scenario whose ego is
     {policy: external, params: {address: ADDRESS}}.
     """
-    if not remote and not is_loopback(address):
-        raise typer.BadParameter(f"{address} is not loopback; add --remote to allow")
-    with user_errors(MissingExtraError):
-        from avrisk.agents.external.server import AccController, EgoServer, serve
-
-        server = EgoServer(AccController(speed=speed, noise=noise))
-        with suppress(KeyboardInterrupt):
-            serve(
-                server, address, ready=lambda a: typer.echo(f"serving the ego at {a}")
+    with user_errors(MissingExtraError), suppress(KeyboardInterrupt):
+        try:
+            serve_reference_ego(
+                address,
+                speed=speed,
+                noise=noise,
+                remote=remote,
+                ready=lambda a: typer.echo(f"serving the ego at {a}"),
             )
+        except NotLoopbackError:
+            raise typer.BadParameter(
+                f"{address} is not loopback; add --remote to allow"
+            ) from None

@@ -1,6 +1,6 @@
 """``avrisk train-vision``: retrain the vision ego's PilotNet on rendered images.
 
-Runs :func:`avrisk.learning.vision.train_vision` (behaviour cloning of the
+Runs :func:`avrisk.api.training.retrain_vision` (behaviour cloning of the
 lidar ego's steering on camera images of ``highway_vision``, then DAgger
 rounds; minutes on one core, as ``avrisk/data/vision/SOURCE.md`` records for
 the shipped weights) with one torch thread, so that the same seed and
@@ -15,16 +15,14 @@ are replaced only when ``--out`` names that folder.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.markup import escape
 
-from avrisk.agents.vision.store import PILOTNET_FILE, default_vision_dir
-from avrisk.cli.common import err_console, out_console, user_errors
-from avrisk.cli.train_drivers import _check_writable, _size, training_progress
+from avrisk.api.training import retrain_vision
+from avrisk.cli.common import err_console, user_errors
+from avrisk.cli.train_drivers import show_written, training_progress
 
 #: Where ``train-vision`` writes by default (not the shipped weights).
 DEFAULT_OUT = Path("runs") / "vision"
@@ -47,22 +45,6 @@ def train_vision_command(
     avrisk/data/vision unless --out names that folder.
     """
     with user_errors(OSError):
-        _check_writable(out)
-        shipped = default_vision_dir()
-        if shipped.is_dir() and os.path.samefile(out, shipped):
-            err_console.print(
-                f"[yellow]warning:[/] replacing the shipped PilotNet in "
-                f"{escape(str(out))}",
-                highlight=False,
-            )
-        from avrisk.learning.vision import REPORT_FILE, train_vision
-
         with training_progress(err_console) as progress:
-            train_vision(seed, out, progress=progress)
-        written = ", ".join(
-            f"{name} ({_size((out / name).stat().st_size)})"
-            for name in (PILOTNET_FILE, REPORT_FILE)
-        )
-        out_console.print(
-            f"wrote {escape(written)} to {escape(str(out))}", highlight=False
-        )
+            trained = retrain_vision(out, seed=seed, progress=progress)
+        show_written(trained)

@@ -21,9 +21,6 @@ The rule, checked on the source with :mod:`ast` (nothing is imported but
   library calls. A class instantiated counts as a call.
 * Each command makes library calls to exactly one callee (at one call site
   or several).
-
-:data:`NOT_YET_THIN` names the commands known to break the rule, each with
-the reason; every entry must still break it, so the list only shrinks.
 """
 
 import ast
@@ -37,30 +34,6 @@ from avrisk.cli.app import COMMANDS, app
 
 #: Top-level modules whose calls are parsing or display, not library work.
 DISPLAY = {"typer", "click", "rich"}
-
-#: Commands that make more than one library call, and why they still do.
-NOT_YET_THIN: dict[str, str] = {
-    "demo": (
-        "its exact-problem part (the problems of avrisk.testing, naive_mc and "
-        "cross_entropy) has no avrisk.api call"
-    ),
-    "train-drivers": (
-        "looks up the shipped drivers' folder (to warn before replacing them, and "
-        "for their CPU kernels) beside train_drivers"
-    ),
-    "train-vision": (
-        "looks up the shipped PilotNet's folder, to warn before replacing it, "
-        "beside train_vision"
-    ),
-    "serve-ego": (
-        "checks the address, builds the reference controller and its server and "
-        "serves it: no avrisk.api call serves an ego"
-    ),
-    "realism": (
-        "builds RealismSettings, runs, writes the report and sets torch's threads: "
-        "no avrisk.api call for realism"
-    ),
-}
 
 
 def _module_tree(module):
@@ -196,18 +169,11 @@ def test_every_registered_command_is_found():
 @pytest.mark.parametrize(("name", "module", "function"), COMMAND_LIST)
 def test_each_command_makes_one_library_call(name, module, function):
     callees = library_calls(_module_tree(module), function)
-    if name in NOT_YET_THIN:
-        assert len(callees) > 1, f"{name} is thin now: drop it from NOT_YET_THIN"
-        return
     where = f"{name} ({module}.{function}) calls {sorted(callees)}"
     if name.endswith("(callback)"):  # dispatches, or sets up the process
         assert len(callees) <= 1, where
         return
     assert len(callees) == 1, where
-
-
-def test_not_yet_thin_names_only_registered_commands():
-    assert set(NOT_YET_THIN) <= {name for name, _, _ in COMMAND_LIST}
 
 
 def _calls_in(source, function="command"):

@@ -6,13 +6,11 @@ from dataclasses import replace
 import pytest
 from typer.testing import CliRunner
 
-import avrisk.learning.training.report as training_report
 import avrisk.learning.training.train as training
 from avrisk.agents.drivers import XiPrior, load_driver_net
 from avrisk.agents.drivers.guard import BrakeGuard
 from avrisk.agents.drivers.store import default_drivers_dir
 from avrisk.cli.app import app
-from avrisk.cli.train_drivers import _warn_other_kernels
 
 runner = CliRunner()
 
@@ -74,18 +72,6 @@ def test_the_brake_written_with_the_weights_is_chosen_on_the_command_line(
         assert load_driver_net(out / "driver_net.npz").guard == guard
 
 
-def test_without_a_brake_the_closed_loop_trains_the_network_alone():
-    from avrisk.cli.train_drivers import _config
-    from avrisk.learning.train_config import TrainConfig
-
-    assert _config(None) == TrainConfig()
-    assert TrainConfig().closed_loop.drive_with_guard
-    assert not _config("none").closed_loop.drive_with_guard
-    held = _config("1,3,hold")
-    assert held.guard == BrakeGuard(1.0, 3.0, hold_floor=True)
-    assert held.closed_loop.drive_with_guard
-
-
 @pytest.mark.parametrize("text", ["3", "x,1", "-1,0.5"])
 def test_a_bad_brake_is_a_one_line_error_before_training(tmp_path, text):
     result = _train("--brake-guard", text, "--out", str(tmp_path / "d"))
@@ -118,23 +104,6 @@ def test_an_out_path_that_cannot_be_a_folder_is_refused_before_training(
     assert "error: cannot write to --out" in result.output
 
 
-def test_training_on_other_cpu_kernels_than_the_shipped_files_says_how_to_match(
-    monkeypatch, capsys
-):
-    report = json.loads((default_drivers_dir() / "training_report.json").read_text())
-    theirs = report["environment"]["cpu_kernels"]
-    monkeypatch.setattr(training_report, "cpu_kernels", lambda: theirs)
-    _warn_other_kernels()
-    assert capsys.readouterr().err == ""
-    other = {"torch": "AVX512", "blas": ["SkylakeX"]}
-    monkeypatch.setattr(training_report, "cpu_kernels", lambda: other)
-    _warn_other_kernels()
-    said = " ".join(capsys.readouterr().err.split())
-    assert "torch AVX512, BLAS SkylakeX" in said
-    assert f"torch {theirs['torch']}, BLAS {', '.join(theirs['blas'])}" in said
-    assert "ATEN_CPU_CAPABILITY=avx2 OPENBLAS_CORETYPE=Haswell" in said
-
-
 @pytest.mark.slow
 def test_candidates_print_their_validation_crashes_and_the_one_kept(
     tmp_path, fake_ngsim, tiny_train_config, monkeypatch
@@ -156,11 +125,7 @@ def test_fewer_than_one_candidate_is_refused(tmp_path):
     assert result.exit_code == 2 and "--candidates" in result.output
 
 
-def test_period_trains_on_that_period_and_an_unknown_one_is_a_one_line_error(tmp_path):
-    from avrisk.cli.train_drivers import _config
-
-    assert _config(None).periods is None
-    assert _config(None, ["0500pm-0515pm"]).periods == ("0500pm-0515pm",)
+def test_an_unknown_period_is_a_one_line_error(tmp_path):
     result = _train("--period", "0515pm-0530pm", "--out", str(tmp_path / "d"))
     assert result.exit_code != 0
     assert result.output.startswith("error: ") and "0400pm-0415pm" in result.output
