@@ -14,12 +14,17 @@ from collections.abc import Callable
 
 from avrisk.agents.external.params import DEFAULT_ADDRESS, is_loopback
 from avrisk.api.errors import UserError
+from avrisk.extras import needs_extra
 
-__all__ = ["NotLoopbackError", "serve_reference_ego"]
+__all__ = ["BindError", "NotLoopbackError", "serve_reference_ego"]
 
 
 class NotLoopbackError(UserError):
     """An address beyond this machine, to bind without ``remote=True``."""
+
+
+class BindError(UserError):
+    """An address ZeroMQ cannot bind (malformed, in use, or a missing folder)."""
 
 
 def serve_reference_ego(
@@ -51,6 +56,8 @@ def serve_reference_ego(
     ------
     NotLoopbackError
         For an address beyond this machine without ``remote``, before binding.
+    BindError
+        If ZeroMQ cannot bind ``address``.
     avrisk.extras.MissingExtraError
         Without pyzmq and msgpack (the ``external`` extra).
     KeyboardInterrupt
@@ -62,4 +69,20 @@ def serve_reference_ego(
         )
     from avrisk.agents.external.server import AccController, EgoServer, serve
 
-    serve(EgoServer(AccController(speed=speed, noise=noise)), address, ready=ready)
+    with needs_extra("external", "the external ego"):
+        import zmq
+    bound = []
+
+    def on_bound(where: str) -> None:
+        bound.append(where)
+        if ready is not None:
+            ready(where)
+
+    try:
+        serve(
+            EgoServer(AccController(speed=speed, noise=noise)), address, ready=on_bound
+        )
+    except zmq.ZMQError as exc:
+        if bound:
+            raise
+        raise BindError(f"cannot bind {address}: {exc}") from None

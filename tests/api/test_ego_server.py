@@ -3,7 +3,7 @@
 import pytest
 
 import avrisk.agents.external.server as server_module
-from avrisk.api.ego_server import NotLoopbackError, serve_reference_ego
+from avrisk.api.ego_server import BindError, NotLoopbackError, serve_reference_ego
 
 
 @pytest.fixture
@@ -35,3 +35,9 @@ def test_an_address_beyond_this_machine_needs_remote(served):
     assert served == []
     serve_reference_ego("tcp://10.0.0.7:5555", remote=True)
     assert [address for _, address in served] == ["tcp://10.0.0.7:5555"]
+
+
+def test_an_address_zeromq_cannot_bind_is_one_clear_error(tmp_path):
+    missing = f"ipc://{tmp_path}/no/such/folder/av.sock"
+    with pytest.raises(BindError, match="cannot bind ipc://"):
+        serve_reference_ego(missing)
