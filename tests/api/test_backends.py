@@ -1,15 +1,16 @@
-"""Backends by name: a new one is one registration, run like the bundled ones."""
+"""Backends by name: a new one is one module (``tests/user_backend.py``), run like
+the bundled ones."""
 
 import copy
-from contextlib import contextmanager
+import importlib
+import sys
 
 import pytest
 
 import avrisk
 from avrisk.api import backends
-from avrisk.api.backends import backend_descriptions, register_backend
+from avrisk.api.backends import backend_descriptions
 from avrisk.cli.backends import BackendName
-from avrisk.rare.evaluation import LocalEvaluator
 from avrisk.registry import UnknownComponentError
 from tests.scenario_files import shortened_scenario
 
@@ -25,22 +26,22 @@ def own_registry(monkeypatch):
         )
 
 
-def test_a_registered_backend_runs_the_estimate_of_this_process(tmp_path, own_registry):
-    calls = []
+@pytest.fixture
+def user_backend(own_registry, monkeypatch):
+    """``tests.user_backend`` imported afresh (its registration and log new)."""
+    monkeypatch.delitem(sys.modules, "tests.user_backend", raising=False)
+    module = importlib.import_module("tests.user_backend")
+    yield module
+    sys.modules.pop("tests.user_backend", None)
 
-    @contextmanager
-    def serial(objective, workers, address):
-        calls.append(("opened", workers, address))
-        yield LocalEvaluator()
-        calls.append(("closed",))
 
-    register_backend("serial", serial, description="this process, chunk by chunk")
+def test_a_registered_backend_runs_the_estimate_of_this_process(tmp_path, user_backend):
     assert backend_descriptions()["serial"] == "this process, chunk by chunk"
 
     scenario = shortened_scenario(tmp_path, 0.5)
     ran = avrisk.estimate(scenario, out=tmp_path / "serial", backend="serial",
                           workers=2, **FAST)  # fmt: skip
-    assert calls == [("opened", 2, None), ("closed",)]
+    assert user_backend.CALLS == [("opened", 2, None), ("closed",)]
     default = avrisk.estimate(scenario, out=tmp_path / "default", **FAST)
     drop = {"wall_time_s"}
     assert {k: v for k, v in ran.estimate.items() if k not in drop} == {

@@ -3,8 +3,8 @@
 Issue 43: adding an estimator, an ego, a backend or a safety measure is one
 module plus tests. The ego is ``tests/user_components.py`` (``HoldSpeedEgo``,
 run in ``tests/cli/test_user_ego.py`` and ``tests/api/test_api.py``), the
-backend the one registered in ``tests/api/test_backends.py``; here are the
-estimator (``tests/user_estimator.py``) and the safety measure
+backend ``tests/user_backend.py`` (run in ``tests/api/test_backends.py``);
+here are the estimator (``tests/user_estimator.py``) and the safety measure
 (``tests/user_safety.py``).
 """
 
