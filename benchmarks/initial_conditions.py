@@ -8,7 +8,8 @@ by :class:`~avrisk.scenario.ScenarioParams` and placed on the road by
 quantiles (5/25/50/75/95%) with those of the shipped I-80 car-following pairs
 (``avrisk/data/ngsim/i80_cf_pairs.parquet``, both periods, every 0.1 s row)
 overall, per recording period and per speed band (a row is *congested* when
-its leader drives below :data:`avrisk.learning.replay.CONGESTED_BELOW`), with
+its leader drives below :data:`avrisk.learning.replay.CONGESTED_BELOW`) and
+where the follower drives at speeds P0 gives the ego (``ego_speeds``), with
 the two-sample Kolmogorov-Smirnov distance and how much of each side's range
 (central 99%) the other covers.
 
@@ -29,7 +30,7 @@ the ego in its lane, the nearest behind, the rest by lane):
   of a lane whose vehicles are spaced as the data's pairs (gap plus leader
   length) and phased independently of the ego, uniform on ``[-h/2, h/2]``.
 
-Usage (a few seconds; no rollouts)::
+Usage (P0 draws and the data only; no rollouts)::
 
     .venv/bin/python benchmarks/initial_conditions.py \
         --out benchmarks/results/initial_conditions.json
@@ -160,13 +161,21 @@ def data_quantities(
     return {"speed": vf, **following(gap, vf, vl), "offset": (u - 0.5) * spacing}
 
 
-def data_sets(pairs: CarFollowingPairs) -> dict[str, NDArray[np.bool_]]:
-    """Row masks: all, each period, each speed band (by the leader's speed)."""
+def data_sets(
+    pairs: CarFollowingPairs, ego_speeds: tuple[float, float]
+) -> dict[str, NDArray[np.bool_]]:
+    """Row masks: all, each period, each speed band, and ``ego_speeds``.
+
+    Bands by the row's leader speed; ``ego_speeds``: the follower's speed
+    inside P0's ego speed support ``(lo, hi)`` [m/s].
+    """
     sets = {"all": np.ones(len(pairs.t), dtype=bool)}
     for period in np.unique(pairs.period):
         sets[PERIOD_NAMES.get(str(period), str(period))] = pairs.period == period
     congested = pairs.v_leader < CONGESTED_BELOW
     sets[BANDS[0]], sets[BANDS[1]] = congested, ~congested
+    lo, hi = ego_speeds
+    sets["ego_speeds"] = (pairs.v_follower >= lo) & (pairs.v_follower <= hi)
     return sets
 
 
@@ -251,7 +260,8 @@ def compare(
     spec = load_spec(scenario)
     pairs = load_i80_pairs() if pairs is None else pairs
     mine = p0_quantities(spec, n, seed)
-    sets = data_sets(pairs)
+    speed = spec.initial_for(0).speed
+    sets = data_sets(pairs, (speed.lo, speed.lo + speed.scale))
     data = {name: data_quantities(pairs, rows, seed) for name, rows in sets.items()}
     table = {}
     for q, values in mine.items():
@@ -302,7 +312,7 @@ def quantile_table(result: dict) -> str:
 def ks_table(result: dict) -> str:
     """Markdown: KS distance per quantity and data set; coverage against all."""
     sets = list(result["data"])
-    short = {BANDS[0]: "cong.", BANDS[1]: "flow."}
+    short = {BANDS[0]: "cong.", BANDS[1]: "flow.", "ego_speeds": "egoV"}
     head = ["quantity", "KS all [95%]", *(short.get(s, s[:5]) for s in sets[1:])]
     head += ["P0:d", "d:P0"]
     lines = [_row(head), _row(["---"] * len(head))]
