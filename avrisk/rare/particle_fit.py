@@ -3,48 +3,48 @@
 Step 3 of :mod:`avrisk.rare.splitting_importance` (its module docstring says
 what the fit does and why): mean shifts of the base's standard normals on the
 coordinates the particles say something about, with their variances where
-that clearly fits better, components chosen by the
-held-out likelihood of one half of the chains under a fit to the other half,
-shrunk by their noise, plus a component for each region the fit leaves out.
-The shifts themselves are fitted in :mod:`avrisk.rare.particle_shifts`; this
-module chooses among them and predicts, from the particles, how the
-importance sample will fare. The fit knows nothing of how the particles were
-made: particles of ``P0(. | f <= gamma)`` in standard-normal space, and the
-chain of each.
+that clearly fits better, components
+chosen by the held-out likelihood of one half of the chains under a fit to
+the other half, shrunk by their noise, plus a component for each region the
+fit leaves out. The shifts themselves are fitted in
+:mod:`avrisk.rare.particle_shifts`, and what the particles predict of a fit's
+sample in :mod:`avrisk.rare.particle_predictions`; this module chooses among
+the fits. It knows nothing of how the particles were made: particles of
+``P0(. | f <= gamma)`` in standard-normal space, and the chain of each.
 """
 
 from __future__ import annotations
 
 import functools
-import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Literal, NamedTuple, Protocol
 
 import numpy as np
-from scipy.special import logsumexp
 
 from avrisk.rare.chain_moments import block_means
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.mixture_em import MixtureProposal
+from avrisk.rare.particle_predictions import (
+    Fitter,
+    HeldOutWeights,
+    cross_fitted_log_ratios,
+    held_out_weights,
+)
 from avrisk.rare.particle_shifts import (
     as_normal,
     fit_along_direction,
     fit_per_coordinate,
-    log_ratios_to_base,
     with_fitted_variances,
     with_light_regions,
 )
 
 __all__ = [
-    "PREDICTION_FOLDS",
     "THRESHOLDS",
     "ChainHalves",
     "FitChoice",
-    "HeldOutWeights",
     "ParticleFit",
     "ProposalSettings",
     "choose_fit",
-    "held_out_weights",
     "particle_proposal",
 ]
 
@@ -53,17 +53,6 @@ __all__ = [
 #: docstring), the sparsest first (ties of the held-out score go to it); 0
 #: keeps every coordinate.
 THRESHOLDS = (4.0, 3.0, 2.5, 2.0, 1.5, 0.0)
-
-#: Folds of the chains in :func:`held_out_weights`.
-PREDICTION_FOLDS = 10
-
-#: A proposal's fit to particles and their chains: its components, their
-#: weights and the coordinates it shifts (the fits of
-#: :mod:`avrisk.rare.particle_shifts` with their settings bound).
-Fitter = Callable[
-    [FloatArray, np.ndarray],
-    tuple[list[ExponentialFamily], FloatArray, np.ndarray],
-]
 
 
 class ProposalSettings(Protocol):
@@ -77,31 +66,6 @@ class ProposalSettings(Protocol):
     defensive: float
     shift: Literal["all", "searched"]
     fit_variances: bool
-
-
-class HeldOutWeights(NamedTuple):
-    """What the particles' held-out weights ``w = p0 / q`` predict of the IS stage.
-
-    The particles follow ``P0(. | f <= gamma)``, so averages over them are
-    conditional expectations given the event ``F``. Where ``q <= p0`` (``w
-    >= 1``) the proposal is no denser than ``P0``, and in a rare event its
-    draws all but never land: importance sampling misses that part of ``p``
-    (a bias its own interval does not show, not a variance). Elsewhere its
-    draws' ``w 1{F, w < 1}`` have relative variance ``E[w 1{w < 1} | F] / p -
-    (1 - s)^2`` per draw (``E_q[(w 1_F)^2] = p E[w | F]``).
-
-    Attributes
-    ----------
-    uncovered : float
-        ``s``, the share of particles with ``w >= 1``: of ``p``, the part the
-        importance sample will miss.
-    covered_mean_weight : float
-        ``E[w 1{w < 1} | F]``, the particles' mean weight where ``w < 1``
-        (0 counted elsewhere).
-    """
-
-    uncovered: float
-    covered_mean_weight: float
 
 
 class ParticleFit(NamedTuple):
@@ -394,94 +358,3 @@ def with_variances(fitter: Fitter) -> Fitter:
         return with_fitted_variances(points, point_chain, *fitter(points, point_chain))
 
     return fit
-
-
-def cross_fitted_log_ratios(
-    z: FloatArray,
-    chain: np.ndarray,
-    held_out: Sequence[np.ndarray],
-    fit: Callable[
-        [FloatArray, np.ndarray], tuple[Sequence[ExponentialFamily], FloatArray]
-    ],
-) -> FloatArray:
-    """``log(sum_k pi_k q_k / p0)`` of each particle, (n,), by a fit not seeing it.
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        The particles in standard-normal space.
-    chain : ndarray of int, shape (n,)
-        Each particle's chain.
-    held_out : sequence of ndarray of bool, shape (n,)
-        Disjoint masks covering every particle, fitted in this order: each
-        part is scored under ``fit`` of the particles outside it.
-    fit : callable
-        ``fit(points, point_chain) -> (components, weights)``, shifts of one
-        structure and their weights ``pi_k``.
-    """
-    log_ratios = np.empty(len(z))
-    for test in held_out:
-        components, weights = fit(z[~test], chain[~test])
-        log_joint = np.log(weights) + log_ratios_to_base(components, z[test])
-        log_ratios[test] = logsumexp(log_joint, axis=1)
-    return log_ratios
-
-
-def held_out_weights(
-    z: FloatArray,
-    chain: np.ndarray,
-    fitter: Fitter,
-    base: ExponentialFamily,
-    defensive: float,
-    rng: np.random.Generator,
-) -> HeldOutWeights:
-    """The particles' weights ``p0 / q`` under fits that did not see them.
-
-    The chains are dealt into ``PREDICTION_FOLDS`` folds; each fold's
-    particles are weighed under the proposal fitted (by ``fitter``, the
-    chosen fit, with the light regions of all the particles as the final
-    proposal has them) to the other folds. Each fit sees 90% of the chains,
-    so it is nearly the final fit's equal even in hundreds of dimensions (a
-    fit to half of them overstated the final sample's variance there). The
-    particles follow ``P0(. | f <= gamma)``, so their weights say, region by
-    region, how the importance sample will fare (:class:`HeldOutWeights`).
-
-    Parameters
-    ----------
-    z : ndarray of shape (n, D)
-        The particles in standard-normal space.
-    chain : ndarray of int, shape (n,)
-        Each particle's chain.
-    fitter : callable
-        ``fitter(points, point_chain) -> (components, weights, shifted)``.
-    base : ExponentialFamily
-    defensive : float
-        The proposal's share of ``P0``, in [0, 1).
-    rng : numpy.random.Generator
-        For the fits' seeding.
-
-    Returns
-    -------
-    HeldOutWeights
-        NaN in both fields with fewer than ``PREDICTION_FOLDS`` chains.
-    """
-    chains = np.unique(chain)
-    if len(chains) < PREDICTION_FOLDS:
-        return HeldOutWeights(float("nan"), float("nan"))
-    fold = np.searchsorted(chains, chain) % PREDICTION_FOLDS
-    log_ratios = cross_fitted_log_ratios(  # log(sum_k pi_k q_k / p0), (n,)
-        z,
-        chain,
-        [fold == k for k in range(PREDICTION_FOLDS)],
-        lambda p, c: with_light_regions(z, *fitter(p, c), base, rng),
-    )
-    if defensive > 0:
-        log_ratios = np.logaddexp(
-            math.log(defensive), math.log1p(-defensive) + log_ratios
-        )
-    w = np.exp(-log_ratios)
-    covered = w < 1.0
-    return HeldOutWeights(
-        uncovered=float(np.mean(~covered)),
-        covered_mean_weight=float(np.mean(np.where(covered, w, 0.0))),
-    )

@@ -33,7 +33,8 @@ from typing import Any
 
 from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
-from avrisk.rare.particle_fit import HeldOutWeights, ParticleFit
+from avrisk.rare.particle_fit import ParticleFit
+from avrisk.rare.particle_predictions import HeldOutWeights
 from avrisk.rare.problem import FINAL_STAGE, RareEventProblem
 from avrisk.rare.results import Estimate, GammaEstimate
 from avrisk.rare.splitting_replicates import (

@@ -22,11 +22,11 @@ from avrisk.rare.cross_entropy_search import SEARCH_ADVICE
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.families.standard_space_normal import VARIANCE_RANGE
-from avrisk.rare.particle_fit import (
+from avrisk.rare.particle_fit import particle_proposal
+from avrisk.rare.particle_predictions import (
     PREDICTION_FOLDS,
     HeldOutWeights,
     held_out_weights,
-    particle_proposal,
 )
 from avrisk.rare.particle_shifts import slope_direction
 from avrisk.rare.results import GammaEstimate
