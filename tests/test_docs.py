@@ -209,7 +209,7 @@ def _unresolved(named):
 
 def test_named_paths_are_checked_at_all():
     named = dict(_named_paths(BENCHMARKS))
-    assert "benchmarks/results/exact_suite/after51_splitting_is.jsonl" in named
+    assert "benchmarks/results/exact_suite/after52_splitting_is.jsonl" in named
     assert "benchmarks/results/coverage/highway_{idm,default}_slope.jsonl" in named
     assert named["benchmarks/results/references/SCENARIO.json"] == (
         "benchmarks/results/references/*.json"
