@@ -5,10 +5,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-#: Not collected (``--doctest-modules`` would import it): importing it registers
-#: an estimator, which ``tests/api/test_user_components.py`` does in a registry
-#: of its own.
-collect_ignore = ["user_estimator.py"]
+#: Not collected (``--doctest-modules`` would import them): importing one
+#: registers an estimator or a backend, which ``tests/api/test_user_components.py``
+#: and ``tests/api/test_backends.py`` do in a registry of their own.
+collect_ignore = ["user_estimator.py", "user_backend.py"]
 
 
 @pytest.fixture

@@ -29,6 +29,7 @@ def own_registry(monkeypatch):
 @pytest.fixture
 def user_backend(own_registry, monkeypatch):
     """``tests.user_backend`` imported afresh (its registration and log new)."""
+    assert "serial" not in backend_descriptions(), "imported elsewhere"
     monkeypatch.delitem(sys.modules, "tests.user_backend", raising=False)
     module = importlib.import_module("tests.user_backend")
     yield module
