@@ -1,4 +1,6 @@
+import functools
 import gzip
+import shutil
 
 import numpy as np
 import pyarrow as pa
@@ -91,3 +93,28 @@ def write_fake_ngsim(folder, rng):
     pq.write_table(
         pa.Table.from_pylist(rows), folder / "i80_0400_0415_emd_cf_pairs.parquet"
     )
+
+
+@pytest.fixture
+def short_parts(monkeypatch):
+    """Realism's part A windows cut to 3 s and part B's scenes to 6 s: seconds."""
+    import avrisk.realism
+    from avrisk.realism import RealismSettings
+
+    monkeypatch.setattr(
+        avrisk.realism,
+        "RealismSettings",
+        functools.partial(RealismSettings, window_s=3.0, horizon=6.0),
+    )
+
+
+@pytest.fixture
+def drivers_copy(tmp_path):
+    """A folder holding a copy of the shipped driver files."""
+    from avrisk.agents.drivers.store import default_drivers_dir
+
+    folder = tmp_path / "drivers"
+    folder.mkdir()
+    for name in ("driver_net.npz", "xi_prior.npz"):
+        shutil.copy(default_drivers_dir() / name, folder / name)
+    return folder

@@ -1,38 +1,15 @@
 """The realism report through the API: the files, the progress, bad input, warnings."""
 
-import functools
 import json
-import shutil
 
 import pytest
 
 import avrisk.realism
-from avrisk.agents.drivers.store import default_drivers_dir
 from avrisk.api import UserError
 from avrisk.api.realism import NotHeldOutWarning, realism_report
-from avrisk.realism import FILES, RealismSettings
+from avrisk.realism import FILES
 
 TINY = {"windows": 3, "replicates": 1, "scenes": 1}
-
-
-@pytest.fixture
-def short_parts(monkeypatch):
-    """Part A's windows cut to 3 s and part B's scenes to 6 s: seconds, not minutes."""
-    monkeypatch.setattr(
-        avrisk.realism,
-        "RealismSettings",
-        functools.partial(RealismSettings, window_s=3.0, horizon=6.0),
-    )
-
-
-@pytest.fixture
-def drivers_copy(tmp_path):
-    """A folder holding a copy of the shipped driver files."""
-    folder = tmp_path / "drivers"
-    folder.mkdir()
-    for name in ("driver_net.npz", "xi_prior.npz"):
-        shutil.copy(default_drivers_dir() / name, folder / name)
-    return folder
 
 
 class Stop(Exception):

@@ -1,6 +1,5 @@
 """``avrisk realism`` through the Typer app: the files it writes, and bad input."""
 
-import functools
 import json
 import shutil
 
@@ -25,26 +24,6 @@ def realism(*args):
     return CliRunner().invoke(
         app, ["realism", *[str(a) for a in args]], env={"COLUMNS": "80"}
     )
-
-
-@pytest.fixture
-def short_parts(monkeypatch):
-    """Part A's windows cut to 3 s and part B's scenes to 6 s: seconds, not minutes."""
-    monkeypatch.setattr(
-        avrisk.realism,
-        "RealismSettings",
-        functools.partial(RealismSettings, window_s=3.0, horizon=6.0),
-    )
-
-
-@pytest.fixture
-def drivers_copy(tmp_path):
-    """A folder holding a copy of the shipped driver files."""
-    folder = tmp_path / "drivers"
-    folder.mkdir()
-    for name in ("driver_net.npz", "xi_prior.npz"):
-        shutil.copy(default_drivers_dir() / name, folder / name)
-    return folder
 
 
 def test_the_report_is_written_whole_with_its_provenance(
