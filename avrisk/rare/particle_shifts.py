@@ -41,6 +41,7 @@ __all__ = [
     "fit_per_coordinate",
     "log_ratios_to_base",
     "shrink",
+    "shrinkage",
     "with_fitted_variances",
     "slope_direction",
     "with_light_regions",
@@ -271,8 +272,18 @@ def shrink(
     size = float(component.mean @ component.mean)
     if size == 0.0:
         return component
-    scale = max(0.0, 1.0 - noise / (share * size))
-    return component.with_natural_params(scale * component.mean)
+    return component.with_natural_params(
+        shrinkage(noise, share * size) * component.mean
+    )
+
+
+def shrinkage(noise: float, size: float) -> float:
+    """James-Stein's ``c = max(0, 1 - noise / size)`` of a fit of squared norm ``size``.
+
+    ``size`` overstates the true squared norm by about ``noise``; ``c`` is the
+    scale of the fit that minimises the expected squared distance to the truth.
+    """
+    return max(0.0, 1.0 - noise / size)
 
 
 def with_fitted_variances(
@@ -322,18 +333,10 @@ def with_fitted_variances(
         log_variance = np.log(variance)
         noise = float(np.nansum((stderr / variance) ** 2))
         size = float(log_variance @ log_variance)
-        scale = max(0.0, 1.0 - noise / size) if size > 0 else 0.0
+        scale = shrinkage(noise, size) if size > 0 else 0.0
         full = np.ones(len(shifted))
         full[shifted] = np.exp(scale * log_variance)
-        scaled.append(
-            StandardSpaceNormal(
-                component.base,
-                component.mean,
-                full,
-                max_shift=component.max_shift,
-                searched=component.searched,
-            )
-        )
+        scaled.append(StandardSpaceNormal.of_shift(component, full))
     return scaled, weights, shifted
 
 

@@ -89,10 +89,16 @@ class StandardSpaceNormal(ExponentialFamily):
         )
 
     @classmethod
-    def of_shift(cls, shift: StandardSpaceShift) -> StandardSpaceNormal:
-        """The same law as ``shift``, in this family (``v = 1``)."""
+    def of_shift(
+        cls, shift: StandardSpaceShift, variance: Any = None
+    ) -> StandardSpaceNormal:
+        """``shift``'s mean, box and searched coordinates; ``variance`` (default 1)."""
         return cls(
-            shift.base, shift.mean, max_shift=shift.max_shift, searched=shift.searched
+            shift.base,
+            shift.mean,
+            variance,
+            max_shift=shift.max_shift,
+            searched=shift.searched,
         )
 
     def _checked(self, variance: Any) -> FloatArray:
