@@ -246,6 +246,13 @@ class ChainHalves(NamedTuple):
         """Mean held-out log-likelihood of each half, summed over the halves."""
         return float(scores[~self.first].mean() + scores[self.first].mean())
 
+    def best_threshold(self, fitter_at: Callable[[float], Fitter]) -> float:
+        """The one of ``THRESHOLDS`` whose fit scores best (ties to the sparsest)."""
+        # max keeps the first of ties
+        return max(
+            THRESHOLDS, key=lambda t: self.summed(self.log_likelihoods(fitter_at(t)))
+        )
+
     def clearly_better(self, a: FloatArray, b: FloatArray) -> bool:
         """Whether held-out scores ``a`` beat ``b`` by two standard errors.
 
@@ -317,11 +324,7 @@ def choose_fit(
     threshold = THRESHOLDS[0]
     if not halves.both_held():
         return FitChoice(per_coordinate(threshold, 1), threshold)
-    # max keeps the first of ties
-    threshold = max(
-        THRESHOLDS,
-        key=lambda t: halves.summed(halves.log_likelihoods(per_coordinate(t, 1))),
-    )
+    threshold = halves.best_threshold(lambda t: per_coordinate(t, 1))
     scores = {
         k: halves.log_likelihoods(per_coordinate(threshold, k))
         for k in range(1, n_components + 1)
@@ -331,11 +334,8 @@ def choose_fit(
     best = scores[k]
     if fit_variances:
         # the coordinates whose variance alone is off count only here
-        scaled_threshold = max(
-            THRESHOLDS,
-            key=lambda t: halves.summed(
-                halves.log_likelihoods(with_variances(per_coordinate(t, 1)))
-            ),
+        scaled_threshold = halves.best_threshold(
+            lambda t: with_variances(per_coordinate(t, 1))
         )
         scaled = with_variances(per_coordinate(scaled_threshold, k))
         scaled_scores = halves.log_likelihoods(scaled)
