@@ -157,7 +157,9 @@ def _exact_problems(
     """Naive MC and CE on each exact problem, ``budget`` calls of ``f`` each.
 
     CE takes 8 iterations of ``budget / 25`` samples (at least 100) and its
-    final stage the rest.
+    final stage the rest, with no audit (:mod:`avrisk.rare.proposal_audit`):
+    the part compares precision at equal calls, and each problem has one
+    failure region.
     """
     problems = [beta_sum_problem(6, p=1e-5), gaussian_linear_problem(100, p=1e-6)]
     n_iter, n_per_iter = 8, max(100, budget // 25)
@@ -166,6 +168,7 @@ def _exact_problems(
         n_per_iter=n_per_iter,
         n_iter=n_iter,
         n_final=budget - n_iter * n_per_iter,
+        audit_particles=0,
     )
     rows = []
     for problem in problems:

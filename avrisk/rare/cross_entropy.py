@@ -38,12 +38,13 @@ import math
 from collections.abc import Sequence
 from typing import Annotated, Any, Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from avrisk.rare.black_box import estimate
 from avrisk.rare.cross_entropy_search import (
     SELECTION_RULES,
     CEState,
+    search_budget,
     search_checkpoint,
     search_convergence,
     search_diagnostics,
@@ -57,7 +58,6 @@ from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
     EstimatorSettings,
-    no_doubts,
     register_estimator,
 )
 from avrisk.rare.families.base import ExponentialFamily
@@ -65,6 +65,7 @@ from avrisk.rare.problem import (
     BatchFunction,
     RareEventProblem,
 )
+from avrisk.rare.proposal_audit import audit_bound, audit_doubts
 from avrisk.rare.results import CEInfo, Estimate
 
 #: The types of the settings that the variants of :class:`CESettings` give
@@ -75,6 +76,18 @@ EliteLevel = Annotated[
 ]
 SearchIterations = Annotated[int, Field(ge=0, description="Search iterations.")]
 ShareOfP0 = Annotated[float, Field(ge=0.0, lt=1.0)]
+AuditParticles = Annotated[
+    int | None,
+    Field(
+        ge=0,
+        description="Particles per level of the audit's subset simulation "
+        "(None: by n_final; 0: no audit).",
+    ),
+]
+#: Final draws per particle of the default audit, and its fewest and most
+#: particles per level (:meth:`CESettings.audit`).
+AUDIT_DRAWS_PER_PARTICLE = 50
+AUDIT_PARTICLES = (20, 1000)
 
 
 class CESettings(EstimatorSettings):
@@ -110,6 +123,15 @@ class CESettings(EstimatorSettings):
         the base's standard normals
         (:class:`~avrisk.rare.families.StandardSpaceShift`), whose weights have
         finite variance however far the search goes.
+    audit_particles : int or None, default=None
+        Particles per level of the independent subset simulation that checks,
+        after the final stage, that its proposal draws where the event is
+        (:mod:`avrisk.rare.proposal_audit`): a failure region the search
+        missed makes the run say caution. Its calls (at most
+        :func:`~avrisk.rare.proposal_audit.audit_bound`, 12 per particle;
+        typically half that) count in the run's. None: one per
+        ``AUDIT_DRAWS_PER_PARTICLE`` final draws, between ``AUDIT_PARTICLES``'s
+        bounds (:meth:`audit`); 0: no audit.
     """
 
     OMIT_IF_DEFAULT = ("defensive", "space")
@@ -130,6 +152,28 @@ class CESettings(EstimatorSettings):
         description="Proposals: the base's family ('natural') or mean shifts of "
         "its standard normals ('standard').",
     )
+    audit_particles: AuditParticles = None
+
+    @field_validator("audit_particles")
+    @classmethod
+    def _audit_replicates_fill(cls, particles: int | None) -> int | None:
+        low = AUDIT_PARTICLES[0]
+        if particles is not None and 0 < particles < low:
+            raise ValueError(f"must be 0 (no audit) or at least {low}")
+        return particles
+
+    def audit(self) -> int:
+        """Particles per level of the audit: ``audit_particles``, or the default's.
+
+        One per ``AUDIT_DRAWS_PER_PARTICLE`` final draws, within
+        ``AUDIT_PARTICLES`` (a subset simulation needs 10 per replicate; a
+        thousand find the regions that hold much of ``p``), so the audit costs
+        about a tenth of the final stage's calls.
+        """
+        if self.audit_particles is not None:
+            return self.audit_particles
+        low, high = AUDIT_PARTICLES
+        return min(max(self.n_final // AUDIT_DRAWS_PER_PARTICLE, low), high)
 
 
 class DefensiveCESettings(CESettings):
@@ -154,25 +198,25 @@ class CrossEntropy:
     Settings: type[CESettings] = CESettings
     weighted = True
     decomposable = True
-    budget_is_bound = False
+    budget_is_bound = True  # the audit's levels may reach gamma early
 
     def __init__(self, settings: CESettings) -> None:
         self.settings = settings
 
     def budget(self) -> int:
-        """Search iterations times their samples, plus the final stage."""
-        s = self.settings
-        return s.n_iter * s.n_per_iter + s.n_final
+        """Search iterations times their samples, the final stage, the audit's bound."""
+        return search_budget(self.settings)
 
     def budget_not_redrawn(self) -> int:
-        """0: every sample is a fresh draw of its stage's proposal."""
-        return 0
+        """The audit's: its points are drawn in standard space and moved."""
+        return audit_bound(self.settings.audit())
 
     def describe(self) -> str:
-        """``"CE 20x5,000 + 100,000"`` (and the defensive share)."""
+        """``"CE 20x5,000 + 100,000, audit 1,000"`` (and the defensive share)."""
         s = self.settings
         text = f"CE {s.n_iter}x{s.n_per_iter:,} + {s.n_final:,}"
-        return text + (f", defensive {s.defensive:g}" if s.defensive else "")
+        text += f", defensive {s.defensive:g}" if s.defensive else ""
+        return text + (f", audit {s.audit():,}" if s.audit() else "")
 
     def init(self, problem: RareEventProblem) -> CEState:
         """Before the first iteration: the proposal is the base distribution."""
@@ -235,7 +279,13 @@ class CrossEntropy:
             else state.best
         )
         return search_final_estimate(
-            "cross_entropy", state, sampled, s.n_final, problem, context
+            "cross_entropy",
+            state,
+            sampled,
+            s.n_final,
+            problem,
+            context,
+            s.audit(),
         )
 
     def progress(self, info: CEInfo) -> str:
@@ -257,11 +307,12 @@ class CrossEntropy:
     @staticmethod
     def stage_label(estimate: dict[str, Any], stage: int) -> str:
         """``"CE iteration 3"`` (stage 4), or ``"the final stage"``."""
-        return search_stage_label(stage, "CE iteration")
+        return search_stage_label(estimate, stage, "CE iteration")
 
     #: Whether the search reached a threshold and held it.
     convergence = staticmethod(search_convergence)
-    doubts = staticmethod(no_doubts)
+    #: A failure region the final stage hardly draws, found by the audit.
+    doubts = staticmethod(audit_doubts)
 
 
 @register_estimator

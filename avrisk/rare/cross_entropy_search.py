@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -36,6 +37,7 @@ from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
 from avrisk.rare.problem import FINAL_STAGE, RareEventProblem
+from avrisk.rare.proposal_audit import audit_bound, audit_proposal
 from avrisk.rare.results import Estimate, SearchConvergence
 from avrisk.rare.stages import StageResult
 from avrisk.rare.weights import (
@@ -198,6 +200,16 @@ def search_checkpoint(state: CEState, infos: Sequence[Any]) -> dict[str, Any]:
     }
 
 
+def search_budget(settings: Any) -> int:
+    """Calls of a CE search's run: its iterations, its final stage, its audit's bound.
+
+    ``settings``: a :class:`~avrisk.rare.cross_entropy.CESettings` (or a
+    variant's).
+    """
+    s = settings
+    return s.n_iter * s.n_per_iter + s.n_final + audit_bound(s.audit())
+
+
 #: Remedies of a CE search's unreliable final stage, in its settings' names.
 SEARCH_ADVICE = Advice(
     no_hit="raise n_final, or the search (n_iter, n_per_iter)",
@@ -214,16 +226,21 @@ def search_final_estimate(
     n_final: int,
     problem: RareEventProblem,
     context: EstimationContext,
+    audit_particles: int = 0,
 ) -> Estimate:
     """The estimate of a CE search: ``n_final`` fresh samples of ``sampled``.
 
     ``sampled`` is the best proposal ``state.best`` or a defensive mixture of
-    it; the final stage may end early by the context's stopping rule.
+    it; the final stage may end early by the context's stopping rule. With
+    ``audit_particles``, an independent subset simulation then checks that
+    ``sampled`` draws where the event is (:mod:`avrisk.rare.proposal_audit`,
+    ``details["audit"]``; its calls are in ``n_evals``), on the stages after
+    the search's.
     """
     stage = context.stage(
         problem, sampled, n_final, FINAL_STAGE, final_after=state.n_evals
     )
-    return Estimate(
+    estimate = Estimate(
         method=method,
         gamma=problem.gamma,
         by_gamma=weighted_stage_estimates(stage, problem.thresholds, SEARCH_ADVICE),
@@ -231,6 +248,22 @@ def search_final_estimate(
         proposal=state.best,
         best_iteration=None if state.best_iteration < 0 else state.best_iteration,
         stopped_by=stage.stopped_by or "budget",
+    )
+    if not audit_particles:
+        return estimate
+    audit = audit_proposal(
+        sampled,
+        estimate,
+        stage.values.size,
+        problem,
+        context,
+        particles=audit_particles,
+        after_stage=state.iteration,
+    )
+    return replace(
+        estimate,
+        n_evals=estimate.n_evals + audit["n_calls"],
+        details={**(estimate.details or {}), "audit": audit},
     )
 
 
@@ -276,12 +309,20 @@ def search_diagnostics(
     ]
 
 
-def search_stage_label(stage: int, step: str = "iteration") -> str:
-    """A CE search's name of ``stage``: ``"iteration 3"`` (stage 4), or the final one.
+def search_stage_label(
+    estimate: dict[str, Any], stage: int, step: str = "iteration"
+) -> str:
+    """A CE search's name of ``stage``: ``"iteration 3"`` (stage 4), or another.
 
-    ``step`` names the iterations as :func:`search_diagnostics` does.
+    ``step`` names the iterations as :func:`search_diagnostics` does; the
+    stages after the search's are the audit's
+    (:mod:`avrisk.rare.proposal_audit`).
     """
-    return "the final stage" if stage == FINAL_STAGE else f"{step} {stage - 1}"
+    if stage == FINAL_STAGE:
+        return "the final stage"
+    if stage > len(estimate.get("history") or ()):
+        return "the audit's subset simulation"
+    return f"{step} {stage - 1}"
 
 
 def search_convergence(

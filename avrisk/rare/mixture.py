@@ -76,6 +76,7 @@ from avrisk.rare.cross_entropy import (
 from avrisk.rare.cross_entropy_search import (
     SELECTION_RULES,
     CEState,
+    search_budget,
     search_checkpoint,
     search_convergence,
     search_diagnostics,
@@ -87,7 +88,6 @@ from avrisk.rare.cross_entropy_search import (
 from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
-    no_doubts,
     register_estimator,
 )
 from avrisk.rare.families.base import ExponentialFamily
@@ -101,6 +101,7 @@ from avrisk.rare.problem import (
     BatchFunction,
     RareEventProblem,
 )
+from avrisk.rare.proposal_audit import audit_bound, audit_doubts
 from avrisk.rare.results import Estimate, MixtureInfo
 
 #: Extra key of the seeding generator, so that it draws no chunk's stream.
@@ -161,27 +162,31 @@ class MixtureCrossEntropy:
     Settings: type[MixtureSettings] = MixtureSettings
     weighted = True
     decomposable = True
-    budget_is_bound = False
+    budget_is_bound = True  # the audit's levels may reach gamma early
 
     def __init__(self, settings: MixtureSettings) -> None:
         self.settings = settings
 
     def budget(self) -> int:
-        """Search iterations times their samples, plus the final stage."""
-        s = self.settings
-        return s.n_iter * s.n_per_iter + s.n_final
+        """Search iterations times their samples, the final stage, the audit's bound."""
+        return search_budget(self.settings)
 
     def budget_not_redrawn(self) -> int:
-        """0: every sample is a fresh draw of its stage's proposal."""
-        return 0
+        """The audit's: its points are drawn in standard space and moved."""
+        return audit_bound(self.settings.audit())
 
     def describe(self) -> str:
-        """``"mixture CE (4 components) 20x5,000 + 100,000, defensive 0.1"``."""
+        """``"mixture CE (4 components) 20x5,000 + 100,000, defensive 0.1"``.
+
+        Then the audit's particles per level, where there is one: ``", audit
+        1,000"``.
+        """
         s = self.settings
-        return (
+        text = (
             f"mixture CE ({s.n_components} components) {s.n_iter}x{s.n_per_iter:,} "
             f"+ {s.n_final:,}, defensive {s.defensive:g}"
         )
+        return text + (f", audit {s.audit():,}" if s.audit() else "")
 
     def init(self, problem: RareEventProblem) -> CEState:
         """Before the first iteration: the proposal is the base distribution."""
@@ -268,7 +273,13 @@ class MixtureCrossEntropy:
         """Fresh samples of the best mixture."""
         s = self.settings
         return search_final_estimate(
-            "mixture_ce", state, state.best, s.n_final, problem, context
+            "mixture_ce",
+            state,
+            state.best,
+            s.n_final,
+            problem,
+            context,
+            s.audit(),
         )
 
     def progress(self, info: MixtureInfo) -> str:
@@ -296,11 +307,12 @@ class MixtureCrossEntropy:
     @staticmethod
     def stage_label(estimate: dict[str, Any], stage: int) -> str:
         """``"iteration 3"`` (stage 4), or ``"the final stage"``."""
-        return search_stage_label(stage)
+        return search_stage_label(estimate, stage)
 
     #: Whether the search reached a threshold and held it.
     convergence = staticmethod(search_convergence)
-    doubts = staticmethod(no_doubts)
+    #: A failure region the final stage hardly draws, found by the audit.
+    doubts = staticmethod(audit_doubts)
 
 
 def mixture_ce(

@@ -79,4 +79,5 @@ def test_the_same_python_ego_resumes_to_the_same_estimate(
         ).groups(),
     )
     assert reused == 60 == summary["timing"]["rollouts_replayed"]
-    assert reused + simulated == summary["estimate"]["n_evals"] == 220
+    audit = summary["estimate"]["details"]["audit"]["n_calls"]
+    assert reused + simulated == summary["estimate"]["n_evals"] == 220 + audit

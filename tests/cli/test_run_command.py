@@ -59,7 +59,8 @@ def test_run_writes_a_complete_run_directory_with_a_report(short_scenario, tmp_p
     assert SUMMARY_KEYS <= set(summary) and summary["schema"] == "avrisk.summary/1"
     assert [g["gamma"] for g in summary["estimate"]["by_gamma"]] == [1.0, 0.5, 2.0]
     table = pq.read_table(out / "samples.parquet")
-    assert table.num_rows == 2 * 60 + 100
+    audit = summary["estimate"]["details"]["audit"]  # CE's check, after its stages
+    assert table.num_rows == 2 * 60 + 100 + audit["n_calls"]
     for col in (
         "veh0.s",
         "veh5.speed",
@@ -232,7 +233,9 @@ def test_compare_runs_ce_naive_and_reference_then_reports_them(
         "compare", short_scenario, "--out", out, *CE_ARGS, "--reference-n", 150
     )
     assert result.exit_code == 0, result.output
-    for part, n in (("ce", 220), ("naive", 220), ("reference", 150)):
+    ce = json.loads((out / "ce" / "summary.json").read_text())["estimate"]
+    used = 220 + ce["details"]["audit"]["n_calls"]  # naive MC gets what CE used
+    for part, n in (("ce", used), ("naive", used), ("reference", 150)):
         summary = json.loads((out / part / "summary.json").read_text())
         assert summary["estimate"]["n_evals"] == n
     assert "cross-entropy against naive Monte Carlo" in result.output

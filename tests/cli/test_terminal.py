@@ -16,6 +16,7 @@ from avrisk.cli.demo import analytic_table
 from avrisk.cli.estimator_options import estimator_options
 from avrisk.cli.run import COMPARE_DEFAULTS, compare
 from avrisk.rare import cross_entropy, get_estimator, naive_mc
+from avrisk.rare.proposal_audit import audit_bound
 from avrisk.testing import beta_sum_problem, gaussian_linear_problem
 from tests.interrupts import ctrl_c_at_chunk
 from tests.scenario_files import shortened_scenario
@@ -103,10 +104,14 @@ def test_the_plan_and_the_measured_rate_come_before_the_results(
 ):
     result = invoke("run", short_scenario, "--out", tmp_path / "run", *RUN_ARGS)
     err = words(result.stderr)
-    assert "plan: cross-entropy (CE 2x60 + 100): 220 rollouts; samples take" in err
+    # CE's 220 and at most 12 sets of its audit's 20 particles
+    assert (
+        "plan: cross-entropy (CE 2x60 + 100, audit 20): at most 460 rollouts "
+        "(fewer if the levels reach gamma sooner); samples take" in err
+    )
     # 24 parameters of highway_idm: 24 x 9.5 + 45 B
-    assert "about 60 kB on disk (an estimate: 273 B a rollout)" in err
-    assert "rate: " in err and "rollouts/s on the first 60: about" in err
+    assert "at most about 126 kB on disk (an estimate: 273 B a rollout)" in err
+    assert "rate: " in err and "rollouts/s on the first 60: at most about" in err
     assert err.index("plan:") < err.index("rate:")
     assert disk_figures(err)[0] == pytest.approx(273, rel=0.15)  # as estimated
 
@@ -208,7 +213,9 @@ def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
     assert answer["event"] == "P(min TTC <= 1 s) per 1.5-s rollout from P0"
     assert answer["trust"] in ("ok", "caution") and answer["run"] == "cross-entropy"
     (run,) = doc["runs"]
-    assert run["n_rollouts"] == 220 and run["path"] == str(out)
+    summary = json.loads((out / "summary.json").read_text())
+    audit = summary["estimate"]["details"]["audit"]["n_calls"]  # CE's check
+    assert run["n_rollouts"] == 220 + audit and run["path"] == str(out)
     assert [g["gamma"] for g in run["by_gamma"]] == [0.5, 1.0, 2.0]
     assert {"p", "ci", "pareto_k", "trust", "reasons"} <= set(run["by_gamma"][0])
     # the report's diagnostic tables: CE's search, one row per iteration
@@ -241,7 +248,9 @@ def test_compare_json_has_one_variance_ratio_per_threshold(short_scenario, tmp_p
     for row in rows:
         assert {"variance_ratio", "rare_event_ratio", "p_from"} <= set(row)
         assert "variance_reduction" not in row
-    assert "plan: " in result.stderr and "590 rollouts in all" in words(result.stderr)
+    assert "plan: " in result.stderr and "at most 1,070 rollouts in all" in words(
+        result.stderr
+    )
     report = invoke("report", out, "--failures", 0)
     assert_whole_at_80_columns(report.stdout)  # the tables of a comparison
     assert "rare-event" in report.stdout  # the comparison table
@@ -270,7 +279,8 @@ def test_compare_defaults_finish_in_minutes():
     options = estimator_options("ce", {}, None, COMPARE_DEFAULTS)
     budget = get_estimator("ce", **options).budget()
     reference = inspect.signature(compare).parameters["reference_n"].default
-    assert budget == 20_000 and reference == 50_000
+    # CE's stages, and the bound of its audit (one particle per 50 final draws)
+    assert budget == 20_000 + audit_bound(200) and reference == 50_000
     assert 2 * budget + reference <= 100_000  # ~3.5 min at 450 rollouts/s
     # the default, splitting_is: 2,000 particles per level and 10,000 in its
     # final stage; on highway_default its levels reach 0.14 s in 4 sets
@@ -304,10 +314,12 @@ def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(
 
     resumed = invoke(*command[1:])
     assert resumed.exit_code == 0, resumed.output
-    assert "resumed: 120 rollouts reused from the earlier session, 100 simulated" in (
-        words(resumed.stderr)
-    )
     summary = json.loads((out / "summary.json").read_text())
+    simulated = summary["estimate"]["n_evals"] - 120  # the final stage, the audit
+    assert (
+        f"resumed: 120 rollouts reused from the earlier session, {simulated} "
+        "simulated" in words(resumed.stderr)
+    )
     assert summary["timing"]["rollouts_replayed"] == 120
     finished = invoke(*command[1:])
     assert "complete already in" in words(finished.stderr)

@@ -98,7 +98,9 @@ def test_the_same_f_resumes_to_the_same_estimate_and_counts_add_up(tmp_path):
     }
     # the replayed check's rollouts are not counted
     assert monitor.replayed == 2 * 500 == resumed["timing"]["rollouts_replayed"]
-    assert monitor.replayed + monitor.simulated == monitor.total == CE.total_rollouts
+    # the total is a bound: the audit's levels may reach gamma sooner
+    done = monitor.replayed + monitor.simulated
+    assert done == resumed["estimate"]["n_evals"] <= monitor.total == CE.total_rollouts
 
 
 def test_rows_that_failed_in_the_first_chunk_are_replaced_by_others(tmp_path):

@@ -22,6 +22,7 @@ from avrisk.rare import (
 from avrisk.rare.cross_entropy import CESettings
 from avrisk.rare.estimator import get_estimator
 from avrisk.rare.naive_mc import NaiveSettings
+from avrisk.rare.proposal_audit import audit_bound
 from avrisk.registry import UnknownComponentError
 from avrisk.testing import (
     beta_sum_cdf,
@@ -141,7 +142,11 @@ def test_estimate_counts_every_call_of_f_and_serialises_to_json():
         batch_size=128,
         gamma_test=[0.5, -0.5],
     )
-    assert est.n_evals == sum(calls) == 3 * 500 + 1000
+    # the search, the final stage, and the audit's subset simulation after them
+    audit = est.details["audit"]
+    assert audit["particles"] == 20  # the fewest: 1,000 final draws / 50
+    assert audit["reached"] and 0 < audit["n_calls"] <= audit_bound(20)
+    assert est.n_evals == sum(calls) == 3 * 500 + 1000 + audit["n_calls"]
     assert max(calls) <= 128
     out = json.loads(json.dumps(est.to_dict()))
     assert [g["gamma"] for g in out["by_gamma"]] == [0.0, 0.5, -0.5]

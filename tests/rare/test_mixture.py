@@ -19,6 +19,7 @@ from avrisk.rare.mixture_em import (
     merge_overlapping,
     seed_components,
 )
+from avrisk.rare.proposal_audit import audit_bound
 from avrisk.testing import (
     beta_sum_problem,
     check_estimator,
@@ -152,10 +153,12 @@ def test_an_interrupted_run_resumes_through_the_pipeline_to_the_uninterrupted_re
 
 def test_the_estimator_describes_its_budget_and_progress():
     estimator = get_estimator("mixture", n_per_iter=4000, n_iter=10, n_final=60_000)
-    assert estimator.budget() == 100_000
+    # the audit's particles: one per 50 final draws, at most 1,000
+    assert estimator.budget() == 100_000 + audit_bound(1000)
     assert estimator.describe() == (
-        "mixture CE (4 components) 10x4,000 + 60,000, defensive 0.1"
+        "mixture CE (4 components) 10x4,000 + 60,000, defensive 0.1, audit 1,000"
     )
+    assert get_estimator("mixture", n_final=5000).settings.audit() == 100
     est = mixture(four_branch_problem(), 0, n_iter=2, n_final=1000)
     assert estimator.progress(est.history[-1]).startswith("iter 1: gamma_k=")
     out = json.loads(json.dumps(est.to_dict()))

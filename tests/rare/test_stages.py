@@ -82,8 +82,10 @@ def test_replaying_recorded_chunks_reproduces_the_run_without_evaluating_them():
         cache=lambda stage, chunk: kept.get((stage, chunk)),
     )
     assert resumed.p == full.p and resumed.stderr == full.stderr
-    assert resumed.history == full.history
-    assert sum(evaluated) == 2 * 3000 + 20_000  # stages 1 and 2 were not re-run
+    assert resumed.history == full.history and resumed.details == full.details
+    # stages 1 and 2 were not re-run; the rest and the audit after them were
+    audit_calls = full.details["audit"]["n_calls"]
+    assert sum(evaluated) == 2 * 3000 + 20_000 + audit_calls
     assert first.rows == 0
 
 
