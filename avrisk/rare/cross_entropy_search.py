@@ -37,7 +37,7 @@ from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.final_stage import Advice, weighted_stage_estimates
 from avrisk.rare.problem import FINAL_STAGE, RareEventProblem
-from avrisk.rare.proposal_audit import audit_bound, audit_proposal
+from avrisk.rare.proposal_audit import audit_bound, audit_proposal, audit_table
 from avrisk.rare.results import Estimate, SearchConvergence
 from avrisk.rare.stages import StageResult
 from avrisk.rare.weights import (
@@ -290,6 +290,18 @@ def search_diagnostics(
         *extra,
     )
     rows = [tuple(h[key] for _, key in keys) for h in history]
+    return [
+        *_search_table(title, keys, rows),
+        *audit_table(estimate),
+    ]
+
+
+def _search_table(
+    title: str,
+    keys: tuple[tuple[str, str], ...],
+    rows: list[tuple[Any, ...]],
+) -> list[DiagnosticTable]:
+    """The search's trajectory as a table (:func:`search_diagnostics`)."""
     return [
         DiagnosticTable(
             title,

@@ -44,13 +44,20 @@ from typing import Any
 import numpy as np
 
 from avrisk.rare.estimation_context import EstimationContext
+from avrisk.rare.estimator import DiagnosticTable
 from avrisk.rare.problem import RareEventProblem
 from avrisk.rare.results import Estimate
 from avrisk.rare.splitting import SubsetSimulation
 from avrisk.rare.splitting_levels import SplittingError
 from avrisk.rare.splitting_settings import SplittingSettings
 
-__all__ = ["audit_bound", "audit_doubts", "audit_proposal", "audit_settings"]
+__all__ = [
+    "audit_bound",
+    "audit_doubts",
+    "audit_proposal",
+    "audit_settings",
+    "audit_table",
+]
 
 
 def audit_settings(particles: int) -> SplittingSettings:
@@ -158,3 +165,43 @@ def audit_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
         f"{record['missed_low']:.2g}, beyond the interval (a failure region the "
         "search missed)",
     )
+
+
+def audit_table(estimate: dict[str, Any]) -> list[DiagnosticTable]:
+    """The audit of a summary's ``estimate`` as a one-row table (none without one)."""
+    record = (estimate.get("details") or {}).get("audit")
+    if not record:
+        return []
+    reached = record.get("reached")
+    row = (
+        record["particles"],
+        record["n_calls"],
+        record.get("n_at_gamma") if reached else None,
+        record.get("n_uncovered") if reached else None,
+        record.get("p") if reached else None,
+        "caution" if record.get("doubt") else ("ok" if reached else record["error"]),
+    )
+    return [
+        DiagnosticTable(
+            "The audit: an independent search for the event",
+            (
+                "per level",
+                "calls",
+                "in the event",
+                "hardly drawn",
+                "its p",
+                "verdict",
+            ),
+            [row],
+            note=(
+                "After the final stage, a small subset simulation looks for the "
+                "event on its own, independently of the proposal (per level: its "
+                "particles; calls: its calls of f; in the event: its particles "
+                "with f <= gamma). Those the final stage would hardly ever draw "
+                "(hardly drawn: a weight p0/q above n p) lie in a part of the "
+                "event the search missed; their share times its own estimate of "
+                "p is probability the estimate leaves out. The run says caution "
+                "when that is more than the estimate's interval can hold."
+            ),
+        )
+    ]

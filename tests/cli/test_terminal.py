@@ -219,7 +219,11 @@ def test_json_is_one_document_on_stdout(short_scenario, tmp_path):
     assert [g["gamma"] for g in run["by_gamma"]] == [0.5, 1.0, 2.0]
     assert {"p", "ci", "pareto_k", "trust", "reasons"} <= set(run["by_gamma"][0])
     # the report's diagnostic tables: CE's search, one row per iteration
-    (search_table,) = run["diagnostics"]
+    # and its audit's, one row
+    search_table, audit_table = run["diagnostics"]
+    assert (
+        audit_table["title"].startswith("The audit") and len(audit_table["rows"]) == 1
+    )
     assert search_table["columns"][0] == "CE iteration"
     assert len(search_table["rows"]) == 2
     assert all(len(row) == len(search_table["columns"]) for row in search_table["rows"])

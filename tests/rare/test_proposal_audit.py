@@ -34,6 +34,10 @@ def test_a_region_the_search_missed_makes_ce_say_caution(seed):
     assert audit["doubt"] and audit["n_uncovered"] > 0.2 * audit["n_at_gamma"]
     reasons = trust("ce", est).reasons
     assert any("independent search" in r for r in reasons)
+    # the reports show it as a table of its own, after the search's
+    search, table = estimator_class("ce").diagnostics(est.to_dict())
+    (row,) = table.rows
+    assert row[0] == audit["particles"] and row[-1] == "caution"
     # ... and the estimate is the one the run gives without the audit
     alone = estimate("ce", p.f, p.base, p.gamma, seed=seed, audit_particles=0, **SMALL)
     assert (alone.p, alone.stderr) == (est.p, est.stderr) and "audit" not in (
