@@ -144,8 +144,8 @@ def test_an_interrupted_run_resumes_through_the_pipeline_to_the_uninterrupted_re
     assert proposal["family"] == "Mixture" and len(proposal["components"]) == len(
         proposal["weights"]
     )
-    (table,) = estimator_class("mixture").diagnostics(resumed["estimate"])
-    assert len(table.rows) == 4
+    table, audit = estimator_class("mixture").diagnostics(resumed["estimate"])
+    assert len(table.rows) == 4 and audit.title.startswith("The audit")
     assert table.column("live components") == [
         h["n_components"] for h in checkpoint["history"]
     ]
