@@ -101,15 +101,21 @@ class BudgetExceeded(RuntimeError):
     """A method asked for more calls of f than the suite's budget."""
 
 
-def suite_settings(method: str) -> dict[str, Any]:
-    """The suite's one setting of ``method`` (see the module docstring)."""
+def suite_settings(
+    method: str, changed: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """The suite's one setting of ``method`` (see the module docstring).
+
+    ``changed``: settings of the method set otherwise before the sample counts
+    are scaled to the budget (a variant measured beside the default).
+    """
     if method in OT_METHODS:
         return {"per_step": OT_PER_STEP, "block": OT_BLOCK, "max_calls": SUITE_BUDGET}
     from avrisk.cli.estimator_options import CLI_DEFAULTS
     from avrisk.rare.estimator import estimator_class, get_estimator, planned_budget
 
     fields = estimator_class(method).Settings.model_fields
-    base = {k: v for k, v in CLI_DEFAULTS.items() if k in fields}
+    base = {k: v for k, v in CLI_DEFAULTS.items() if k in fields} | (changed or {})
     default = get_estimator(method, **base)
     scale = SUITE_BUDGET / planned_budget(default)  # the plan without regrowth
     counts = {
@@ -248,6 +254,16 @@ def run_one(problem_name: str, method: str, seed: int, settings: dict) -> dict:
     return record
 
 
+def _assignment(text: str) -> tuple[str, Any]:
+    """``("n_moves", 3)`` from ``"n_moves=3"`` (the value read as YAML)."""
+    import yaml
+
+    name, sep, value = text.partition("=")
+    if not sep:
+        raise SystemExit(f"--set takes NAME=VALUE; got {text!r}")
+    return name.strip(), yaml.safe_load(value)
+
+
 def _seeds(text: str) -> list[int]:
     out: list[int] = []
     for part in text.split(","):
@@ -284,7 +300,8 @@ def run(args: argparse.Namespace) -> None:
 
     problems = args.problems.split(",") if args.problems else list(SUITE)
     methods = args.methods.split(",") if args.methods else list(DEFAULT_METHODS)
-    settings = {m: suite_settings(m) for m in methods}
+    changed = dict(_assignment(text) for text in args.set)
+    settings = {m: suite_settings(m, changed) for m in methods}
     done = {_key(r) for r in _read(args.out)}
     tasks = [
         (problem, method, seed, settings[method])
@@ -505,6 +522,12 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--seeds", default="0-49", help="e.g. 0-49 or 0-4,10")
     r.add_argument("--jobs", type=int, default=1, help="processes")
     r.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    r.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        help="NAME=VALUE: a setting of every method run changed (a variant)",
+    )
     r.set_defaults(func=run)
     t = sub.add_parser("table", help="tabulate a results file")
     t.add_argument(

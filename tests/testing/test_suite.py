@@ -227,6 +227,17 @@ def test_suite_settings_keep_every_engine_method_within_the_budget():
         assert 0.9 * suite.SUITE_BUDGET <= budget <= suite.SUITE_BUDGET, method
 
 
+def test_a_variant_is_scaled_to_the_same_budget():
+    from avrisk.rare.estimator import get_estimator, planned_budget
+
+    suite = _load_suite_command()
+    default = suite.suite_settings("splitting_is")
+    variant = suite.suite_settings("splitting_is", {"n_moves": 3})
+    assert variant["n_moves"] == 3 and variant["n_particles"] < default["n_particles"]
+    estimator = get_estimator("splitting_is", **variant)
+    assert planned_budget(estimator) <= suite.SUITE_BUDGET
+
+
 def test_gross_miss_needs_both_a_missed_interval_and_a_factor_two():
     suite = _load_suite_command()
     run = {"p_exact": 1.0, "p_rel_error": 0.0}
