@@ -470,6 +470,16 @@ def _results(specs: list[str]) -> list[dict]:
     return records
 
 
+def _recorded_settings(records: list[dict], method: str) -> str:
+    """The settings ``method``'s runs recorded, each once (backquoted JSON)."""
+    seen = dict.fromkeys(
+        json.dumps(r["settings"], sort_keys=True)
+        for r in records
+        if r["method"] == method
+    )
+    return "; ".join(f"`{text}`" for text in seen)
+
+
 def table(args: argparse.Namespace) -> None:
     """Print (and write) the table of ``args.results``."""
     records = _results(args.results)
@@ -486,7 +496,7 @@ def table(args: argparse.Namespace) -> None:
         "Settings (one for the whole suite, at most "
         f"{SUITE_BUDGET:,} calls of f a run):",
         "",
-        *(f"- {LABELS.get(m, m)}: `{json.dumps(suite_settings(m))}`" for m in methods),
+        *(f"- {LABELS.get(m, m)}: {_recorded_settings(records, m)}" for m in methods),
         "",
         HEADER,
         *(_fmt(row) for row in rows),
