@@ -205,7 +205,14 @@ class SplittingISSettings(SplittingSettings):
     fit_variances : bool, default=True
         Whether the proposal may also fit each shifted coordinate's variance
         (where the held-out likelihood clearly prefers it; step 3).
+    moves_at_gamma : int or None, default=None
+        pCN proposals per kept state in the moves at ``gamma`` (step 2), the
+        particles the proposal is fitted to; None: ``n_moves``, as at every
+        level. More spread those particles over the event's law where one
+        move per state leaves them narrower than it, at ``N`` calls each.
     """
+
+    OMIT_IF_DEFAULT = (*SplittingSettings.OMIT_IF_DEFAULT, "moves_at_gamma")
 
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
     n_components: int = Field(
@@ -232,9 +239,20 @@ class SplittingISSettings(SplittingSettings):
         "variance too (where held-out particles clearly prefer it).",
     )
 
+    moves_at_gamma: int | None = Field(
+        None,
+        ge=1,
+        description="pCN proposals per kept state in the moves at gamma "
+        "(None: n_moves).",
+    )
+
+    def gamma_moves(self) -> int:
+        """The pCN proposals per kept state in the moves at ``gamma``."""
+        return self.n_moves if self.moves_at_gamma is None else self.moves_at_gamma
+
     def tail_bound(self, n: int) -> int:
         """The moves at ``gamma`` on ``n`` particles in all, and the final stage."""
-        return n * self.n_moves + self.n_final
+        return n * self.gamma_moves() + self.n_final
 
 
 @register_estimator
@@ -330,7 +348,11 @@ class SplittingImportanceSampling(SubsetSimulation):
             deepest = [levels_estimate(r, problem, n) for r, n in with_hits]
             combined = combined_levels(deepest, problem, sum(state.sizes))
         moves = _moves_at_gamma(
-            with_hits, state.current.n_stages, problem, context, self.settings.n_moves
+            with_hits,
+            state.current.n_stages,
+            problem,
+            context,
+            self.settings.gamma_moves(),
         )
         fitted = _fitted_proposal(moves, with_hits, problem, context, self.settings)
         n_evals = state.current.n_evals + sum(m.n_calls for m in moves)

@@ -78,6 +78,19 @@ def test_finds_p_of_exact_problems_within_its_stderr(problem):
     assert levels["ci"][0] <= levels["p"] <= levels["ci"][1]  # the cross-check
 
 
+def test_more_moves_at_gamma_cost_their_calls_and_leave_the_levels_alone():
+    problem = gaussian_linear_problem(10, p=1e-6)
+    one, three = sis(problem, seed=2), sis(problem, seed=2, moves_at_gamma=3)
+    assert one.history == three.history  # the same levels, draw for draw
+    lasts = [h for h in one.history if h.level == problem.gamma]
+    moved = sum(1000 - h.n_survivors for h in lasts)  # states moved at gamma
+    assert three.n_evals - one.n_evals == 2 * moved
+    assert abs(three.p - problem.p_exact) < 4 * three.stderr
+    settings = estimator_class("splitting_is").Settings
+    assert "moves_at_gamma" not in settings().recorded()  # older records hold
+    assert settings(moves_at_gamma=3).recorded()["moves_at_gamma"] == 3
+
+
 def test_the_four_branches_get_a_component_each():
     est = sis(four_branch_problem(), seed=1, n_particles=4000)
     assert est.details["n_components"] == 4
