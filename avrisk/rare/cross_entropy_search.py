@@ -275,8 +275,10 @@ def search_diagnostics(
 ) -> list[DiagnosticTable]:
     """A CE search's trajectory per iteration: levels, quantiles, hits, ESS.
 
-    ``step`` names the iteration column; ``extra`` adds ``(column name,
-    history key)`` pairs after the others.
+    Then its audit's table, where it has one
+    (:func:`~avrisk.rare.proposal_audit.audit_table`). ``step`` names the
+    iteration column; ``extra`` adds ``(column name, history key)`` pairs
+    after the others.
     """
     history = estimate.get("history") or []
     if not history:
@@ -290,18 +292,6 @@ def search_diagnostics(
         *extra,
     )
     rows = [tuple(h[key] for _, key in keys) for h in history]
-    return [
-        *_search_table(title, keys, rows),
-        *audit_table(estimate),
-    ]
-
-
-def _search_table(
-    title: str,
-    keys: tuple[tuple[str, str], ...],
-    rows: list[tuple[Any, ...]],
-) -> list[DiagnosticTable]:
-    """The search's trajectory as a table (:func:`search_diagnostics`)."""
     return [
         DiagnosticTable(
             title,
@@ -317,7 +307,8 @@ def _search_table(
                 "found the event once gamma_k reaches gamma. Elite ESS: how "
                 "many equally weighted samples the weighted elite is worth."
             ),
-        )
+        ),
+        *audit_table(estimate),
     ]
 
 
