@@ -188,6 +188,12 @@ class SplittingISSettings(SplittingSettings):
 
     Attributes
     ----------
+    n_moves : int, default=2
+        pCN proposals per kept chain state at every level (one for subset
+        simulation alone): the proposal is fitted to the particles, so their
+        spread over each level's conditional law matters here as well as their
+        level; with one move per state a chain's kept states sit closer to its
+        seed.
     n_final : int, default=10000
         Samples of the fitted proposal.
     n_components : int, default=4
@@ -214,6 +220,9 @@ class SplittingISSettings(SplittingSettings):
 
     OMIT_IF_DEFAULT = (*SplittingSettings.OMIT_IF_DEFAULT, "moves_at_gamma")
 
+    n_moves: int = Field(
+        2, ge=1, description="pCN proposals per kept chain state (thinning)."
+    )
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
     n_components: int = Field(
         4, ge=1, description="Mean shifts seeded from the particles."

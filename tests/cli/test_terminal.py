@@ -128,25 +128,26 @@ def test_the_default_method_is_splitting_is_its_plan_a_bound_and_its_tables_show
         "splitting_is"
     )
     err = words(result.stderr)
-    # max_levels=12 sets of 100 (the first of 800 on a plateau), the moves at
-    # gamma and the final stage: a bound; 7 times the sets (each replicate
-    # regrown twice, to 2 and 4 times its particles) and 4 x 100 moves at gamma
-    # if its levels run out
+    # max_levels=12 sets of 100 (the first of 800 on a plateau, two moves per
+    # state after it), the moves at gamma and the final stage: a bound; 7 times
+    # the sets (each replicate regrown twice, to 2 and 4 times its particles)
+    # and 4 x 100 states moved at gamma if its levels run out
     assert (
         "plan: splitting + IS (subset simulation, 100 particles per level, p0 0.1, "
-        "regrown up to 2x, then IS 100 (4 components, defensive 0.1)): at most "
-        "2,100 rollouts (fewer if the levels reach gamma sooner; up to 13,800 if "
+        "2 moves per state, regrown up to 2x, then IS 100 (4 components, "
+        "defensive 0.1)): at most 3,300 rollouts (fewer if the levels reach "
+        "gamma sooner; up to 21,900 if "
         "levels that run out are run again, larger); samples take at most about"
     ) in err
     # its first batch: the first replicate's first set, 50 particles
     assert "rollouts/s on the first 50: at most about" in err
-    assert "for at most 2,050 more" in err
+    assert "for at most 3,250 more" in err
     assert_whole_at_80_columns(result.stdout)
     estimate = json.loads((out / "summary.json").read_text())["estimate"]
     n = estimate["n_evals"]
-    assert n < 2100
+    assert n < 3300
     # the bar ends full at the rollouts the levels needed, not short of the bound
-    assert f"{n}/{n}" in err and "/2100" not in err
+    assert f"{n}/{n}" in err and "/3300" not in err
     assert f"method splitting + IS, {estimate['n_evals']:,} rollouts" in words(
         result.stdout
     )
@@ -192,11 +193,12 @@ def test_the_plan_counts_the_rollouts_splitting_stores_in_full(tmp_path):
         float(x.replace(",", "")) for x in estimates.split(" B a rollout, ")
     )
     assert compact < 400 < 2000 < full  # xi's 404 float32 columns
-    # 12 sets of 30 (the first of 240 on a plateau) and 30 moves at gamma in
-    # full, the final 30 without xi (the plan before any regrowth)
+    # 12 sets of 30 (the first of 240 on a plateau, two moves a state after
+    # it) and 2 x 30 moves at gamma in full, the final 30 without xi (the plan
+    # before any regrowth)
     planned = err.split("samples take at most about ")[1].split(" on disk")[0]
-    assert planned == "1 MB"  # (600 full + 30 compact) rows, about 1.4 MB
-    assert 1e6 <= 600 * full + 30 * compact < 2e6
+    assert planned == "2 MB"  # (960 full + 30 compact) rows, about 2.2 MB
+    assert 1.5e6 <= 960 * full + 30 * compact < 2.5e6
     measured = float(err.split("; disk: ")[1].split(" B a rollout")[0].replace(",", ""))
     assert measured == pytest.approx(full, rel=0.15)  # the first chunk: a level
     assert " B a rollout stored in full, at most about " in err.split("; disk: ")[1]
@@ -286,20 +288,21 @@ def test_compare_defaults_finish_in_minutes():
     # CE's stages, and the bound of its audit (one particle per 50 final draws)
     assert budget == 20_000 + audit_bound(200) and reference == 50_000
     assert 2 * budget + reference <= 100_000  # ~3.5 min at 450 rollouts/s
-    # the default, splitting_is: 2,000 particles per level and 10,000 in its
-    # final stage; on highway_default its levels reach 0.14 s in 4 sets
-    # (README: 18,908 rollouts), within the bound the plan gives
+    # the default, splitting_is: 2,000 particles per level, two moves a state,
+    # and 10,000 in its final stage; on highway_default its levels reach 0.14 s
+    # in 4 sets (about 26,000 rollouts), within the bound the plan gives
     method = inspect.signature(compare).parameters["method"].default
     options = estimator_options(method, {}, None, COMPARE_DEFAULTS)
     splitting = get_estimator(method, **options)
     assert method == "splitting_is" and options == {"n_final": 10_000}
     s = splitting.settings
-    four_sets = 4 * s.n_particles + s.n_particles + s.n_final
-    assert four_sets == 20_000
+    assert s.n_moves == 2
+    moved = s.n_moves * s.n_particles  # proposals a set after the first
+    assert s.n_particles + 3 * moved + moved + s.n_final == 28_000
     # the bound: 12 sets (the first of 8 N on a plateau), 7 times over where each
-    # replicate runs out of levels twice and is regrown, 4 N moves at gamma
-    levels = 8 * s.n_particles + 11 * s.n_particles
-    assert splitting.budget() == 7 * levels + 4 * s.n_particles + s.n_final == 284_000
+    # replicate runs out of levels twice and is regrown, 4 N states moved at gamma
+    levels = 8 * s.n_particles + 11 * moved
+    assert splitting.budget() == 7 * levels + 4 * moved + s.n_final == 446_000
 
 
 def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(
