@@ -128,8 +128,8 @@ def test_where_the_event_narrows_p0_the_proposal_fits_the_variances():
     assert runs[True].details["fitted_variances"]
     assert not runs[False].details["fitted_variances"]
     # shifts alone are answered by the levels, the fitted variances by the
-    # importance sample, several times more precise
-    assert runs[True].stderr < runs[False].stderr / 3
+    # importance sample, worth more than ten times as many draws
+    assert runs[True].stderr < runs[False].stderr / np.sqrt(10)
     assert abs(runs[True].p - problem.p_exact) < 4 * runs[True].stderr
     table = runs[True].proposal.to_dict()["components"][0]
     assert table["family"] == "StandardSpaceNormal"
@@ -317,9 +317,9 @@ def test_the_95_percent_interval_covers_p_in_most_runs():
         for problem in problems
     }
     # four-branch at this small budget covers about 87% (100 seeds, one or two
-    # moves per state alike): judge the pooled rate, and each problem's gross miss
+    # moves per state alike; 40 seeds left it to the luck of the draw)
     assert np.mean(list(covered.values())) >= 0.88, covered
-    assert min(covered.values()) >= 0.8, covered
+    assert min(covered.values()) >= 0.85, covered
 
 
 def test_same_seed_same_result_whatever_the_batch_size():
