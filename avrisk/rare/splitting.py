@@ -83,6 +83,7 @@ from avrisk.rare.splitting_moves import draw_p0, drawn_more, move_chains
 from avrisk.rare.splitting_replicates import (
     ReplicatesState,
     combined_levels,
+    disagreement_doubts,
     exhausted_doubts,
     few_survivors,
     regrown_doubts,
@@ -467,16 +468,12 @@ class SubsetSimulation:
         """
         details = estimate.get("details") or {}
         reasons = list(few_survivors(details.get("survivors") or []))
-        if gamma == estimate.get("gamma") and details.get("replicates_disagree"):
-            found = ", ".join(f"{r['p']:.2g}" for r in details["replicates"])
-            reasons.append(
-                f"the replicates of the search found p = {found}, further apart "
-                "than their errors allow: they followed different parts of the "
-                "failure set, and a part none of them found is as likely (compare "
-                "runs with other seeds, or raise n_particles)"
-            )
         if gamma == estimate.get("gamma"):
-            reasons.extend(exhausted_doubts(details) + regrown_doubts(details))
+            reasons.extend(
+                disagreement_doubts(details)
+                + exhausted_doubts(details)
+                + regrown_doubts(details)
+            )
         return tuple(reasons)
 
 

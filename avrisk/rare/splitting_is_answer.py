@@ -32,12 +32,13 @@ import warnings
 from typing import Any
 
 from avrisk.rare.estimation_context import EstimationContext
-from avrisk.rare.final_stage import Advice, weighted_stage_estimates
+from avrisk.rare.final_stage import Advice, is_reliable, weighted_stage_estimates
 from avrisk.rare.particle_fit import ParticleFit
 from avrisk.rare.particle_predictions import HeldOutWeights
 from avrisk.rare.problem import FINAL_STAGE, RareEventProblem
 from avrisk.rare.results import Estimate, GammaEstimate
 from avrisk.rare.splitting_replicates import (
+    disagreement_doubts,
     estimates_disagree,
     exhausted_doubts,
     few_survivors,
@@ -148,8 +149,8 @@ def answer_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
     event lacks (the sample is unbiased; a single huge weight is its Pareto
     k's to show), so the levels lost part of the event, as they do when their
     chains follow a near miss. When the levels answer (the module docstring),
-    their own doubts count (a level held by a handful of particles), and so
-    does an importance sample far from them.
+    their own doubts count (subset simulation's), and so does an importance
+    sample that belies them (:func:`_levels_answer_doubts`).
     """
     details = estimate.get("details") or {}
     main = next((g for g in estimate.get("by_gamma", ()) if g["gamma"] == gamma), None)
@@ -189,10 +190,27 @@ def _none_reached(details: dict[str, Any]) -> tuple[str, ...]:
 def _levels_answer_doubts(
     details: dict[str, Any], main: dict[str, Any], gamma: float
 ) -> list[str]:
-    """The levels' own doubts, and an importance sample far from them."""
+    """The levels' own doubts, and an importance sample that belies them.
+
+    The levels' own are subset simulation's
+    (:meth:`~avrisk.rare.splitting.SubsetSimulation.doubts`): a level held by
+    a handful of particles, replicates whose products disagree. An importance
+    sample from their particles belies them when it lies further from them
+    than both errors allow: above them (it cannot add mass the event lacks,
+    so the levels lost part of it), or below them with weights that make its
+    own interval mean something (:func:`~avrisk.rare.final_stage.is_reliable`).
+    Below them with a few dominant weights or a heavy tail it says little:
+    such a sample falls low as a rule (its largest weights are not drawn),
+    which is what the particles predicted when the levels were chosen.
+    """
     reasons = list(few_survivors(details.get("survivors") or []))
+    reasons += disagreement_doubts(details)
     sampled = (details.get("importance_sampling") or {}).get(str(gamma))
-    if sampled and "stderr" in sampled and estimates_disagree(sampled, main):
+    if not (sampled and "stderr" in sampled and estimates_disagree(sampled, main)):
+        return reasons
+    if sampled["p"] > main["p"] or is_reliable(
+        sampled.get("ess"), sampled.get("pareto_k")
+    ):
         reasons.append(
             f"the levels found p = {main['p']:.2g} but importance sampling "
             f"from their particles {sampled['p']:.2g}, further apart than "

@@ -43,6 +43,7 @@ __all__ = [
     "DISAGREEMENT_Z",
     "ReplicatesState",
     "combined_levels",
+    "disagreement_doubts",
     "estimates_disagree",
     "exhausted_doubts",
     "few_survivors",
@@ -270,6 +271,24 @@ def replicates_record(
         "replicates_regrown": sum(r.exhausted for r in state.all) - exhausted,
         "replicate_particles": [n for _, n in reached],
     }
+
+
+def disagreement_doubts(details: dict[str, Any]) -> tuple[str, ...]:
+    """The doubt of replicates whose estimates disagree (:func:`replicates_disagree`).
+
+    ``details``: a run's, with ``replicates_disagree`` and each replicate's
+    estimate at ``gamma`` in ``replicates``. The levels' product is their
+    mean: of products that each miss part of the event.
+    """
+    if not details.get("replicates_disagree"):
+        return ()
+    found = ", ".join(f"{r['p']:.2g}" for r in details["replicates"])
+    return (
+        f"the replicates of the search found p = {found}, further apart than "
+        "their errors allow: they followed different parts of the failure set, "
+        "and a part none of them found is as likely (compare runs with other "
+        "seeds, or raise n_particles)",
+    )
 
 
 def exhausted_doubts(details: dict[str, Any]) -> tuple[str, ...]:

@@ -128,6 +128,7 @@ def test_importance_sampling_far_from_its_own_levels_says_caution():
 def test_levels_that_answer_far_from_their_own_importance_sample_say_caution():
     levels = {"gamma": 0.0, "p": 1e-6, "stderr": 2e-7, "ci": [6.7e-7, 1.5e-6]}
     sampled = {"p": 1e-7, "stderr": 1e-8, "ci": [8e-8, 1.2e-7], "n_hits": 500}
+    sampled |= {"ess": 400.0, "pareto_k": 0.2}
     as_dict = {
         "gamma": 0.0,
         "by_gamma": [{**levels, "n_hits": 300, "ess": 300.0, "pareto_k": None}],
@@ -145,9 +146,21 @@ def test_levels_that_answer_far_from_their_own_importance_sample_say_caution():
         )
 
     assert "the levels found p = 1e-06 but importance sampling" in str(trust())
+    # below them with weights that make its interval unreliable: no doubt
+    for unreliable in ({"pareto_k": 0.9}, {"ess": 4.0}):
+        as_dict["details"]["importance_sampling"]["0.0"] = sampled | unreliable
+        assert trust().ok
+    # above them it belies them, whatever its weights
+    above = {"p": 1e-5, "stderr": 1e-6, "ci": [8e-6, 1.2e-5], "pareto_k": 0.9}
+    as_dict["details"]["importance_sampling"]["0.0"] = sampled | above
+    assert "importance sampling from their particles 1e-05" in str(trust())
     # a sample that bears the levels out: no doubt
     as_dict["details"]["importance_sampling"]["0.0"] = sampled | {"p": 9e-7}
     assert trust().ok
+    # replicates whose products disagree: subset simulation's own doubt
+    as_dict["details"]["replicates_disagree"] = True
+    assert "the replicates of the search found p = 1e-06, 1e-06" in str(trust())
+    as_dict["details"]["replicates_disagree"] = False
     # a level of the levels held by a handful of particles: their own doubt
     as_dict["details"]["survivors"][1] = [200, 3, 150]
     assert "held only 3 particles" in str(trust())
