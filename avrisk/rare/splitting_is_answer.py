@@ -32,7 +32,11 @@ import warnings
 from typing import Any
 
 from avrisk.rare.estimation_context import EstimationContext
-from avrisk.rare.final_stage import Advice, is_reliable, weighted_stage_estimates
+from avrisk.rare.final_stage import (
+    MIN_RELIABLE_ESS,
+    Advice,
+    weighted_stage_estimates,
+)
 from avrisk.rare.particle_fit import ParticleFit
 from avrisk.rare.particle_predictions import HeldOutWeights
 from avrisk.rare.problem import FINAL_STAGE, RareEventProblem
@@ -197,20 +201,20 @@ def _levels_answer_doubts(
     a handful of particles, replicates whose products disagree. An importance
     sample from their particles belies them when it lies further from them
     than both errors allow: above them (it cannot add mass the event lacks,
-    so the levels lost part of it), or below them with weights that make its
-    own interval mean something (:func:`~avrisk.rare.final_stage.is_reliable`).
-    Below them with a few dominant weights or a heavy tail it says little:
-    such a sample falls low as a rule (its largest weights are not drawn),
-    which is what the particles predicted when the levels were chosen.
+    so the levels lost part of it), or below them with at least
+    ``MIN_RELIABLE_ESS`` effective hits. Below them with fewer, its estimate
+    is a handful of weights, and such a sample falls low as a rule (its
+    largest weights are not drawn), which is what the particles predicted
+    when the levels were chosen. (A heavy tail of the weights, Pareto ``k >
+    0.7``, does not silence it: in many dimensions the sample's heavy-tailed
+    estimate still falls far below levels that are twice too high.)
     """
     reasons = list(few_survivors(details.get("survivors") or []))
     reasons += disagreement_doubts(details)
     sampled = (details.get("importance_sampling") or {}).get(str(gamma))
     if not (sampled and "stderr" in sampled and estimates_disagree(sampled, main)):
         return reasons
-    if sampled["p"] > main["p"] or is_reliable(
-        sampled.get("ess"), sampled.get("pareto_k")
-    ):
+    if sampled["p"] > main["p"] or (sampled.get("ess") or 0.0) >= MIN_RELIABLE_ESS:
         reasons.append(
             f"the levels found p = {main['p']:.2g} but importance sampling "
             f"from their particles {sampled['p']:.2g}, further apart than "
