@@ -72,6 +72,11 @@ GATE_CASES = {
 PAIRED = {"n_particles": 2000, "n_final": 10_000}
 #: Each independent run's: half of the paired run's samples.
 INDEPENDENT = {"n_particles": 1000, "n_final": 5000}
+#: The paired run of the efficiency table: each of its draws is evaluated by
+#: both versions, so at the independent runs' settings it makes as many
+#: evaluations of a version as the two independent runs together.
+EVEN = INDEPENDENT
+EVEN_OUT = ROOT / "benchmarks" / "results" / "ab" / "even_runs.jsonl"
 #: Offset of the independent runs' seeds (2 per paired seed), so that no
 #: independent run shares a paired run's draws.
 INDEPENDENT_SEED = 1_000_000
@@ -125,6 +130,35 @@ def independent_record(pair: AnalyticPair, seed: int) -> dict[str, Any]:
     return {"a": a.p, "b": b.p, "n_evals": a.n_evals + b.n_evals}
 
 
+def run_even(cases: list[str], seeds: list[int], out: Path) -> None:
+    """Append the even paired run's difference per (case, seed) not yet in ``out``."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    done = set()
+    if out.is_file():
+        done = {(r["case"], r["seed"]) for r in map(json.loads, out.open())}
+    with out.open("a") as sink:
+        for name in cases:
+            pair = pair_problem(name)
+            for seed in seeds:
+                if (name, seed) in done:
+                    continue
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    est = paired_splitting_is(
+                        pair.f, pair.base, pair.gamma, seed=seed, **EVEN
+                    )
+                rec = {
+                    "case": name,
+                    "seed": seed,
+                    "settings": EVEN,
+                    "difference": est.difference.value,
+                    "n_evals": est.n_evals,
+                }
+                sink.write(json.dumps(rec) + "\n")
+                sink.flush()
+            print(f"{name}: done", flush=True)
+
+
 def parse_seeds(text: str) -> list[int]:
     """``"0-199"`` or ``"0,3,5"``."""
     if "-" in text:
@@ -166,8 +200,10 @@ def run(cases: list[str], seeds: list[int], out: Path) -> None:
             print(f"{name}: done", flush=True)
 
 
-def case_row(name: str, recs: list[dict[str, Any]]) -> dict[str, Any]:
-    """The table's figures for one case."""
+def case_row(
+    name: str, recs: list[dict[str, Any]], even: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """The table's figures for one case (``even``: its even paired runs)."""
     n = len(recs)
     exact = recs[0]["exact"]
     cover = {
@@ -197,16 +233,46 @@ def case_row(name: str, recs: list[dict[str, Any]]) -> dict[str, Any]:
             np.mean([r["independent"]["n_evals"] for r in recs])
         ),
         "caution": sum(r["paired"]["trust"] != "ok" for r in recs),
+    } | _even_figures(even, spread_indep, recs)
+
+
+def _even_figures(
+    even: list[dict[str, Any]], spread_indep: float, recs: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """The efficiency at equal evaluations of a version: the even paired runs'."""
+    if len(even) < 2:
+        return {}
+    spread = float(np.std([r["difference"] for r in even], ddof=1))
+    return {
+        "even_runs": len(even),
+        "spread_even": spread,
+        "narrower_by_even": spread_indep / spread if spread > 0 else math.inf,
+        # each draw of a paired run is evaluated by both versions
+        "evaluations_even": 2 * float(np.mean([r["n_evals"] for r in even])),
+        "evaluations_independent": float(
+            np.mean([r["independent"]["n_evals"] for r in recs])
+        ),
     }
 
 
-def table(results: Path) -> tuple[list[dict[str, Any]], str]:
-    """Rows per case and the markdown of the coverage and efficiency tables."""
+def table(results: Path, even: Path | None = None) -> tuple[list[dict[str, Any]], str]:
+    """Rows per case and the markdown of the coverage and efficiency tables.
+
+    ``even``: the even paired runs (``run-even``), for the efficiency at equal
+    evaluations of a version; without them the table compares the default
+    paired run, which evaluates twice as many.
+    """
     by_case: dict[str, list[dict[str, Any]]] = {}
     for line in results.read_text().splitlines():
         rec = json.loads(line)
         by_case.setdefault(rec["case"], []).append(rec)
-    rows = [case_row(name, recs) for name, recs in by_case.items()]
+    by_even: dict[str, list[dict[str, Any]]] = {}
+    if even is not None and even.is_file():
+        for rec in map(json.loads, even.read_text().splitlines()):
+            by_even.setdefault(rec["case"], []).append(rec)
+    rows = [
+        case_row(name, recs, by_even.get(name, [])) for name, recs in by_case.items()
+    ]
     md = [
         "| case | r | p_A | p_B | runs | p_A | p_B | p_B - p_A | p_B / p_A | "
         "ratio < lower / > upper (one-sided 95%) | caution |",
@@ -229,16 +295,32 @@ def table(results: Path) -> tuple[list[dict[str, Any]], str]:
     )
     md += [
         "",
-        "| case | r | spread of p_B - p_A: paired | independent | "
-        "independent / paired | mean calls: paired | independent |",
+        "| case | r | spread of p_B - p_A: paired, default | independent | "
+        "independent / paired | evaluations of a version: paired | independent |",
         "|---|---|---|---|---|---|---|",
     ]
     for row in rows:
         md.append(
             f"| {row['case']} | {row['r']:.2f} | {row['spread_paired']:.3g} "
             f"| {row['spread_independent']:.3g} | {row['narrower_by']:.2f} "
-            f"| {row['calls_paired']:,.0f} | {row['calls_independent']:,.0f} |"
+            f"| {2 * row['calls_paired']:,.0f} | {row['calls_independent']:,.0f} |"
         )
+    if all("spread_even" in row for row in rows):
+        md += [
+            "",
+            "At equal evaluations of a version (the even paired runs):",
+            "",
+            "| case | r | runs | spread of p_B - p_A: paired, even | independent "
+            "| independent / paired | evaluations: paired | independent |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for row in rows:
+            md.append(
+                f"| {row['case']} | {row['r']:.2f} | {row['even_runs']} "
+                f"| {row['spread_even']:.3g} | {row['spread_independent']:.3g} "
+                f"| {row['narrower_by_even']:.2f} | {row['evaluations_even']:,.0f} "
+                f"| {row['evaluations_independent']:,.0f} |"
+            )
     return rows, "\n".join(md)
 
 
@@ -276,8 +358,13 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--out", type=Path, default=DEFAULT_OUT)
     t = sub.add_parser("table")
     t.add_argument("--results", type=Path, default=DEFAULT_OUT)
+    t.add_argument("--even", type=Path, default=EVEN_OUT)
     t.add_argument("--md", type=Path)
     t.add_argument("--json", type=Path)
+    e = sub.add_parser("run-even")
+    e.add_argument("--cases", default=",".join(PAIR_SUITE))
+    e.add_argument("--seeds", default="0-199")
+    e.add_argument("--out", type=Path, default=EVEN_OUT)
     g = sub.add_parser("gate")
     g.add_argument("--seeds", default="0-19")
     g.add_argument("--out", type=Path, default=GATE_OUT)
@@ -285,10 +372,13 @@ def main(argv: list[str] | None = None) -> None:
     if args.command == "run":
         run(args.cases.split(","), parse_seeds(args.seeds), args.out)
         return
+    if args.command == "run-even":
+        run_even(args.cases.split(","), parse_seeds(args.seeds), args.out)
+        return
     if args.command == "gate":
         gate_sweep(parse_seeds(args.seeds), args.out)
         return
-    rows, md = table(args.results)
+    rows, md = table(args.results, args.even)
     print(md)
     if args.md:
         args.md.write_text(md + "\n")

@@ -9,25 +9,30 @@ shipped lidar ego ``A`` and its variant ``B`` whose lidar reads every range
   estimates of ``p_A``, ``p_B``, ``p_B - p_A`` and ``p_B / p_A`` with their
   intervals, the discordant share and the gate's outcome at ``--max-ratio``;
 * two independent ``splitting_is`` runs (:func:`avrisk.api.estimate`), one
-  per ego, with half the paired run's particles and final samples each, so
-  that both together simulate about as many rollouts as the paired run
-  simulates pairs, on seeds of their own (``INDEPENDENT_SEED + 2 seed`` and
-  ``+ 1``).
+  per ego, with half the paired run's particles and final samples each, on
+  seeds of their own (``INDEPENDENT_SEED + 2 seed`` and ``+ 1``);
+* with ``run-even`` (a file of its own), a paired run at the independent
+  runs' settings (``EVEN``): each of its draws is simulated with both egos,
+  so it simulates as many rollouts as the two independent runs together.
+  The efficiency is the spread of this run's difference against theirs;
+  the default paired run simulates twice as many rollouts.
 
 ::
 
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run \\
         [--seeds 0-49] [--reverse] [--out benchmarks/results/ab/lidar_pair.jsonl]
-    python benchmarks/ab_scenario.py table [--results ...] [--md T.md]
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run-even \\
+        [--seeds 0-49] [--out benchmarks/results/ab/lidar_pair_even.jsonl]
+    python benchmarks/ab_scenario.py table [--results ...] [--even ...] [--md T.md]
 
 ``run`` appends one JSON line per seed and skips seeds already there, so an
 interrupted sweep goes on (each seed's run directories are temporary); a
 second process may go down the seeds into the same file (``--reverse``). No
 exact answer is known here, so ``table`` reports what needs none: the spread
 (standard deviation over seeds) of the paired difference against that of the
-independent runs' difference, their ratio (what the analytic pairs' table of
-``ab_coverage.py`` reports against ``r``), the mean discordant share ``r``,
-the gate's outcomes, and the rollouts each way.
+independent runs' difference, their ratio at equal rollouts (what the
+analytic pairs' table of ``ab_coverage.py`` reports against ``r``), the mean
+discordant share ``r``, the gate's outcomes, and the rollouts each way.
 """
 
 from __future__ import annotations
@@ -61,6 +66,11 @@ EGOS = {
 }
 #: Each independent run's settings: half the paired run's default samples.
 INDEPENDENT = {"n_particles": 1000, "n_final": 5000}
+#: The paired run of the efficiency comparison: each of its draws is simulated
+#: with both egos, so at the independent runs' settings it simulates as many
+#: rollouts as the two independent runs together.
+EVEN = INDEPENDENT
+EVEN_OUT = ROOT / "benchmarks" / "results" / "ab" / "lidar_pair_even.jsonl"
 #: Offset of the independent runs' seeds, so none shares a paired run's draws.
 INDEPENDENT_SEED = 1_000_000
 #: The gate's margin on ``p_B / p_A``.
@@ -71,8 +81,10 @@ def _ego(which: str) -> dict[str, Any]:
     return yaml.safe_load(EGOS[which].read_text())
 
 
-def paired_record(seed: int, scratch: Path) -> dict[str, Any]:
-    """One paired run at ``avrisk ab``'s defaults: its figures and verdict."""
+def paired_record(
+    seed: int, scratch: Path, settings: dict[str, int] | None = None
+) -> dict[str, Any]:
+    """One paired run (``settings``: ``avrisk ab``'s defaults): its figures, verdict."""
     start = time.perf_counter()
     result = compare_egos(
         SCENARIO,
@@ -82,6 +94,7 @@ def paired_record(seed: int, scratch: Path) -> dict[str, Any]:
         max_ratio=MAX_RATIO,
         seed=seed,
         failures=0,
+        **(settings or {}),
     )
     est = result.paired
     union = float(est.union["p"])
@@ -176,13 +189,38 @@ def run(seeds: list[int], out: Path) -> None:
         )
 
 
-def summary(results: Path) -> tuple[dict[str, Any], str]:
-    """The spread, the discordant share and the gate's outcomes, as figures and text."""
+def run_even(seeds: list[int], out: Path) -> None:
+    """Append the even paired run (``EVEN``) per seed not yet in ``out``."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    for seed in seeds:
+        if seed in _done(out):
+            continue
+        with tempfile.TemporaryDirectory() as scratch, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rec = {
+                "scenario": SCENARIO,
+                "seed": seed,
+                "settings": EVEN,
+                "paired": paired_record(seed, Path(scratch), EVEN),
+            }
+        with out.open("a") as sink:
+            sink.write(json.dumps(rec) + "\n")
+        print(f"seed {seed}: {rec['paired']['seconds']:.0f} s", flush=True)
+
+
+def _by_seed(path: Path) -> dict[int, dict[str, Any]]:
+    """A results file's records by seed (a seed twice: the first)."""
     by_seed: dict[int, dict[str, Any]] = {}
-    for line in results.read_text().splitlines():  # a seed twice: the first
-        rec = json.loads(line)
-        by_seed.setdefault(rec["seed"], rec)
-    recs = list(by_seed.values())
+    if path.is_file():
+        for line in path.read_text().splitlines():
+            rec = json.loads(line)
+            by_seed.setdefault(rec["seed"], rec)
+    return by_seed
+
+
+def summary(results: Path, even: Path | None = None) -> tuple[dict[str, Any], str]:
+    """The spread, the discordant share and the gate's outcomes, as figures and text."""
+    recs = list(_by_seed(results).values())
     paired = np.array([r["paired"]["difference"]["value"] for r in recs])
     indep = np.array([r["independent"]["b"] - r["independent"]["a"] for r in recs])
     outcomes = [r["paired"]["outcome"] for r in recs]
@@ -203,34 +241,61 @@ def summary(results: Path) -> tuple[dict[str, Any], str]:
         "caution": sum(r["paired"]["trust"] != "ok" for r in recs),
     }
     row["narrower_by"] = row["spread_independent"] / row["spread_paired"]
-    md = "\n".join(
-        [
-            "| pair | seeds | r | mean p_A | mean p_B | spread of p_B - p_A: paired "
-            "| independent | independent / paired | rollouts: paired (both egos) "
-            "| independent | gate at 1.0: pass / fail / inconclusive |",
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
-            f"| `{SCENARIO}`, lidar ego / range x 1.3 | {row['seeds']} "
-            f"| {row['r']:.2f} | {row['p_a']:.3g} | {row['p_b']:.3g} "
-            f"| {row['spread_paired']:.3g} | {row['spread_independent']:.3g} "
-            f"| {row['narrower_by']:.2f} | {row['rollouts_paired']:,.0f} "
-            f"| {row['rollouts_independent']:,.0f} "
-            f"| {row['outcomes']['pass']} / {row['outcomes']['fail']} / "
-            f"{row['outcomes']['inconclusive']} |",
+    lines = [
+        "| pair | seeds | r | mean p_A | mean p_B | spread of p_B - p_A: paired, "
+        "default | independent | independent / paired | rollouts: paired (both "
+        "egos) | independent | gate at 1.0: pass / fail / inconclusive |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        f"| `{SCENARIO}`, lidar ego / range x 1.3 | {row['seeds']} "
+        f"| {row['r']:.2f} | {row['p_a']:.3g} | {row['p_b']:.3g} "
+        f"| {row['spread_paired']:.3g} | {row['spread_independent']:.3g} "
+        f"| {row['narrower_by']:.2f} | {row['rollouts_paired']:,.0f} "
+        f"| {row['rollouts_independent']:,.0f} "
+        f"| {row['outcomes']['pass']} / {row['outcomes']['fail']} / "
+        f"{row['outcomes']['inconclusive']} |",
+    ]
+    evens = list(_by_seed(even).values()) if even is not None else []
+    if len(evens) > 1:
+        spread = float(
+            np.std([r["paired"]["difference"]["value"] for r in evens], ddof=1)
+        )
+        row |= {
+            "even_seeds": len(evens),
+            "spread_even": spread,
+            "narrower_by_even": row["spread_independent"] / spread,
+            "rollouts_even": float(
+                np.mean([2 * r["paired"]["n_evals"] for r in evens])
+            ),
+        }
+        lines += [
+            "",
+            "At equal rollouts (the even paired runs, `run-even`):",
+            "",
+            "| pair | seeds | spread of p_B - p_A: paired, even | independent "
+            "| independent / paired | rollouts: paired | independent |",
+            "|---|---:|---:|---:|---:|---:|---:|",
+            f"| `{SCENARIO}`, lidar ego / range x 1.3 | {len(evens)} "
+            f"| {spread:.3g} | {row['spread_independent']:.3g} "
+            f"| {row['narrower_by_even']:.2f} | {row['rollouts_even']:,.0f} "
+            f"| {row['rollouts_independent']:,.0f} |",
         ]
-    )
-    return row, md
+    return row, "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Command line: ``run`` or ``table``."""
+    """Command line: ``run``, ``run-even`` or ``table``."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run")
     r.add_argument("--seeds", default="0-49")
     r.add_argument("--out", type=Path, default=DEFAULT_OUT)
     r.add_argument("--reverse", action="store_true", help="the seeds downwards")
+    e = sub.add_parser("run-even")
+    e.add_argument("--seeds", default="0-49")
+    e.add_argument("--out", type=Path, default=EVEN_OUT)
     t = sub.add_parser("table")
     t.add_argument("--results", type=Path, default=DEFAULT_OUT)
+    t.add_argument("--even", type=Path, default=EVEN_OUT)
     t.add_argument("--md", type=Path)
     t.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
@@ -238,7 +303,10 @@ def main(argv: list[str] | None = None) -> None:
         seeds = parse_seeds(args.seeds)
         run(seeds[::-1] if args.reverse else seeds, args.out)
         return
-    row, md = summary(args.results)
+    if args.command == "run-even":
+        run_even(parse_seeds(args.seeds), args.out)
+        return
+    row, md = summary(args.results, args.even)
     print(md)
     if args.md:
         args.md.write_text(md + "\n")

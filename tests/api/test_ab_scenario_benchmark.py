@@ -55,6 +55,26 @@ def test_summary_spreads_outcomes_and_duplicates(bench, tmp_path):
     assert row["outcomes"] == {"pass": 0, "fail": 7, "inconclusive": 1}
     assert row["rollouts_paired"] == 2000 and row["rollouts_independent"] == 1900
     assert "| 0 / 7 / 1 |" in md
+    assert "spread_even" not in row  # no even runs: no comparison at equal rollouts
+    # the even paired runs (half the samples, both egos): compared at equal rollouts
+    even_diff = rng.normal(3e-5, 2e-6, 5)
+    even = tmp_path / "even.jsonl"
+    even.write_text(
+        "".join(
+            json.dumps(
+                {"seed": s, "paired": {"difference": {"value": d}, "n_evals": 950}}
+            )
+            + "\n"
+            for s, d in enumerate(even_diff)
+        )
+    )
+    row, md = bench.summary(path, even)
+    assert row["even_seeds"] == 5
+    assert row["narrower_by_even"] == pytest.approx(
+        indep.std(ddof=1) / even_diff.std(ddof=1)
+    )
+    assert row["rollouts_even"] == 1900 == row["rollouts_independent"]
+    assert "At equal rollouts" in md
 
 
 def test_run_skips_seeds_already_recorded(bench, tmp_path, monkeypatch):
