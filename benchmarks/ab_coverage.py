@@ -5,13 +5,19 @@ Runs the paired estimator (:func:`avrisk.rare.paired.paired_splitting_is`:
 sample) on the analytic pairs of :mod:`avrisk.testing.pairs` (half-spaces in
 standard-normal space, exact ``p_A``, ``p_B`` and ``p_AB``) and, on the same
 seeds, two independent ``splitting_is`` runs, one per version, with half the
-particles and half the final samples each (the same total calls of ``f`` as
-the paired run, one call of the pair counting as one)::
+particles and half the final samples each (as many calls of ``f`` as the
+paired run counting one call of the pair as one, so half its evaluations of
+a version). ``run-even`` (a file of its own) runs the paired estimator at the
+independent runs' settings (``EVEN``): as many evaluations of a version as
+the two independent runs together, the fair comparison of their spreads::
 
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py run \\
         [--cases nested_r0.05_p1e-04_d10,...] [--seeds 0-199] \\
         [--out benchmarks/results/ab/runs.jsonl]
-    python benchmarks/ab_coverage.py table [--results ...] [--md T.md] [--json T.json]
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py run-even \\
+        [--seeds 0-199] [--out benchmarks/results/ab/even_runs.jsonl]
+    python benchmarks/ab_coverage.py table [--results ...] [--even ...] \\
+        [--md T.md] [--json T.json]
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py gate \
         [--seeds 0-19] [--out benchmarks/results/ab/gate.json]
 
@@ -26,7 +32,8 @@ sweep goes on. ``table`` prints per case:
 * efficiency: the spread (standard deviation over seeds) of the paired
   estimate of ``p_B - p_A`` and of the difference of the two independent
   runs' estimates, their ratio (``> 1``: the paired one is narrower), and
-  both methods' mean calls;
+  both methods' mean evaluations of a version; with ``--even``, the same at
+  equal evaluations (the even paired runs);
 * runs the engine's trust rule labelled ``caution``.
 
 ``gate`` runs the gate (:func:`avrisk.rare.paired.gate`, margin 1) on the
