@@ -137,12 +137,19 @@ def independent_record(pair: AnalyticPair, seed: int) -> dict[str, Any]:
     return {"a": a.p, "b": b.p, "n_evals": a.n_evals + b.n_evals}
 
 
+def _done(out: Path) -> set[tuple[str, int]]:
+    """The (case, seed) pairs ``out`` holds."""
+    if not out.is_file():
+        return set()
+    return {
+        (r["case"], r["seed"]) for r in map(json.loads, out.read_text().splitlines())
+    }
+
+
 def run_even(cases: list[str], seeds: list[int], out: Path) -> None:
     """Append the even paired run's difference per (case, seed) not yet in ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    done = set()
-    if out.is_file():
-        done = {(r["case"], r["seed"]) for r in map(json.loads, out.open())}
+    done = _done(out)
     with out.open("a") as sink:
         for name in cases:
             pair = pair_problem(name)
@@ -177,11 +184,7 @@ def parse_seeds(text: str) -> list[int]:
 def run(cases: list[str], seeds: list[int], out: Path) -> None:
     """Append a line per (case, seed) not yet in ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    done = set()
-    if out.is_file():
-        for line in out.read_text().splitlines():
-            rec = json.loads(line)
-            done.add((rec["case"], rec["seed"]))
+    done = _done(out)
     settings = {"paired": PAIRED, "independent": INDEPENDENT}
     with out.open("a") as sink:
         for name in cases:

@@ -45,6 +45,7 @@ import sys
 import tempfile
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -159,11 +160,16 @@ def _done(out: Path) -> set[int]:
     return {json.loads(line)["seed"] for line in out.read_text().splitlines()}
 
 
-def run(seeds: list[int], out: Path) -> None:
-    """Append a line per seed not yet in ``out``.
+def _append_per_seed(
+    seeds: list[int],
+    out: Path,
+    record: Callable[[int, Path], dict[str, Any]],
+    describe: Callable[[dict[str, Any]], str],
+) -> None:
+    """Append ``record(seed, scratch)`` per seed not yet in ``out``, and print it.
 
-    ``out`` is read again before each seed, so two processes may share it,
-    e.g. one going up the seeds and one down (``--reverse``).
+    ``out`` is read again before each seed, so two processes may share it;
+    each seed's run directories live in a temporary ``scratch`` folder.
     """
     out.parent.mkdir(parents=True, exist_ok=True)
     for seed in seeds:
@@ -171,41 +177,45 @@ def run(seeds: list[int], out: Path) -> None:
             continue
         with tempfile.TemporaryDirectory() as scratch, warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            rec = {
-                "scenario": SCENARIO,
-                "seed": seed,
-                "egos": {k: str(v.relative_to(ROOT)) for k, v in EGOS.items()},
-                "independent_settings": INDEPENDENT,
-                "paired": paired_record(seed, Path(scratch)),
-                "independent": independent_record(seed, Path(scratch)),
-            }
+            rec = {"scenario": SCENARIO, "seed": seed, **record(seed, Path(scratch))}
         with out.open("a") as sink:
             sink.write(json.dumps(rec) + "\n")
-        p = rec["paired"]
-        print(
-            f"seed {seed}: {p['outcome']}, ratio {p['ratio']['value']:.3g}, "
-            f"{p['seconds']:.0f} s + {rec['independent']['seconds']:.0f} s",
-            flush=True,
-        )
+        print(f"seed {seed}: {describe(rec)}", flush=True)
+
+
+def run(seeds: list[int], out: Path) -> None:
+    """Append the default paired run and the independent runs per seed.
+
+    Two processes may share ``out``, e.g. one going up the seeds and one
+    down (``--reverse``).
+    """
+    _append_per_seed(
+        seeds,
+        out,
+        lambda seed, scratch: {
+            "egos": {k: str(v.relative_to(ROOT)) for k, v in EGOS.items()},
+            "independent_settings": INDEPENDENT,
+            "paired": paired_record(seed, scratch),
+            "independent": independent_record(seed, scratch),
+        },
+        lambda rec: (
+            f"{rec['paired']['outcome']}, ratio {rec['paired']['ratio']['value']:.3g}, "
+            f"{rec['paired']['seconds']:.0f} s + {rec['independent']['seconds']:.0f} s"
+        ),
+    )
 
 
 def run_even(seeds: list[int], out: Path) -> None:
     """Append the even paired run (``EVEN``) per seed not yet in ``out``."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    for seed in seeds:
-        if seed in _done(out):
-            continue
-        with tempfile.TemporaryDirectory() as scratch, warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            rec = {
-                "scenario": SCENARIO,
-                "seed": seed,
-                "settings": EVEN,
-                "paired": paired_record(seed, Path(scratch), EVEN),
-            }
-        with out.open("a") as sink:
-            sink.write(json.dumps(rec) + "\n")
-        print(f"seed {seed}: {rec['paired']['seconds']:.0f} s", flush=True)
+    _append_per_seed(
+        seeds,
+        out,
+        lambda seed, scratch: {
+            "settings": EVEN,
+            "paired": paired_record(seed, scratch, EVEN),
+        },
+        lambda rec: f"{rec['paired']['seconds']:.0f} s",
+    )
 
 
 def _by_seed(path: Path) -> dict[int, dict[str, Any]]:
