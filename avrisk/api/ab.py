@@ -49,6 +49,8 @@ from avrisk.pipeline.files import write_json
 from avrisk.pipeline.provenance import stamp
 from avrisk.pipeline.repeatability import ReplayCheck
 from avrisk.rare.evaluation import Evaluator
+from avrisk.rare.families.base import ExponentialFamily
+from avrisk.rare.mixture_controls import mixture_controls
 from avrisk.rare.paired import (
     PAIR_COLUMNS,
     UNION_METHOD,
@@ -59,6 +61,7 @@ from avrisk.rare.paired import (
 )
 from avrisk.rare.paired_gate import Verdict, gate
 from avrisk.rare.problem import FINAL_STAGE, STATUS
+from avrisk.rare.proposals import mixture_from_estimate
 from avrisk.rare.results import jsonable
 from avrisk.report.ab import AB_REPORT_FILE, write_ab_report
 from avrisk.report.animate import animate_pair, animate_samples
@@ -156,20 +159,63 @@ class ABResult:
         return self.line()
 
 
-def final_sample(run_dir: RunDirectory) -> PairedSample:
-    """The final stage of a finished paired run, both egos' values, from its table."""
-    columns = ["stage", "log_weight", *PAIR_COLUMNS, STATUS]
+def final_sample(
+    run_dir: RunDirectory,
+    base: ExponentialFamily | None = None,
+    proposal: Any = None,
+) -> PairedSample:
+    """The final stage of a finished paired run, both egos' values, from its table.
+
+    With ``base`` (the run's ``P0``) and ``proposal`` (the union estimate's
+    description of its proposal, ``estimate["proposal"]``), the proposal's
+    control variates too: only if the proposal read back gives every final
+    sample the density the run recorded (else none).
+    """
+    columns = ["stage", "log_weight", "log_p_proposal", *PAIR_COLUMNS, STATUS]
     table = run_dir.samples(columns)
     final = np.asarray(table["stage"]) == FINAL_STAGE
 
     def column(name: str) -> np.ndarray:
         return np.asarray(table[name].to_numpy(zero_copy_only=False))[final]
 
+    log_q = column("log_p_proposal").astype(np.float64)
+    controls = np.empty((log_q.size, 0))
+    if base is not None and proposal is not None:
+        x = run_dir.samples(run_dir.param_names, rows=np.flatnonzero(final))
+        controls = _recorded_controls(base, proposal, _matrix(x), log_q)
     return PairedSample(
         column("log_weight").astype(np.float64),
         column("f_a").astype(np.float64),
         column("f_b").astype(np.float64),
         column(STATUS) != 0,
+        controls,
+    )
+
+
+#: How far (in log-density) a proposal read back may be from the recorded one.
+DENSITY_TOLERANCE = 1e-8
+
+
+def _recorded_controls(
+    base: ExponentialFamily, proposal: Any, x: np.ndarray, log_q: np.ndarray
+) -> np.ndarray:
+    """The control variates of ``proposal`` at ``x``, where its densities match."""
+    try:
+        mixture = mixture_from_estimate(proposal, base)
+    except ValueError:
+        return np.empty((len(x), 0))
+    if not np.allclose(mixture.log_prob(x), log_q, rtol=0.0, atol=DENSITY_TOLERANCE):
+        return np.empty((len(x), 0))
+    return mixture_controls(mixture, x)
+
+
+def _matrix(table: Any) -> np.ndarray:
+    """A table's columns side by side, float64, shape (rows, columns)."""
+    return np.column_stack(
+        [
+            np.asarray(c.to_numpy(zero_copy_only=False), dtype=np.float64)
+            for c in table.columns
+        ]
     )
 
 
@@ -251,7 +297,10 @@ def conclude(
     B's; an animation not made yet is left out where its simulator is None).
     """
     out, gamma = run_dir.path, float(estimate["gamma"])
-    paired = paired_estimate(final_sample(run_dir), gamma, estimate, SCENARIO_WORDING)
+    sample = final_sample(
+        run_dir, base_distribution(specs[0]), estimate.get("proposal")
+    )
+    paired = paired_estimate(sample, gamma, estimate, SCENARIO_WORDING)
     discordant = ranked_discordant(run_dir, specs[0], gamma)
     egos = [spec.ego.model_dump(mode="json") for spec in specs]
     then = "the comparison is complete: free space and rerun"

@@ -30,7 +30,17 @@ gamma}`` and ``b_i`` alike:
   when ``p_A`` is not clearly above 0;
 * the discordant shares: regressions (``B`` fails, ``A`` does not: ``mean(w
   b (1 - a))``, as a share of ``p_B``) and fixes (the reverse, as a share of
-  ``p_A``); ``p_B - p_A`` is their difference.
+  ``p_A``); their difference is the plain ``mean(w (b - a))``.
+
+Control variates. The proposal is a mixture (its fitted components and the
+defensive ``P0``), and the number of draws each component made is random: on
+two failure sets each fitted by a component of its own, that count's
+randomness is much of the difference's variance. The components' density
+ratios ``q_j / q``, of known mean 1, are regressed out of the terms ``w a``
+and ``w b`` (:mod:`avrisk.rare.mixture_controls`, Owen & Zhou 2000): ``p_A``,
+``p_B``, the difference and the ratio come from the controlled terms, where
+each version has at least ``MIN_RELIABLE_ESS`` effective hits (the
+intervals' descriptions say so).
 
 A discordant side with no sample. When no sample has ``B`` failing and
 ``A`` not (or the reverse), the terms of that side are all 0, yet the
@@ -66,10 +76,14 @@ import numpy as np
 from avrisk.rare.families.base import ExponentialFamily, FloatArray
 from avrisk.rare.final_stage import (
     CONFIDENCE,
+    MIN_RELIABLE_ESS,
     bracket_failures,
     weighted_hits_estimate,
 )
+from avrisk.rare.intervals import normal_interval
+from avrisk.rare.mixture_controls import controlled_terms
 from avrisk.rare.paired_intervals import (
+    CONTROLLED,
     DISCORDANCE_BOUND,
     Contrast,
     difference_contrast,
@@ -269,7 +283,12 @@ def paired_estimate(
             failed,
         )[gamma]
 
-    a, b = version(sample.f_a), version(sample.f_b)
+    (a, b), terms, ddof = _controlled(
+        (version(sample.f_a), version(sample.f_b)),
+        terms,
+        sample.controls,
+        math.exp(shift),
+    )
     union_upper = weighted_hits_estimate(log_w, either, gamma).ci[1]
     discordant = a_hit ^ b_hit
     regressions, fixes = b_hit & ~a_hit, a_hit & ~b_hit
@@ -286,8 +305,8 @@ def paired_estimate(
         gamma=gamma,
         a=a,
         b=b,
-        difference=difference_contrast(terms, math.exp(shift), unseen),
-        ratio=ratio_contrast(terms, a, unseen),
+        difference=difference_contrast(terms, math.exp(shift), unseen, ddof),
+        ratio=ratio_contrast(terms, a, unseen, ddof),
         regressions=share(regressions),
         fixes=share(fixes),
         union=dict(union),
@@ -297,6 +316,60 @@ def paired_estimate(
             wording,
         ),
     )
+
+
+def _controlled(
+    versions: tuple[GammaEstimate, GammaEstimate],
+    terms: tuple[FloatArray, FloatArray],
+    controls: FloatArray,
+    scale: float,
+) -> tuple[tuple[GammaEstimate, GammaEstimate], tuple[FloatArray, FloatArray], int]:
+    """Both versions' estimates and terms with the proposal's control variates.
+
+    The terms ``w a`` and ``w b`` (divided by ``scale``) less their fit on
+    ``controls`` (:func:`~avrisk.rare.mixture_controls.controlled_terms`),
+    and each version's ``p``, standard error and interval from them (its
+    hits, ESS and Pareto k are the sample's; an upper end widened by failed
+    samples stays). Unchanged, with ``ddof`` 1, where there are no controls,
+    where a version has fewer than ``MIN_RELIABLE_ESS`` effective hits (too
+    few for a fitted coefficient to be better than none) or where a
+    controlled estimate is not positive.
+
+    Returns
+    -------
+    versions, terms, ddof
+        ``ddof``: the degrees of freedom of the terms' spread.
+    """
+    if controls.shape[1] == 0 or any(v.ess < MIN_RELIABLE_ESS for v in versions):
+        return versions, terms, 1
+    fit = controlled_terms(np.stack(terms, axis=1), controls)
+    if fit.ddof == 1:  # nothing was fitted
+        return versions, terms, 1
+    t = fit.terms
+    n = t.shape[0]
+    means = t.mean(axis=0) * scale
+    if (means <= 0.0).any():
+        return versions, terms, 1
+
+    def version(est: GammaEstimate, column: FloatArray, mean: float) -> GammaEstimate:
+        p = float(mean)
+        se = float(column.std(ddof=fit.ddof) * scale / math.sqrt(n))
+        low, high = (float(end) for end in normal_interval(p, se, CONFIDENCE))
+        if est.n_failed:  # failed samples counted dangerous: the bracket's end
+            high = max(high, est.ci[1])
+        return dataclasses.replace(
+            est,
+            p=p,
+            stderr=se,
+            ci=(low, high),
+            interval=f"{est.interval}, with {CONTROLLED}",
+        )
+
+    controlled = (
+        version(versions[0], t[:, 0], means[0]),
+        version(versions[1], t[:, 1], means[1]),
+    )
+    return controlled, (t[:, 0], t[:, 1]), fit.ddof
 
 
 def paired_splitting_is(
@@ -370,7 +443,7 @@ def paired_splitting_is(
     )
     if not tap.chunks:  # the levels ended with a bound and no final stage
         return bound_only(union.to_dict(), wording)
-    sample = tap.sample(union.n_samples)
+    sample = tap.sample(union.n_samples, union.proposal)
     return paired_estimate(sample, union.gamma, union.to_dict(), wording)
 
 

@@ -43,6 +43,8 @@ FIELLER = (
     "Fieller's interval for the ratio of the two correlated weighted means "
     "(their covariance from the one weighted sample both versions share)"
 )
+#: Appended to an interval's description when its terms are controlled.
+CONTROLLED = "the proposal's mixture components as control variates"
 DISCORDANCE_BOUND = (
     "bound of a discordant side with no sample (B failing and A not, or the "
     "reverse): the zero-hit bound of its share of the union's effective hits, "
@@ -177,18 +179,24 @@ def fieller_interval(
 
 
 def difference_contrast(
-    terms: tuple[FloatArray, FloatArray], scale: float, unseen: tuple[float, float]
+    terms: tuple[FloatArray, FloatArray],
+    scale: float,
+    unseen: tuple[float, float],
+    ddof: int = 1,
 ) -> Contrast:
     """``p_B - p_A`` from the scaled terms ``w a`` and ``w b`` (times ``scale``).
 
     The paired normal interval of ``mean(w (b - a))``, widened below by
     ``unseen[0]`` and above by ``unseen[1]``: the bounds of ``P(A, not B)``
     and ``P(B, not A)`` where no such sample was drawn (0 where one was), so
-    that a side the sample never saw is bounded, not taken for 0.
+    that a side the sample never saw is bounded, not taken for 0. ``ddof``
+    above 1: the terms are controlled
+    (:func:`~avrisk.rare.mixture_controls.controlled_terms`) and their spread
+    loses the fit's degrees of freedom.
     """
     d = (terms[1] - terms[0]) * scale
     value = float(d.mean())
-    se = float(d.std(ddof=1) / math.sqrt(d.size))
+    se = float(d.std(ddof=ddof) / math.sqrt(d.size))
     down, up = unseen
     return Contrast(
         value,
@@ -197,29 +205,33 @@ def difference_contrast(
         value - Z_ONE_SIDED * se - down,
         value + Z_ONE_SIDED * se + up,
         CONFIDENCE,
-        _described(PAIRED_NORMAL, unseen),
+        _described(PAIRED_NORMAL, unseen, ddof > 1),
     )
 
 
 def ratio_contrast(
-    terms: tuple[FloatArray, FloatArray], a: GammaEstimate, unseen: tuple[float, float]
+    terms: tuple[FloatArray, FloatArray],
+    a: GammaEstimate,
+    unseen: tuple[float, float],
+    ddof: int = 1,
 ) -> Contrast:
     """``p_B / p_A`` from the scaled terms, ``a`` the estimate of ``p_A``.
 
     Fieller's interval, widened as :func:`difference_contrast` widens the
     difference's, divided by ``p_A``'s lower bound (``p_B / p_A = 1 + (p_B -
     p_A) / p_A``). With no discordant sample at all Fieller's interval is
-    the point 1, and the widening alone makes it.
+    the point 1, and the widening alone makes it. ``ddof`` as for
+    :func:`difference_contrast`.
     """
     wa, wb = terms
     n = wa.size
     mean_a, mean_b = float(wa.mean()), float(wb.mean())
     if mean_a > 0.0:
         value = mean_b / mean_a
-        se = float((wb - value * wa).std(ddof=1) / math.sqrt(n) / mean_a)
+        se = float((wb - value * wa).std(ddof=ddof) / math.sqrt(n) / mean_a)
     else:
         value, se = (math.inf if mean_b > 0.0 else math.nan), math.inf
-    cov = np.cov(np.stack([wa, wb])) / n
+    cov = np.cov(np.stack([wa, wb]), ddof=ddof) / n
     low, high = fieller_interval((mean_a, mean_b), cov, Z_TWO_SIDED)
     lower, upper = fieller_interval((mean_a, mean_b), cov, Z_ONE_SIDED)
     down, up = (_over(u, a.ci[0]) for u in unseen)
@@ -230,7 +242,7 @@ def ratio_contrast(
         max(lower - down, 0.0),
         upper + up,
         CONFIDENCE,
-        _described(FIELLER, unseen),
+        _described(FIELLER, unseen, ddof > 1),
     )
 
 
@@ -241,8 +253,12 @@ def _over(bound: float, a_low: float) -> float:
     return bound / a_low if a_low > 0.0 else math.inf
 
 
-def _described(interval: str, unseen: tuple[float, float]) -> str:
-    """``interval``, and the widening by ``unseen`` when there is one."""
+def _described(
+    interval: str, unseen: tuple[float, float], controlled: bool = False
+) -> str:
+    """``interval``, its controls and the widening by ``unseen``, where they are."""
+    if controlled:
+        interval = f"{interval}, with {CONTROLLED}"
     if not any(unseen):
         return interval
     return f"{interval}, widened by the {DISCORDANCE_BOUND}"

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from avrisk.rare.families.base import FloatArray
+from avrisk.rare.mixture_controls import mixture_controls
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, InvalidOutputError
 from avrisk.rare.stages import BatchCache, BatchRecorder, StageBatch
 
@@ -36,12 +37,17 @@ class PairedSample:
         Each version's value (NaN where the evaluation failed).
     failed : ndarray of bool, shape (n,)
         Samples whose evaluation failed (counted safe for both versions).
+    controls : ndarray of shape (n, J)
+        The proposal's centred control variates at each sample
+        (:func:`~avrisk.rare.mixture_controls.mixture_controls`; ``J = 0``:
+        none).
     """
 
     log_w: FloatArray
     f_a: FloatArray
     f_b: FloatArray
     failed: np.ndarray
+    controls: FloatArray
 
 
 class MinOfPair:
@@ -129,8 +135,11 @@ class FinalStageTap:
             self.chunks[chunk] = batch
         return batch
 
-    def sample(self, n: int) -> PairedSample:
+    def sample(self, n: int, proposal: Any = None) -> PairedSample:
         """The first ``n`` samples of the final stage (its chunks in order).
+
+        ``proposal``: the distribution they were drawn from, whose mixture
+        components give the sample's control variates (none without it).
 
         Raises
         ------
@@ -156,4 +165,5 @@ class FinalStageTap:
             column(lambda b: np.asarray(b.extras["f_a"], dtype=np.float64)),
             column(lambda b: np.asarray(b.extras["f_b"], dtype=np.float64)),
             column(lambda b: b.failed),
+            mixture_controls(proposal, column(lambda b: b.x)),
         )

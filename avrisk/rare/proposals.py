@@ -39,7 +39,12 @@ from avrisk.rare.families.standard_space import StandardSpaceShift
 from avrisk.rare.families.standard_space_normal import StandardSpaceNormal
 from avrisk.rare.mixture_em import MixtureProposal
 
-__all__ = ["Sampler", "proposal_from_record", "proposal_record"]
+__all__ = [
+    "Sampler",
+    "mixture_from_estimate",
+    "proposal_from_record",
+    "proposal_record",
+]
 
 #: The spaces a record's members may live in.
 SPACES = ("natural", "standard", "standard-scaled")
@@ -161,6 +166,62 @@ def proposal_from_record(record: Any, base: ExponentialFamily) -> Sampler:
         mixture.weights = weights  # as recorded: normalising again may move a bit
         return mixture
     raise ValueError(f"unknown proposal kind {kind!r} (family, defensive, mixture)")
+
+
+#: The standard-space members an estimate's ``to_dict`` names, and their space.
+_ESTIMATE_MEMBERS = {
+    "StandardSpaceShift": "standard",
+    "StandardSpaceNormal": "standard-scaled",
+}
+
+
+def mixture_from_estimate(description: Any, base: ExponentialFamily) -> MixtureProposal:
+    """The standard-space mixture an estimate describes, read back on ``base``.
+
+    The description is ``Estimate.to_dict()["proposal"]``: ``splitting_is``
+    fits a :class:`MixtureProposal` of standard-space shifts (or shifts with
+    fitted variances), and its ``to_dict`` names each member's mean (and
+    variance) as a run summary keeps them. This reads
+    that description back on ``base``'s structure, through
+    :func:`proposal_from_record`. Whether it is the distribution the samples
+    came from is for the caller to check (their recorded densities).
+
+    Raises
+    ------
+    ValueError
+        If ``description`` is not such a mixture (says what is wrong).
+    """
+    if not isinstance(description, dict) or description.get("family") != "Mixture":
+        raise ValueError("not the description of a mixture proposal")
+    members = description.get("components")
+    if not isinstance(members, list) or not members:
+        raise ValueError("a mixture description needs a list of components")
+    spaces = {
+        _ESTIMATE_MEMBERS.get(m.get("family")) if isinstance(m, dict) else None
+        for m in members
+    }
+    if len(spaces) != 1 or None in spaces:
+        raise ValueError("the mixture's members are not all of one standard-space kind")
+    space = spaces.pop()
+
+    def params(member: dict[str, Any]) -> list[Any]:
+        mean = list(member.get("mean") or [])
+        return (
+            mean + list(member.get("variance") or []) if space != "standard" else mean
+        )
+
+    mixture = proposal_from_record(
+        {
+            "kind": "mixture",
+            "defensive": description.get("defensive"),
+            "weights": description.get("weights"),
+            "components": [params(m) for m in members],
+            "space": space,
+        },
+        base,
+    )
+    assert isinstance(mixture, MixtureProposal)
+    return mixture
 
 
 def _member(params: Any, base: ExponentialFamily, space: str) -> ExponentialFamily:

@@ -8,9 +8,13 @@ import pytest
 
 import avrisk
 from avrisk.api import events
+from avrisk.api.ab import PAIR_UNITS, final_sample
+from avrisk.api.result import samples_directory
 from avrisk.api.runs import scenario_spec
+from avrisk.assembly import base_distribution
 from avrisk.pipeline import RunDirectoryError
 from avrisk.rare.parallel import EVALUATED_BY
+from avrisk.scenario import ScenarioSpec
 
 #: A short, not-rare comparison: a few hundred rollout pairs.
 SMALL = dict(gamma=2.0, n_particles=100, n_final=200, batch_size=200, failures=0)
@@ -40,6 +44,16 @@ def test_two_egos_are_compared_written_and_read_back(tmp_path):
     for part in (est.a, est.b):
         assert part.ci[0] <= part.p <= part.ci[1] and part.n_hits > 0
     assert est.difference.value == pytest.approx(est.b.p - est.a.p)
+    # the proposal read back from the summary gives the recorded densities,
+    # so its components serve as control variates (here one component, at P0
+    # as this event is not rare: a constant control, and none fitted)
+    spec = ScenarioSpec.model_validate(short_scenario())
+    run_dir = samples_directory(tmp_path, spec, outputs=PAIR_UNITS)
+    proposal = run_dir.summary()["estimate"]["proposal"]
+    sample = final_sample(run_dir, base_distribution(spec), proposal)
+    assert sample.controls.shape == (sample.log_w.size, 1)
+    assert np.allclose(sample.controls, 0.0)
+    assert final_sample(run_dir).controls.shape == (sample.log_w.size, 0)
     assert result.verdict.outcome in ("pass", "fail", "inconclusive")
     assert result.line().startswith(result.verdict.outcome.upper())
     document = json.loads((tmp_path / "ab.json").read_text())
