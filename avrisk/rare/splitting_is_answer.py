@@ -146,8 +146,9 @@ def answer_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
     stage (its weights' diagnostics speak for it), nor do replicates that
     ended in different places: the proposal holds what either found
     (*Replicates* in :mod:`avrisk.rare.splitting_importance`). But an
-    importance-sampling answer below every replicate's own estimate, beyond
-    both errors, says the proposal misses where the particles were (a shift
+    importance-sampling answer below the levels' estimate, beyond both
+    errors (:func:`_sample_below_levels`), says the proposal misses where the
+    particles were (a shift
     fitted on too few coordinates, a region dropped), which its weights alone
     may not show. One above them does not: a proposal cannot add mass the
     event lacks (the sample is unbiased; a single huge weight is its Pareto
@@ -166,8 +167,11 @@ def answer_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
     reasons = list(exhausted_doubts(details))
     if details.get("answer") == "splitting":
         reasons[:0] = _levels_answer_doubts(details, main, gamma)
-    elif all(main["p"] < r["p"] and estimates_disagree(main, r) for r in own):
+    elif _sample_below_levels(details, main, gamma):
         levels = ", ".join(f"{r['p']:.2g}" for r in own)
+        pooled = (details.get("splitting") or {}).get(str(gamma))
+        if pooled and len(own) > 1:
+            levels = f"{pooled['p']:.2g} (replicates {levels})"
         reasons.append(
             f"importance sampling found p = {main['p']:.2g} but the levels of "
             f"the same run {levels}, further apart than their errors allow: "
@@ -175,6 +179,31 @@ def answer_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
             "other seeds, or raise n_particles)"
         )
     return tuple(reasons)
+
+
+def _sample_below_levels(
+    details: dict[str, Any], main: dict[str, Any], gamma: float
+) -> bool:
+    """Whether an importance-sampling answer lies below the levels beyond both errors.
+
+    The reference is the replicates' pooled product (the run's own levels'
+    estimate, ``details["splitting"]``), the most precise the levels give,
+    where the replicates agree with each other. Where they do not
+    (``replicates_disagree``), their pool is no fair reference: the answer
+    is doubted only when it lies below every replicate's estimate, as one
+    that a replicate bears out may be right where the other replicate's
+    levels went astray.
+    """
+    own = details.get("replicates") or []
+
+    def below(levels: dict[str, Any]) -> bool:
+        return main["p"] < levels["p"] and estimates_disagree(main, levels)
+
+    below_each = all(below(r) for r in own)
+    pooled = (details.get("splitting") or {}).get(str(gamma))
+    if details.get("replicates_disagree") or not pooled:
+        return below_each
+    return below(pooled) or below_each
 
 
 def _none_reached(details: dict[str, Any]) -> tuple[str, ...]:

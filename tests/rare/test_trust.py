@@ -166,3 +166,35 @@ def test_levels_that_answer_far_from_their_own_importance_sample_say_caution():
     # a level of the levels held by a handful of particles: their own doubt
     as_dict["details"]["survivors"][1] = [200, 3, 150]
     assert "held only 3 particles" in str(trust())
+
+
+def test_importance_sampling_below_the_pooled_levels_says_caution():
+    # neither replicate alone is far enough from the sample (their intervals
+    # are wide), but their pool is: the run's own levels' estimate
+    sampled = {"gamma": 0.0, "p": 1.2e-7, "stderr": 1.5e-8, "ci": [9e-8, 1.5e-7]}
+    own = [
+        {"p": 2.5e-7, "ci": [1.05e-7, 6.1e-7]},
+        {"p": 3.8e-7, "ci": [2.05e-7, 7.1e-7]},
+    ]
+    assert not all(estimates_disagree(sampled, r) for r in own)
+    pooled = {"p": 3.2e-7, "ci": [1.9e-7, 5.4e-7]}
+    assert estimates_disagree(sampled, pooled)
+    as_dict = {
+        "gamma": 0.0,
+        "by_gamma": [{**sampled, "n_hits": 900, "ess": 65.0, "pareto_k": 0.66}],
+        "details": {
+            "replicates": own,
+            "replicates_disagree": False,
+            "splitting": {"0.0": pooled},
+        },
+    }
+    trust = estimate_trust(
+        estimator_class("splitting_is"), as_dict, as_dict["by_gamma"][0]
+    )
+    assert "the levels of the same run 3.2e-07 (replicates 2.5e-07" in str(trust)
+    # replicates that disagree with each other are no fair pool: one that
+    # bears the sample out is enough
+    as_dict["details"]["replicates_disagree"] = True
+    assert estimate_trust(
+        estimator_class("splitting_is"), as_dict, as_dict["by_gamma"][0]
+    ).ok
