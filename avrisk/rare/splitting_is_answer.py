@@ -188,11 +188,12 @@ def _sample_below_levels(
 
     The reference is the replicates' pooled product (the run's own levels'
     estimate, ``details["splitting"]``), the most precise the levels give,
-    where the replicates agree with each other. Where they do not
-    (``replicates_disagree``), their pool is no fair reference: the answer
-    is doubted only when it lies below every replicate's estimate, as one
-    that a replicate bears out may be right where the other replicate's
-    levels went astray.
+    where the replicates agree with each other and each found more than the
+    answer: a replicate whose own estimate is at or below it bears it out.
+    Where the replicates disagree (``replicates_disagree``), their pool is
+    no fair reference: the answer is doubted only when it lies below every
+    replicate's estimate beyond both errors, as one that a replicate bears
+    out may be right where the other replicate's levels went astray.
     """
     own = details.get("replicates") or []
 
@@ -203,7 +204,8 @@ def _sample_below_levels(
     pooled = (details.get("splitting") or {}).get(str(gamma))
     if details.get("replicates_disagree") or not pooled:
         return below_each
-    return below(pooled) or below_each
+    borne_out = any(r["p"] <= main["p"] for r in own)
+    return below_each or (below(pooled) and not borne_out)
 
 
 def _none_reached(details: dict[str, Any]) -> tuple[str, ...]:
