@@ -192,6 +192,12 @@ def test_importance_sampling_below_the_pooled_levels_says_caution():
         estimator_class("splitting_is"), as_dict, as_dict["by_gamma"][0]
     )
     assert "the levels of the same run 3.2e-07 (replicates 2.5e-07" in str(trust)
+    # a replicate whose own estimate is at or below the sample's bears it out
+    borne = {**as_dict, "details": {**as_dict["details"], "replicates": [own[1]]}}
+    borne["details"]["replicates"].append({"p": 1.1e-7, "ci": [4e-8, 3e-7]})
+    assert estimate_trust(
+        estimator_class("splitting_is"), borne, borne["by_gamma"][0]
+    ).ok
     # replicates that disagree with each other are no fair pool: one that
     # bears the sample out is enough
     as_dict["details"]["replicates_disagree"] = True
