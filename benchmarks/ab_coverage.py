@@ -50,6 +50,7 @@ import math
 import os
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -146,8 +147,13 @@ def _done(out: Path) -> set[tuple[str, int]]:
     }
 
 
-def run_even(cases: list[str], seeds: list[int], out: Path) -> None:
-    """Append the even paired run's difference per (case, seed) not yet in ``out``."""
+def _append_missing(
+    cases: list[str],
+    seeds: list[int],
+    out: Path,
+    record: Callable[[AnalyticPair, str, int], dict[str, Any]],
+) -> None:
+    """Append ``record(pair, case, seed)`` per (case, seed) not yet in ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
     done = _done(out)
     with out.open("a") as sink:
@@ -156,21 +162,27 @@ def run_even(cases: list[str], seeds: list[int], out: Path) -> None:
             for seed in seeds:
                 if (name, seed) in done:
                     continue
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    est = paired_splitting_is(
-                        pair.f, pair.base, pair.gamma, seed=seed, **EVEN
-                    )
-                rec = {
-                    "case": name,
-                    "seed": seed,
-                    "settings": EVEN,
-                    "difference": est.difference.value,
-                    "n_evals": est.n_evals,
-                }
-                sink.write(json.dumps(rec) + "\n")
+                sink.write(json.dumps(record(pair, name, seed)) + "\n")
                 sink.flush()
             print(f"{name}: done", flush=True)
+
+
+def run_even(cases: list[str], seeds: list[int], out: Path) -> None:
+    """Append the even paired run's difference per (case, seed) not yet in ``out``."""
+
+    def record(pair: AnalyticPair, name: str, seed: int) -> dict[str, Any]:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            est = paired_splitting_is(pair.f, pair.base, pair.gamma, seed=seed, **EVEN)
+        return {
+            "case": name,
+            "seed": seed,
+            "settings": EVEN,
+            "difference": est.difference.value,
+            "n_evals": est.n_evals,
+        }
+
+    _append_missing(cases, seeds, out, record)
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -183,31 +195,24 @@ def parse_seeds(text: str) -> list[int]:
 
 def run(cases: list[str], seeds: list[int], out: Path) -> None:
     """Append a line per (case, seed) not yet in ``out``."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    done = _done(out)
     settings = {"paired": PAIRED, "independent": INDEPENDENT}
-    with out.open("a") as sink:
-        for name in cases:
-            pair = pair_problem(name)
-            for seed in seeds:
-                if (name, seed) in done:
-                    continue
-                rec = {
-                    "case": name,
-                    "seed": seed,
-                    "settings": settings,
-                    "exact": {
-                        "p_a": pair.p_a,
-                        "p_b": pair.p_b,
-                        "p_ab": pair.p_ab,
-                        "r": pair.discordant_share,
-                    },
-                    "paired": paired_record(pair, seed),
-                    "independent": independent_record(pair, seed),
-                }
-                sink.write(json.dumps(rec) + "\n")
-                sink.flush()
-            print(f"{name}: done", flush=True)
+
+    def record(pair: AnalyticPair, name: str, seed: int) -> dict[str, Any]:
+        return {
+            "case": name,
+            "seed": seed,
+            "settings": settings,
+            "exact": {
+                "p_a": pair.p_a,
+                "p_b": pair.p_b,
+                "p_ab": pair.p_ab,
+                "r": pair.discordant_share,
+            },
+            "paired": paired_record(pair, seed),
+            "independent": independent_record(pair, seed),
+        }
+
+    _append_missing(cases, seeds, out, record)
 
 
 def case_row(
