@@ -169,7 +169,7 @@ def answer_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
         reasons[:0] = _levels_answer_doubts(details, main, gamma)
     elif _sample_below_levels(details, main, gamma):
         levels = ", ".join(f"{r['p']:.2g}" for r in own)
-        pooled = (details.get("splitting") or {}).get(str(gamma))
+        pooled = _pooled_levels(details, gamma)
         if pooled and len(own) > 1:
             levels = f"{pooled['p']:.2g} (replicates {levels})"
         reasons.append(
@@ -201,11 +201,16 @@ def _sample_below_levels(
         return main["p"] < levels["p"] and estimates_disagree(main, levels)
 
     below_each = all(below(r) for r in own)
-    pooled = (details.get("splitting") or {}).get(str(gamma))
+    pooled = _pooled_levels(details, gamma)
     if details.get("replicates_disagree") or not pooled:
         return below_each
     borne_out = any(r["p"] <= main["p"] for r in own)
     return below_each or (below(pooled) and not borne_out)
+
+
+def _pooled_levels(details: dict[str, Any], gamma: float) -> dict[str, Any] | None:
+    """The pooled levels' estimate at ``gamma`` (``{"p", "ci"}``), if any."""
+    return (details.get("splitting") or {}).get(str(gamma))
 
 
 def _none_reached(details: dict[str, Any]) -> tuple[str, ...]:
