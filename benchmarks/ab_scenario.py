@@ -11,6 +11,9 @@ shipped lidar ego ``A`` and its variant ``B`` whose lidar reads every range
 * two independent ``splitting_is`` runs (:func:`avrisk.api.estimate`), one
   per ego, with half the paired run's particles and final samples each, on
   seeds of their own (``INDEPENDENT_SEED + 2 seed`` and ``+ 1``);
+* with ``run-independent`` (a file of its own), the independent runs alone:
+  the efficiency needs their spread over more seeds than the default
+  paired run, which costs as much again;
 * with ``run-even`` (a file of its own), a paired run at the independent
   runs' settings (``EVEN``): each of its draws is simulated with both egos,
   so it simulates as many rollouts as the two independent runs together.
@@ -21,11 +24,14 @@ shipped lidar ego ``A`` and its variant ``B`` whose lidar reads every range
 
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run \\
         [--seeds 0-49] [--reverse] [--out benchmarks/results/ab/lidar_pair.jsonl]
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run-independent \\
+        [--seeds 0-49] [--out benchmarks/results/ab/lidar_pair_independent.jsonl]
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run-even \\
         [--seeds 0-49] [--out benchmarks/results/ab/lidar_pair_even.jsonl]
-    python benchmarks/ab_scenario.py table [--results ...] [--even ...] [--md T.md]
+    python benchmarks/ab_scenario.py table [--results ...] [--independent ...] \\
+        [--even ...] [--md T.md]
 
-``run`` appends one JSON line per seed and skips seeds already there, so an
+Each command appends one JSON line per seed and skips seeds already there, so an
 interrupted sweep goes on (each seed's run directories are temporary); a
 second process may go down the seeds into the same file (``--reverse``). No
 exact answer is known here, so ``table`` reports what needs none: the spread
@@ -71,7 +77,9 @@ INDEPENDENT = {"n_particles": 1000, "n_final": 5000}
 #: with both egos, so at the independent runs' settings it simulates as many
 #: rollouts as the two independent runs together.
 EVEN = INDEPENDENT
-EVEN_OUT = ROOT / "benchmarks" / "results" / "ab" / "lidar_pair_even.jsonl"
+RESULTS = ROOT / "benchmarks" / "results" / "ab"
+EVEN_OUT = RESULTS / "lidar_pair_even.jsonl"
+INDEPENDENT_OUT = RESULTS / "lidar_pair_independent.jsonl"
 #: Offset of the independent runs' seeds, so none shares a paired run's draws.
 INDEPENDENT_SEED = 1_000_000
 #: The gate's margin on ``p_B / p_A``.
@@ -205,6 +213,19 @@ def run(seeds: list[int], out: Path) -> None:
     )
 
 
+def run_independent(seeds: list[int], out: Path) -> None:
+    """Append the independent runs alone per seed not yet in ``out``."""
+    _append_per_seed(
+        seeds,
+        out,
+        lambda seed, scratch: {
+            "independent_settings": INDEPENDENT,
+            "independent": independent_record(seed, scratch),
+        },
+        lambda rec: f"{rec['independent']['seconds']:.0f} s",
+    )
+
+
 def run_even(seeds: list[int], out: Path) -> None:
     """Append the even paired run (``EVEN``) per seed not yet in ``out``."""
     _append_per_seed(
@@ -228,14 +249,26 @@ def _by_seed(path: Path) -> dict[int, dict[str, Any]]:
     return by_seed
 
 
-def summary(results: Path, even: Path | None = None) -> tuple[dict[str, Any], str]:
-    """The spread, the discordant share and the gate's outcomes, as figures and text."""
+def summary(
+    results: Path, even: Path | None = None, independent: Path | None = None
+) -> tuple[dict[str, Any], str]:
+    """The spread, the discordant share and the gate's outcomes, as figures and text.
+
+    The independent runs' spread pools those of ``results`` with the seeds
+    ``independent`` adds (a seed in both: ``results``'s).
+    """
     recs = list(_by_seed(results).values())
+    singles = (_by_seed(independent) if independent is not None else {}) | {
+        r["seed"]: r for r in recs
+    }
     paired = np.array([r["paired"]["difference"]["value"] for r in recs])
-    indep = np.array([r["independent"]["b"] - r["independent"]["a"] for r in recs])
+    indep = np.array(
+        [r["independent"]["b"] - r["independent"]["a"] for r in singles.values()]
+    )
     outcomes = [r["paired"]["outcome"] for r in recs]
     row = {
         "seeds": len(recs),
+        "independent_seeds": len(singles),
         "r": float(np.mean([r["paired"]["r"] for r in recs])),
         "p_a": float(np.mean([r["paired"]["a"]["value"] for r in recs])),
         "p_b": float(np.mean([r["paired"]["b"]["value"] for r in recs])),
@@ -245,7 +278,7 @@ def summary(results: Path, even: Path | None = None) -> tuple[dict[str, Any], st
         "mean_difference_independent": float(indep.mean()),
         "rollouts_paired": float(np.mean([2 * r["paired"]["n_evals"] for r in recs])),
         "rollouts_independent": float(
-            np.mean([r["independent"]["n_evals"] for r in recs])
+            np.mean([r["independent"]["n_evals"] for r in singles.values()])
         ),
         "outcomes": {o: outcomes.count(o) for o in ("pass", "fail", "inconclusive")},
         "caution": sum(r["paired"]["trust"] != "ok" for r in recs),
@@ -255,8 +288,9 @@ def summary(results: Path, even: Path | None = None) -> tuple[dict[str, Any], st
         "| pair | seeds | r | mean p_A | mean p_B | spread of p_B - p_A: paired, "
         "default | independent | independent / paired | rollouts: paired (both "
         "egos) | independent | gate at 1.0: pass / fail / inconclusive |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
-        f"| `{SCENARIO}`, lidar ego / range x 1.3 | {row['seeds']} "
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        f"| `{SCENARIO}`, lidar ego / range x 1.3 | {row['seeds']} (independent: "
+        f"{row['independent_seeds']}) "
         f"| {row['r']:.2f} | {row['p_a']:.3g} | {row['p_b']:.3g} "
         f"| {row['spread_paired']:.3g} | {row['spread_independent']:.3g} "
         f"| {row['narrower_by']:.2f} | {row['rollouts_paired']:,.0f} "
@@ -281,10 +315,12 @@ def summary(results: Path, even: Path | None = None) -> tuple[dict[str, Any], st
             "",
             "At equal rollouts (the even paired runs, `run-even`):",
             "",
-            "| pair | seeds | spread of p_B - p_A: paired, even | independent "
-            "| independent / paired | rollouts: paired | independent |",
-            "|---|---:|---:|---:|---:|---:|---:|",
-            f"| `{SCENARIO}`, lidar ego / range x 1.3 | {len(evens)} "
+            "| pair | seeds: even / independent | spread of p_B - p_A: paired, "
+            "even | independent | independent / paired | rollouts: paired "
+            "| independent |",
+            "|---|---|---:|---:|---:|---:|---:|",
+            f"| `{SCENARIO}`, lidar ego / range x 1.3 | {len(evens)} / "
+            f"{row['independent_seeds']} "
             f"| {spread:.3g} | {row['spread_independent']:.3g} "
             f"| {row['narrower_by_even']:.2f} | {row['rollouts_even']:,.0f} "
             f"| {row['rollouts_independent']:,.0f} |",
@@ -293,19 +329,24 @@ def summary(results: Path, even: Path | None = None) -> tuple[dict[str, Any], st
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Command line: ``run``, ``run-even`` or ``table``."""
+    """Command line: ``run``, ``run-independent``, ``run-even`` or ``table``."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run")
     r.add_argument("--seeds", default="0-49")
     r.add_argument("--out", type=Path, default=DEFAULT_OUT)
     r.add_argument("--reverse", action="store_true", help="the seeds downwards")
+    i = sub.add_parser("run-independent")
+    i.add_argument("--seeds", default="0-49")
+    i.add_argument("--out", type=Path, default=INDEPENDENT_OUT)
+    i.add_argument("--reverse", action="store_true", help="the seeds downwards")
     e = sub.add_parser("run-even")
     e.add_argument("--seeds", default="0-49")
     e.add_argument("--out", type=Path, default=EVEN_OUT)
     t = sub.add_parser("table")
     t.add_argument("--results", type=Path, default=DEFAULT_OUT)
     t.add_argument("--even", type=Path, default=EVEN_OUT)
+    t.add_argument("--independent", type=Path, default=INDEPENDENT_OUT)
     t.add_argument("--md", type=Path)
     t.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
@@ -313,10 +354,14 @@ def main(argv: list[str] | None = None) -> None:
         seeds = parse_seeds(args.seeds)
         run(seeds[::-1] if args.reverse else seeds, args.out)
         return
+    if args.command == "run-independent":
+        seeds = parse_seeds(args.seeds)
+        run_independent(seeds[::-1] if args.reverse else seeds, args.out)
+        return
     if args.command == "run-even":
         run_even(parse_seeds(args.seeds), args.out)
         return
-    row, md = summary(args.results, args.even)
+    row, md = summary(args.results, args.even, args.independent)
     print(md)
     if args.md:
         args.md.write_text(md + "\n")
