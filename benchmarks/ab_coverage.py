@@ -4,16 +4,16 @@ Runs the paired estimator (:func:`avrisk.rare.paired.paired_splitting_is`:
 ``splitting_is`` on ``min(f_A, f_B)``, every figure from its one weighted
 sample) on the analytic pairs of :mod:`avrisk.testing.pairs` (half-spaces in
 standard-normal space, exact ``p_A``, ``p_B`` and ``p_AB``) and, on the same
-seeds, two independent ``splitting_is`` runs, one per version, with half the
-particles and half the final samples each (as many calls of ``f`` as the
-paired run counting one call of the pair as one, so half its evaluations of
-a version). ``run-even`` (a file of its own) runs the paired estimator at the
-independent runs' settings (``EVEN``): as many evaluations of a version as
-the two independent runs together, the fair comparison of their spreads::
+seeds, two independent ``splitting_is`` runs, one per version, with half a
+default single-version run's particles and final samples each (about half
+the paired run's evaluations of a version). ``run-even`` (a file of its own)
+runs the paired estimator at half its default samples (``EVEN``): about as
+many evaluations of a version as the two independent runs together, the fair
+comparison of their spreads::
 
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py run \\
         [--cases nested_r0.05_p1e-04_d10,...] [--seeds 0-199] \\
-        [--out benchmarks/results/ab/runs.jsonl]
+        [--out benchmarks/results/ab/runs.jsonl] [--independent-from EARLIER.jsonl]
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py run-even \\
         [--seeds 0-199] [--out benchmarks/results/ab/even_runs.jsonl]
     python benchmarks/ab_coverage.py table [--results ...] [--even ...] \\
@@ -61,7 +61,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from avrisk.rare.paired import paired_splitting_is  # noqa: E402
+from avrisk.rare.paired import PAIRED_DEFAULTS, paired_splitting_is  # noqa: E402
 from avrisk.rare.paired_gate import gate  # noqa: E402
 from avrisk.rare.splitting_importance import splitting_is  # noqa: E402
 from avrisk.testing.pairs import PAIR_SUITE, AnalyticPair, pair_problem  # noqa: E402
@@ -76,14 +76,15 @@ GATE_CASES = {
     "equal, disjoint": "disjoint_ratio1_p1e-04_d10",
 }
 
-#: The paired run's settings, for every case.
-PAIRED = {"n_particles": 2000, "n_final": 10_000}
-#: Each independent run's: half of the paired run's samples.
+#: The paired run's settings, for every case: ``avrisk ab``'s defaults.
+PAIRED = PAIRED_DEFAULTS
+#: Each independent run's: half of a default single-version run's samples,
+#: so that the two make about half the paired run's evaluations.
 INDEPENDENT = {"n_particles": 1000, "n_final": 5000}
-#: The paired run of the efficiency table: each of its draws is evaluated by
-#: both versions, so at the independent runs' settings it makes as many
-#: evaluations of a version as the two independent runs together.
-EVEN = INDEPENDENT
+#: The paired run of the efficiency table: half the default paired run's
+#: samples; each of its draws is evaluated by both versions, so it makes
+#: about as many evaluations as the two independent runs together.
+EVEN = {name: value // 2 for name, value in PAIRED_DEFAULTS.items()}
 EVEN_OUT = ROOT / "benchmarks" / "results" / "ab" / "even_runs.jsonl"
 #: Offset of the independent runs' seeds (2 per paired seed), so that no
 #: independent run shares a paired run's draws.
@@ -193,9 +194,32 @@ def parse_seeds(text: str) -> list[int]:
     return [int(s) for s in text.split(",")]
 
 
-def run(cases: list[str], seeds: list[int], out: Path) -> None:
-    """Append a line per (case, seed) not yet in ``out``."""
+def earlier_independent(path: Path | None) -> dict[tuple[str, int], dict[str, Any]]:
+    """The independent runs of an earlier ``run`` file at today's ``INDEPENDENT``.
+
+    They do not depend on the paired estimator, so a change of it leaves
+    them bit for bit as they were: ``run --independent-from`` copies them
+    instead of running them again.
+    """
+    if path is None:
+        return {}
+    return {
+        (r["case"], r["seed"]): r["independent"]
+        for r in map(json.loads, path.read_text().splitlines())
+        if r["settings"]["independent"] == INDEPENDENT
+    }
+
+
+def run(
+    cases: list[str], seeds: list[int], out: Path, reuse: Path | None = None
+) -> None:
+    """Append a line per (case, seed) not yet in ``out``.
+
+    ``reuse``: an earlier ``run`` file whose independent runs are copied
+    (:func:`earlier_independent`).
+    """
     settings = {"paired": PAIRED, "independent": INDEPENDENT}
+    earlier = earlier_independent(reuse)
 
     def record(pair: AnalyticPair, name: str, seed: int) -> dict[str, Any]:
         return {
@@ -209,7 +233,7 @@ def run(cases: list[str], seeds: list[int], out: Path) -> None:
                 "r": pair.discordant_share,
             },
             "paired": paired_record(pair, seed),
-            "independent": independent_record(pair, seed),
+            "independent": earlier.get((name, seed)) or independent_record(pair, seed),
         }
 
     _append_missing(cases, seeds, out, record)
@@ -371,6 +395,11 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--cases", default=",".join(PAIR_SUITE))
     r.add_argument("--seeds", default="0-199")
     r.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    r.add_argument(
+        "--independent-from",
+        type=Path,
+        help="an earlier run file whose independent runs to copy",
+    )
     t = sub.add_parser("table")
     t.add_argument("--results", type=Path, default=DEFAULT_OUT)
     t.add_argument("--even", type=Path, default=EVEN_OUT)
@@ -385,7 +414,12 @@ def main(argv: list[str] | None = None) -> None:
     g.add_argument("--out", type=Path, default=GATE_OUT)
     args = parser.parse_args(argv)
     if args.command == "run":
-        run(args.cases.split(","), parse_seeds(args.seeds), args.out)
+        run(
+            args.cases.split(","),
+            parse_seeds(args.seeds),
+            args.out,
+            args.independent_from,
+        )
         return
     if args.command == "run-even":
         run_even(args.cases.split(","), parse_seeds(args.seeds), args.out)

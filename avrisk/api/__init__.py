@@ -247,7 +247,8 @@ def compare_egos(
         As for :func:`estimate`: each worker simulates both egos on its
         chunks; the result is the same bit for bit wherever they run.
     **options
-        ``splitting_is``'s settings by name (``n_final=20000``).
+        ``splitting_is``'s settings by name (``n_final=20000``), over the
+        paired defaults (:data:`avrisk.rare.paired.PAIRED_DEFAULTS`).
 
     Returns
     -------
@@ -262,8 +263,9 @@ def compare_egos(
     """
     from avrisk.api.ab import compare_specs
     from avrisk.api.result import scenario_spec
-    from avrisk.rare.paired import UNION_METHOD
+    from avrisk.rare.paired import PAIRED_DEFAULTS, UNION_METHOD
 
+    options = {**PAIRED_DEFAULTS, **options}
     spec = scenario_spec(scenario)
     if ego_a is None:
         ego_a = spec.ego.model_dump(mode="json")

@@ -39,7 +39,7 @@ from avrisk.cli.common import (
 from avrisk.cli.progress import RichProgress
 from avrisk.cli.results import show_comparison
 from avrisk.cli.run import Gamma, Scenario, Seed, Set, estimator_options
-from avrisk.rare.paired import UNION_METHOD
+from avrisk.rare.paired import PAIRED_DEFAULTS, UNION_METHOD
 
 #: The exit status of each outcome of the gate.
 EXIT_CODES = {"pass": 0, "fail": 1, "inconclusive": 3}
@@ -58,7 +58,11 @@ EgoA = Annotated[
 EgoB = Annotated[str, typer.Option("--ego-b", help=f"The new ego (B): {EGO_FORMS}.")]
 NFinal = Annotated[
     int | None,
-    typer.Option(min=1, help="Rollout pairs of the final stage [default: 10000]."),
+    typer.Option(
+        min=1,
+        help="Rollout pairs of the final stage "
+        f"[default: {PAIRED_DEFAULTS['n_final']}].",
+    ),
 ]
 Json = Annotated[
     bool,
@@ -145,7 +149,7 @@ def ab(
     with user_errors(*EXPECTED), resumable(ctx):
         check_output_folder(out)
         options = estimator_options(
-            UNION_METHOD, {"n_final": n_final}, set_, cli_defaults={}
+            UNION_METHOD, {"n_final": n_final}, set_, cli_defaults=PAIRED_DEFAULTS
         )
         result = avrisk.compare_egos(
             scenario,

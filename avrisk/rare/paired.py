@@ -60,7 +60,12 @@ then each version's estimate and the discordant samples' estimate
 (:func:`~avrisk.rare.trust.trust_at`), in words naming which.
 
 Calls. One call of the paired box evaluates both versions on a row;
-``n_evals`` counts calls (pairs of evaluations).
+``n_evals`` counts calls (pairs of evaluations). Unless told otherwise the
+search runs with ``PAIRED_DEFAULTS``: its levels with half the particles of
+a single-version run's default, so that they cost as many evaluations as
+that run's levels, and the rest of the budget of two single-version runs in
+the final stage, since every figure's error is the final sample's (the
+levels only place the proposal).
 """
 
 from __future__ import annotations
@@ -107,6 +112,7 @@ from avrisk.rare.stages import BatchCache, BatchRecorder
 from avrisk.rare.trust import GENERIC, Trust, Wording, estimate_trust, trust_at
 
 __all__ = [
+    "PAIRED_DEFAULTS",
     "PAIR_COLUMNS",
     "UNION_METHOD",
     "Contrast",
@@ -122,6 +128,12 @@ __all__ = [
 
 #: The estimator that searches the union of the two failure sets.
 UNION_METHOD = SplittingImportanceSampling.name
+
+#: The union's search settings where none are given: the levels at half a
+#: single-version run's default particles (two evaluations a particle), the
+#: final stage larger, about as many evaluations in all as two default
+#: single-version runs (module docstring, *Calls*).
+PAIRED_DEFAULTS: dict[str, int] = {"n_particles": 1000, "n_final": 18_000}
 
 
 @dataclass(frozen=True)
@@ -398,7 +410,8 @@ def paired_splitting_is(
     gamma : float
         Failure threshold of both versions.
     settings : SplittingISSettings, optional
-        The search's settings (:func:`~avrisk.rare.splitting_importance.splitting_is`).
+        The search's settings (:func:`~avrisk.rare.splitting_importance.splitting_is`);
+        none: ``PAIRED_DEFAULTS`` with the settings given by name over them.
     seed, batch_size : int
         As for ``splitting_is``.
     on_batch, cache : callable, optional
@@ -429,6 +442,8 @@ def paired_splitting_is(
     >>> bool(est.ratio.ci[0] < 0.684 < est.ratio.ci[1])  # Phi(-3.6) / Phi(-3.5)
     True
     """
+    if settings is None:
+        options = {**PAIRED_DEFAULTS, **options}
     tap = FinalStageTap(on_batch, cache)
     union = splitting_is(
         MinOfPair(pair),
