@@ -9,16 +9,17 @@ shipped lidar ego ``A`` and its variant ``B`` whose lidar reads every range
   estimates of ``p_A``, ``p_B``, ``p_B - p_A`` and ``p_B / p_A`` with their
   intervals, the discordant share and the gate's outcome at ``--max-ratio``;
 * two independent ``splitting_is`` runs (:func:`avrisk.api.estimate`), one
-  per ego, with half the paired run's particles and final samples each, on
-  seeds of their own (``INDEPENDENT_SEED + 2 seed`` and ``+ 1``);
+  per ego, with half a default single-version run's particles and final
+  samples each (about half the default paired run's rollouts), on seeds of
+  their own (``INDEPENDENT_SEED + 2 seed`` and ``+ 1``);
 * with ``run-independent`` (a file of its own), the independent runs alone:
   the efficiency needs their spread over more seeds than the default
   paired run, which costs as much again;
-* with ``run-even`` (a file of its own), a paired run at the independent
-  runs' settings (``EVEN``): each of its draws is simulated with both egos,
-  so it simulates as many rollouts as the two independent runs together.
-  The efficiency is the spread of this run's difference against theirs;
-  the default paired run simulates twice as many rollouts.
+* with ``run-even`` (a file of its own), a paired run at half the default
+  paired run's samples (``EVEN``): each of its draws is simulated with both
+  egos, so it simulates about as many rollouts as the two independent runs
+  together. The efficiency is the spread of this run's difference against
+  theirs; the default paired run simulates twice as many rollouts.
 
 ::
 
@@ -64,6 +65,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from avrisk.api import compare_egos, estimate  # noqa: E402
+from avrisk.rare.paired import PAIRED_DEFAULTS  # noqa: E402
 
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "ab" / "lidar_pair.jsonl"
 SCENARIO = "highway_default"
@@ -71,12 +73,12 @@ EGOS = {
     which: ROOT / "examples" / "ab_lidar" / name
     for which, name in (("a", "lidar_ego.yaml"), ("b", "lidar_ego_degraded.yaml"))
 }
-#: Each independent run's settings: half the paired run's default samples.
+#: Each independent run's settings: half a default single-version run's samples.
 INDEPENDENT = {"n_particles": 1000, "n_final": 5000}
-#: The paired run of the efficiency comparison: each of its draws is simulated
-#: with both egos, so at the independent runs' settings it simulates as many
-#: rollouts as the two independent runs together.
-EVEN = INDEPENDENT
+#: The paired run of the efficiency comparison, at half the default paired
+#: run's samples: each of its draws is simulated with both egos, so it
+#: simulates about as many rollouts as the two independent runs together.
+EVEN = {name: value // 2 for name, value in PAIRED_DEFAULTS.items()}
 RESULTS = ROOT / "benchmarks" / "results" / "ab"
 EVEN_OUT = RESULTS / "lidar_pair_even.jsonl"
 INDEPENDENT_OUT = RESULTS / "lidar_pair_independent.jsonl"

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from avrisk.rare.paired import MinOfPair, paired_splitting_is
+from avrisk.rare.paired import PAIRED_DEFAULTS, MinOfPair, paired_splitting_is
 from avrisk.rare.paired_gate import gate
 from avrisk.rare.paired_intervals import discordance_bound, fieller_interval
 from avrisk.rare.problem import InvalidOutputError
@@ -96,6 +96,22 @@ def test_the_paired_difference_has_a_smaller_error_than_two_independent_ones():
             )
     independent_se = math.hypot(*(e.stderr for e in independent))
     assert est.difference.stderr < independent_se / 3
+
+
+def test_the_search_runs_at_the_paired_defaults_unless_told_otherwise():
+    pair = pair_problem("nested_r0.05_p1e-04_d4")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        default = paired_splitting_is(pair.f, pair.base, 0.0, seed=3)
+        told = paired_splitting_is(pair.f, pair.base, 0.0, seed=3, n_final=3000)
+    assert default.a.n_samples == PAIRED_DEFAULTS["n_final"]
+    assert told.a.n_samples == 3000
+    # the levels are the defaults' in both: their calls are the same
+    levels = default.n_evals - PAIRED_DEFAULTS["n_final"]
+    assert told.n_evals - 3000 == levels
+    # half the particles of a single-version run: about half its levels' calls
+    single = splitting_is(pair.version(0).f, pair.base, 0.0, seed=3, n_final=1)
+    assert 0.3 < levels / (single.n_evals - 1) < 0.7
 
 
 def test_identical_versions_get_an_honest_nonzero_interval():
