@@ -16,8 +16,10 @@ comparison of their spreads::
         [--out benchmarks/results/ab/runs.jsonl] [--independent-from EARLIER.jsonl]
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py run-even \\
         [--seeds 0-199] [--out benchmarks/results/ab/even_runs.jsonl]
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py run-single \\
+        [--seeds 0-199] [--out benchmarks/results/ab/single_runs.jsonl]
     python benchmarks/ab_coverage.py table [--results ...] [--even ...] \\
-        [--md T.md] [--json T.json]
+        [--single ...] [--md T.md] [--json T.json]
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_coverage.py gate \
         [--seeds 0-19] [--out benchmarks/results/ab/gate.json]
 
@@ -29,6 +31,9 @@ sweep goes on. ``table`` prints per case:
   / p_A`` (runs whose interval holds the exact value), and how often the
   exact ratio lies below the one-sided lower 95% bound or above the upper one
   (what a CI gate reads; each should be at most about 5%);
+* with ``--single`` (``run-single``: two independent runs at a default
+  single-version run's settings, ``SINGLE``, about the default paired run's
+  evaluations), the efficiency at the default budget;
 * efficiency: the spread (standard deviation over seeds) of the paired
   estimate of ``p_B - p_A`` and of the difference of the two independent
   runs' estimates, their ratio (``> 1``: the paired one is narrower), and
@@ -63,7 +68,10 @@ sys.path.insert(0, str(ROOT))
 
 from avrisk.rare.paired import PAIRED_DEFAULTS, paired_splitting_is  # noqa: E402
 from avrisk.rare.paired_gate import gate  # noqa: E402
-from avrisk.rare.splitting_importance import splitting_is  # noqa: E402
+from avrisk.rare.splitting_importance import (  # noqa: E402
+    SplittingISSettings,
+    splitting_is,
+)
 from avrisk.testing.pairs import PAIR_SUITE, AnalyticPair, pair_problem  # noqa: E402
 
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "ab" / "runs.jsonl"
@@ -85,6 +93,13 @@ INDEPENDENT = {"n_particles": 1000, "n_final": 5000}
 #: samples; each of its draws is evaluated by both versions, so it makes
 #: about as many evaluations as the two independent runs together.
 EVEN = {name: value // 2 for name, value in PAIRED_DEFAULTS.items()}
+#: A default single-version run's settings (``avrisk run``'s): two of them make
+#: about as many evaluations as the default paired run (``run-single``).
+SINGLE = {
+    name: SplittingISSettings.model_fields[name].default
+    for name in ("n_particles", "n_final")
+}
+SINGLE_OUT = ROOT / "benchmarks" / "results" / "ab" / "single_runs.jsonl"
 EVEN_OUT = ROOT / "benchmarks" / "results" / "ab" / "even_runs.jsonl"
 #: Offset of the independent runs' seeds (2 per paired seed), so that no
 #: independent run shares a paired run's draws.
@@ -122,7 +137,9 @@ def paired_record(pair: AnalyticPair, seed: int) -> dict[str, Any]:
     return out
 
 
-def independent_record(pair: AnalyticPair, seed: int) -> dict[str, Any]:
+def independent_record(
+    pair: AnalyticPair, seed: int, settings: dict[str, int] = INDEPENDENT
+) -> dict[str, Any]:
     """Two independent runs, one per version: their estimates and calls."""
     estimates = []
     with warnings.catch_warnings():
@@ -132,7 +149,7 @@ def independent_record(pair: AnalyticPair, seed: int) -> dict[str, Any]:
             run_seed = INDEPENDENT_SEED + 2 * seed + which
             estimates.append(
                 splitting_is(
-                    problem.f, problem.base, problem.gamma, seed=run_seed, **INDEPENDENT
+                    problem.f, problem.base, problem.gamma, seed=run_seed, **settings
                 )
             )
     a, b = estimates
@@ -181,6 +198,20 @@ def run_even(cases: list[str], seeds: list[int], out: Path) -> None:
             "settings": EVEN,
             "difference": est.difference.value,
             "n_evals": est.n_evals,
+        }
+
+    _append_missing(cases, seeds, out, record)
+
+
+def run_single(cases: list[str], seeds: list[int], out: Path) -> None:
+    """Append two default single-version runs per (case, seed) not yet in ``out``."""
+
+    def record(pair: AnalyticPair, name: str, seed: int) -> dict[str, Any]:
+        return {
+            "case": name,
+            "seed": seed,
+            "settings": SINGLE,
+            **independent_record(pair, seed, SINGLE),
         }
 
     _append_missing(cases, seeds, out, record)
@@ -240,9 +271,16 @@ def run(
 
 
 def case_row(
-    name: str, recs: list[dict[str, Any]], even: list[dict[str, Any]]
+    name: str,
+    recs: list[dict[str, Any]],
+    even: list[dict[str, Any]],
+    single: list[dict[str, Any]] = (),
 ) -> dict[str, Any]:
-    """The table's figures for one case (``even``: its even paired runs)."""
+    """The table's figures for one case.
+
+    ``even``: its even paired runs; ``single``: its pairs of default
+    single-version runs (``run-single``).
+    """
     n = len(recs)
     exact = recs[0]["exact"]
     cover = {
@@ -254,25 +292,46 @@ def case_row(
     truth = exact["p_b"] - exact["p_a"]
     spread_paired = float(paired_diff.std(ddof=1))
     spread_indep = float(indep_diff.std(ddof=1))
+    return (
+        {
+            "case": name,
+            "runs": n,
+            "r": exact["r"],
+            "p_a": exact["p_a"],
+            "p_b": exact["p_b"],
+            "coverage": cover,
+            "ratio_below_lower": sum(r["paired"]["ratio"]["below_lower"] for r in recs),
+            "ratio_above_upper": sum(r["paired"]["ratio"]["above_upper"] for r in recs),
+            "spread_paired": spread_paired,
+            "spread_independent": spread_indep,
+            "narrower_by": spread_indep / spread_paired
+            if spread_paired > 0
+            else math.inf,
+            "bias_paired": float(paired_diff.mean() - truth),
+            "calls_paired": float(np.mean([r["paired"]["n_evals"] for r in recs])),
+            "calls_independent": float(
+                np.mean([r["independent"]["n_evals"] for r in recs])
+            ),
+            "caution": sum(r["paired"]["trust"] != "ok" for r in recs),
+        }
+        | _even_figures(even, spread_indep, recs)
+        | _single_figures(single, spread_paired)
+    )
+
+
+def _single_figures(
+    single: list[dict[str, Any]], spread_paired: float
+) -> dict[str, Any]:
+    """The efficiency at the default budget: two default single-version runs'."""
+    if len(single) < 2:
+        return {}
+    spread = float(np.std([r["b"] - r["a"] for r in single], ddof=1))
     return {
-        "case": name,
-        "runs": n,
-        "r": exact["r"],
-        "p_a": exact["p_a"],
-        "p_b": exact["p_b"],
-        "coverage": cover,
-        "ratio_below_lower": sum(r["paired"]["ratio"]["below_lower"] for r in recs),
-        "ratio_above_upper": sum(r["paired"]["ratio"]["above_upper"] for r in recs),
-        "spread_paired": spread_paired,
-        "spread_independent": spread_indep,
-        "narrower_by": spread_indep / spread_paired if spread_paired > 0 else math.inf,
-        "bias_paired": float(paired_diff.mean() - truth),
-        "calls_paired": float(np.mean([r["paired"]["n_evals"] for r in recs])),
-        "calls_independent": float(
-            np.mean([r["independent"]["n_evals"] for r in recs])
-        ),
-        "caution": sum(r["paired"]["trust"] != "ok" for r in recs),
-    } | _even_figures(even, spread_indep, recs)
+        "single_runs": len(single),
+        "spread_single": spread,
+        "narrower_by_single": spread / spread_paired if spread_paired > 0 else math.inf,
+        "evaluations_single": float(np.mean([r["n_evals"] for r in single])),
+    }
 
 
 def _even_figures(
@@ -294,23 +353,30 @@ def _even_figures(
     }
 
 
-def table(results: Path, even: Path | None = None) -> tuple[list[dict[str, Any]], str]:
+def _by_case(path: Path | None) -> dict[str, list[dict[str, Any]]]:
+    """A results file's records by case (none: no file)."""
+    by_case: dict[str, list[dict[str, Any]]] = {}
+    if path is not None and path.is_file():
+        for rec in map(json.loads, path.read_text().splitlines()):
+            by_case.setdefault(rec["case"], []).append(rec)
+    return by_case
+
+
+def table(
+    results: Path, even: Path | None = None, single: Path | None = None
+) -> tuple[list[dict[str, Any]], str]:
     """Rows per case and the markdown of the coverage and efficiency tables.
 
     ``even``: the even paired runs (``run-even``), for the efficiency at equal
     evaluations of a version; without them the table compares the default
-    paired run, which evaluates twice as many.
+    paired run, which evaluates twice as many. ``single``: default
+    single-version runs (``run-single``), for the efficiency at the default
+    budget.
     """
-    by_case: dict[str, list[dict[str, Any]]] = {}
-    for line in results.read_text().splitlines():
-        rec = json.loads(line)
-        by_case.setdefault(rec["case"], []).append(rec)
-    by_even: dict[str, list[dict[str, Any]]] = {}
-    if even is not None and even.is_file():
-        for rec in map(json.loads, even.read_text().splitlines()):
-            by_even.setdefault(rec["case"], []).append(rec)
+    by_even, by_single = _by_case(even), _by_case(single)
     rows = [
-        case_row(name, recs, by_even.get(name, [])) for name, recs in by_case.items()
+        case_row(name, recs, by_even.get(name, []), by_single.get(name, []))
+        for name, recs in _by_case(results).items()
     ]
     md = [
         "| case | r | p_A | p_B | runs | p_A | p_B | p_B - p_A | p_B / p_A | "
@@ -360,6 +426,23 @@ def table(results: Path, even: Path | None = None) -> tuple[list[dict[str, Any]]
                 f"| {row['narrower_by_even']:.2f} | {row['evaluations_even']:,.0f} "
                 f"| {row['evaluations_independent']:,.0f} |"
             )
+    if all("spread_single" in row for row in rows):
+        md += [
+            "",
+            "At the default budget (the default paired run against two default "
+            "single-version runs, `run-single`):",
+            "",
+            "| case | r | runs | spread of p_B - p_A: paired, default | two single "
+            "runs | single / paired | evaluations: paired | single |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for row in rows:
+            md.append(
+                f"| {row['case']} | {row['r']:.2f} | {row['single_runs']} "
+                f"| {row['spread_paired']:.3g} | {row['spread_single']:.3g} "
+                f"| {row['narrower_by_single']:.2f} | {2 * row['calls_paired']:,.0f} "
+                f"| {row['evaluations_single']:,.0f} |"
+            )
     return rows, "\n".join(md)
 
 
@@ -403,12 +486,17 @@ def main(argv: list[str] | None = None) -> None:
     t = sub.add_parser("table")
     t.add_argument("--results", type=Path, default=DEFAULT_OUT)
     t.add_argument("--even", type=Path, default=EVEN_OUT)
+    t.add_argument("--single", type=Path, default=SINGLE_OUT)
     t.add_argument("--md", type=Path)
     t.add_argument("--json", type=Path)
     e = sub.add_parser("run-even")
     e.add_argument("--cases", default=",".join(PAIR_SUITE))
     e.add_argument("--seeds", default="0-199")
     e.add_argument("--out", type=Path, default=EVEN_OUT)
+    o = sub.add_parser("run-single")
+    o.add_argument("--cases", default=",".join(PAIR_SUITE))
+    o.add_argument("--seeds", default="0-199")
+    o.add_argument("--out", type=Path, default=SINGLE_OUT)
     g = sub.add_parser("gate")
     g.add_argument("--seeds", default="0-19")
     g.add_argument("--out", type=Path, default=GATE_OUT)
@@ -421,13 +509,16 @@ def main(argv: list[str] | None = None) -> None:
             args.independent_from,
         )
         return
+    if args.command == "run-single":
+        run_single(args.cases.split(","), parse_seeds(args.seeds), args.out)
+        return
     if args.command == "run-even":
         run_even(args.cases.split(","), parse_seeds(args.seeds), args.out)
         return
     if args.command == "gate":
         gate_sweep(parse_seeds(args.seeds), args.out)
         return
-    rows, md = table(args.results, args.even)
+    rows, md = table(args.results, args.even, args.single)
     print(md)
     if args.md:
         args.md.write_text(md + "\n")
