@@ -61,9 +61,9 @@ then each version's estimate and the discordant samples' estimate
 
 Calls. One call of the paired box evaluates both versions on a row;
 ``n_evals`` counts calls (pairs of evaluations). Unless told otherwise the
-search runs with ``PAIRED_DEFAULTS``: its levels with half the particles of
-a single-version run's default, so that they cost as many evaluations as
-that run's levels, and the rest of the budget of two single-version runs in
+search runs with ``PAIRED_DEFAULTS``: its levels at half a single-version
+run's default particles (two evaluations a particle, so they cost what that
+run's levels cost), the rest of two default single-version runs' budget in
 the final stage, since every figure's error is the final sample's (the
 levels only place the proposal).
 """
@@ -129,10 +129,7 @@ __all__ = [
 #: The estimator that searches the union of the two failure sets.
 UNION_METHOD = SplittingImportanceSampling.name
 
-#: The union's search settings where none are given: the levels at half a
-#: single-version run's default particles (two evaluations a particle), the
-#: final stage larger, about as many evaluations in all as two default
-#: single-version runs (module docstring, *Calls*).
+#: The union's search settings where none are given (module docstring, *Calls*).
 PAIRED_DEFAULTS: dict[str, int] = {"n_particles": 1000, "n_final": 18_000}
 
 
