@@ -86,19 +86,19 @@ GATE_CASES = {
 
 #: The paired run's settings, for every case: ``avrisk ab``'s defaults.
 PAIRED = PAIRED_DEFAULTS
-#: Each independent run's: half of a default single-version run's samples,
-#: so that the two make about half the paired run's evaluations.
-INDEPENDENT = {"n_particles": 1000, "n_final": 5000}
-#: The paired run of the efficiency table: half the default paired run's
-#: samples; each of its draws is evaluated by both versions, so it makes
-#: about as many evaluations as the two independent runs together.
-EVEN = {name: value // 2 for name, value in PAIRED_DEFAULTS.items()}
 #: A default single-version run's settings (``avrisk run``'s): two of them make
 #: about as many evaluations as the default paired run (``run-single``).
 SINGLE = {
     name: SplittingISSettings.model_fields[name].default
     for name in ("n_particles", "n_final")
 }
+#: Each independent run's: half of a default single-version run's samples,
+#: so that the two make about half the paired run's evaluations.
+INDEPENDENT = {name: value // 2 for name, value in SINGLE.items()}
+#: The paired run of the efficiency table: half the default paired run's
+#: samples; each of its draws is evaluated by both versions, so it makes
+#: about as many evaluations as the two independent runs together.
+EVEN = {name: value // 2 for name, value in PAIRED_DEFAULTS.items()}
 SINGLE_OUT = ROOT / "benchmarks" / "results" / "ab" / "single_runs.jsonl"
 EVEN_OUT = ROOT / "benchmarks" / "results" / "ab" / "even_runs.jsonl"
 #: Offset of the independent runs' seeds (2 per paired seed), so that no

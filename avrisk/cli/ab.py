@@ -149,7 +149,7 @@ def ab(
     with user_errors(*EXPECTED), resumable(ctx):
         check_output_folder(out)
         options = estimator_options(
-            UNION_METHOD, {"n_final": n_final}, set_, cli_defaults=PAIRED_DEFAULTS
+            UNION_METHOD, {"n_final": n_final}, set_, cli_defaults={}
         )
         result = avrisk.compare_egos(
             scenario,
