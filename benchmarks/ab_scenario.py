@@ -66,6 +66,7 @@ sys.path.insert(0, str(ROOT))
 
 from avrisk.api import compare_egos, estimate  # noqa: E402
 from avrisk.rare.paired import PAIRED_DEFAULTS  # noqa: E402
+from avrisk.rare.splitting_importance import SplittingISSettings  # noqa: E402
 
 DEFAULT_OUT = ROOT / "benchmarks" / "results" / "ab" / "lidar_pair.jsonl"
 SCENARIO = "highway_default"
@@ -74,7 +75,10 @@ EGOS = {
     for which, name in (("a", "lidar_ego.yaml"), ("b", "lidar_ego_degraded.yaml"))
 }
 #: Each independent run's settings: half a default single-version run's samples.
-INDEPENDENT = {"n_particles": 1000, "n_final": 5000}
+INDEPENDENT = {
+    name: SplittingISSettings.model_fields[name].default // 2
+    for name in ("n_particles", "n_final")
+}
 #: The paired run of the efficiency comparison, at half the default paired
 #: run's samples: each of its draws is simulated with both egos, so it
 #: simulates about as many rollouts as the two independent runs together.
