@@ -155,7 +155,11 @@ def answer_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
     k's to show), so the levels lost part of the event, as they do when their
     chains follow a near miss. When the levels answer (the module docstring),
     their own doubts count (subset simulation's), and so does an importance
-    sample that belies them (:func:`_levels_answer_doubts`).
+    sample that belies them (:func:`_levels_answer_doubts`). Replicates that
+    ran out of levels are doubted as
+    :func:`~avrisk.rare.splitting_replicates.exhausted_doubts` says: under an
+    importance-sampling answer, only where the mass their mechanism reached
+    may exceed the answer's standard error.
     """
     details = estimate.get("details") or {}
     main = next((g for g in estimate.get("by_gamma", ()) if g["gamma"] == gamma), None)
@@ -164,8 +168,9 @@ def answer_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
         return ()
     if not own:  # no replicate reached gamma (or none was recorded)
         return _none_reached(details)
-    reasons = list(exhausted_doubts(details))
-    if details.get("answer") == "splitting":
+    sampled = details.get("answer") != "splitting"
+    reasons = list(exhausted_doubts(details, main if sampled else None))
+    if not sampled:
         reasons[:0] = _levels_answer_doubts(details, main, gamma)
     elif _sample_below_levels(details, main, gamma):
         levels = ", ".join(f"{r['p']:.2g}" for r in own)

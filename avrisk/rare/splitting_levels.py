@@ -201,6 +201,17 @@ def levels_estimate(
     )
 
 
+def deepest_mass(state: SplittingState) -> GammaEstimate:
+    """``P0(f <= l)`` at the deepest level ``l`` a run's sets reached.
+
+    For a run that ran out of levels above ``gamma``
+    (``state.exhausted``): the mass of ``f <= l`` along the mechanism its
+    chains followed, which bounds what that mechanism can still hold of the
+    event below ``l``.
+    """
+    return _estimate_at(state.sets, state.sets[-1].level)
+
+
 def next_level(
     values: FloatArray,
     current: float,

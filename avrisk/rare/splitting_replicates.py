@@ -36,6 +36,7 @@ from avrisk.rare.results import Estimate
 from avrisk.rare.splitting_levels import (
     Z_CONFIDENCE,
     SplittingState,
+    deepest_mass,
     lognormal_interval,
 )
 
@@ -260,16 +261,23 @@ def replicates_record(
     regrowth the settings allowed (of the ``replicates`` the run fills);
     ``replicates_regrown``: the runs that ran out of levels and were run
     again, larger; ``replicate_particles``: the particles per level of each
-    that reached ``gamma``.
+    that reached ``gamma``; ``exhausted_mass``: for every run that ran out of
+    levels (regrown or not), ``P0(f <= l)`` at its deepest level ``l`` as its
+    own sets estimate it (:func:`~avrisk.rare.splitting_levels.deepest_mass`:
+    ``level``, ``p`` and the upper end ``upper`` of its interval).
     """
     reached = state.reached()
     exhausted = replicates - len(reached)
+    masses = [deepest_mass(r) for r in state.all if r.exhausted]
     return {
         "replicates": [{"p": e.p, "ci": list(e.ci), "n_hits": e.n_hits} for e in own],
         "replicates_disagree": replicates_disagree(own),
         "replicates_exhausted": exhausted,
         "replicates_regrown": sum(r.exhausted for r in state.all) - exhausted,
         "replicate_particles": [n for _, n in reached],
+        "exhausted_mass": [
+            {"level": m.gamma, "p": float(m.p), "upper": float(m.ci[1])} for m in masses
+        ],
     }
 
 
@@ -291,11 +299,29 @@ def disagreement_doubts(details: dict[str, Any]) -> tuple[str, ...]:
     )
 
 
-def exhausted_doubts(details: dict[str, Any]) -> tuple[str, ...]:
-    """The doubt of replicates that ran out of levels with no regrowth left."""
+def exhausted_doubts(
+    details: dict[str, Any], sampled: dict[str, Any] | None = None
+) -> tuple[str, ...]:
+    """The doubt of replicates that ran out of levels with no regrowth left.
+
+    A levels' answer then rests on the replicates that reached ``gamma``,
+    each of which may have squeezed through the same bottleneck: the doubt
+    stands. An importance-sampling answer (``sampled``: its estimate at
+    ``gamma``, with ``p``, ``stderr`` and ``n_hits``) has its own weights'
+    diagnostics for the mechanism it sampled; what a run out of levels adds
+    is a mechanism it did not sample, and that mechanism's mass at the
+    deepest level its chains reached bounds the event's mass it may still
+    hold. When every such run's bound (the upper end of its interval,
+    ``details["exhausted_mass"]``) is at most the answer's standard error,
+    nothing the mechanism may hold moves ``p`` beyond its own error: no doubt.
+    """
     exhausted = details.get("replicates_exhausted") or 0
     if not exhausted:
         return ()
+    masses = details.get("exhausted_mass")
+    if sampled and sampled.get("n_hits") and masses is not None:
+        if max(m["upper"] for m in masses) <= sampled["stderr"]:
+            return ()
     of = len(details.get("replicates") or []) + exhausted
     return (
         f"{exhausted} of the {of} replicates of the search did not reach gamma "

@@ -11,7 +11,11 @@ from avrisk.rare import (
     subset_simulation,
 )
 from avrisk.rare.estimator import estimator_class
-from avrisk.rare.splitting_replicates import estimates_disagree, replicates_disagree
+from avrisk.rare.splitting_replicates import (
+    estimates_disagree,
+    exhausted_doubts,
+    replicates_disagree,
+)
 from avrisk.rare.trust import GENERIC, Trust, Wording, estimate_trust, trust_at
 
 GOOD = {"gamma": 0.0, "n_hits": 50, "ess": 40.0, "pareto_k": 0.4}
@@ -204,3 +208,26 @@ def test_importance_sampling_below_the_pooled_levels_says_caution():
     assert estimate_trust(
         estimator_class("splitting_is"), as_dict, as_dict["by_gamma"][0]
     ).ok
+
+
+def test_a_run_out_of_levels_is_doubted_unless_its_mechanism_cannot_move_the_answer():
+    # one replicate reached gamma, the other ran out of levels at f <= 0.5,
+    # where its own sets put P0(f <= 0.5) below 1.2e-11
+    details = {
+        "replicates": [{"p": 1e-6, "ci": [5e-7, 2e-6], "n_hits": 300}],
+        "replicates_exhausted": 1,
+        "exhausted_mass": [{"level": 0.5, "p": 1.7e-12, "upper": 1.2e-11}],
+    }
+    sampled = {"p": 1e-6, "stderr": 5e-8, "n_hits": 4000}
+    # an importance sample's answer with an error far above that mass: no doubt
+    assert exhausted_doubts(details, sampled) == ()
+    # the same run out of levels at a mass the answer's error does not cover
+    deep = {**details, "exhausted_mass": [{"level": 0.5, "p": 4e-8, "upper": 9e-8}]}
+    (doubt,) = exhausted_doubts(deep, sampled)
+    assert doubt.startswith("1 of the 2 replicates of the search did not reach gamma")
+    # the levels' answer (no sample), an answer with no hit, or a record that
+    # does not say the mass: the doubt stands
+    assert exhausted_doubts(details) == (doubt,)
+    assert exhausted_doubts(details, {**sampled, "n_hits": 0}) == (doubt,)
+    old = {k: v for k, v in details.items() if k != "exhausted_mass"}
+    assert exhausted_doubts(old, sampled) == (doubt,)
