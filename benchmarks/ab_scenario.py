@@ -1,45 +1,51 @@
 """Paired comparison of two versions on a scenario: spread and gate (issue 45).
 
-The bundled pair's row of the efficiency table (``examples/ab_lidar``: the
+The bundled pair's rows of the efficiency table (``examples/ab_lidar``: the
 shipped lidar ego ``A`` and its variant ``B`` whose lidar reads every range
-30% long) and the gate's outcomes at the CLI's default budget. Per seed:
+30% long) and the gate's outcomes at the CLI's default budget. Per seed, each
+command into a file of its own:
 
-* the paired run, as ``avrisk ab`` makes it (:func:`avrisk.api.compare_egos`,
-  its default settings: ``splitting_is`` on ``min(f_A, f_B)``), its
-  estimates of ``p_A``, ``p_B``, ``p_B - p_A`` and ``p_B / p_A`` with their
-  intervals, the discordant share and the gate's outcome at ``--max-ratio``;
-* two independent ``splitting_is`` runs (:func:`avrisk.api.estimate`), one
-  per ego, with half a default single-version run's particles and final
-  samples each (about half the default paired run's rollouts), on seeds of
-  their own (``INDEPENDENT_SEED + 2 seed`` and ``+ 1``);
-* with ``run-independent`` (a file of its own), the independent runs alone:
-  the efficiency needs their spread over more seeds than the default
-  paired run, which costs as much again;
-* with ``run-even`` (a file of its own), a paired run at half the default
-  paired run's samples (``EVEN``): each of its draws is simulated with both
-  egos, so it simulates about as many rollouts as the two independent runs
-  together. The efficiency is the spread of this run's difference against
-  theirs; the default paired run simulates twice as many rollouts.
+* ``run-paired``: the paired run, as ``avrisk ab`` makes it
+  (:func:`avrisk.api.compare_egos`, its default settings ``PAIRED_DEFAULTS``:
+  ``splitting_is`` on ``min(f_A, f_B)``), its estimates of ``p_A``, ``p_B``,
+  ``p_B - p_A`` and ``p_B / p_A`` with their intervals, the discordant share,
+  its label and the gate's outcome at ``MAX_RATIO``;
+* ``run-single``: two default single-version ``splitting_is`` runs
+  (:func:`avrisk.api.estimate`, ``SINGLE``), one per ego, on seeds of their
+  own (``SINGLE_SEED + 2 seed`` and ``+ 1``). Every draw of the paired run is
+  simulated with both egos, so the two simulate about as many rollouts as
+  it: the comparison at the default budget;
+* ``run-even`` and ``run-independent``: the same comparison at half those
+  budgets, a paired run at half ``PAIRED_DEFAULTS`` (``EVEN``) against two
+  runs at half ``SINGLE`` (``INDEPENDENT``, seeds ``INDEPENDENT_SEED + 2
+  seed`` and ``+ 1``);
+* ``run``: the default paired run and the runs at half ``SINGLE`` together
+  (into the paired runs' file).
 
 ::
 
-    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run \\
-        [--seeds 0-49] [--reverse] [--out benchmarks/results/ab/lidar_pair.jsonl]
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run-paired \\
+        [--seeds 0-49] [--reverse] [--out ...lidar_pair_final_heavy.jsonl]
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run-single \\
+        [--seeds 0-49] [--out benchmarks/results/ab/lidar_pair_single.jsonl]
+    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run-even \\
+        [--seeds 0-49] [--out ...lidar_pair_even_final_heavy.jsonl]
     OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run-independent \\
         [--seeds 0-49] [--out benchmarks/results/ab/lidar_pair_independent.jsonl]
-    OMP_NUM_THREADS=1 nice -n 19 python benchmarks/ab_scenario.py run-even \\
-        [--seeds 0-49] [--out benchmarks/results/ab/lidar_pair_even.jsonl]
-    python benchmarks/ab_scenario.py table [--results ...] [--independent ...] \\
-        [--even ...] [--md T.md]
+    python benchmarks/ab_scenario.py table [--results ...] [--single ...] \\
+        [--even ...] [--independent ...] [--md T.md] [--json T.json]
 
 Each command appends one JSON line per seed and skips seeds already there, so an
 interrupted sweep goes on (each seed's run directories are temporary); a
 second process may go down the seeds into the same file (``--reverse``). No
 exact answer is known here, so ``table`` reports what needs none: the spread
 (standard deviation over seeds) of the paired difference against that of the
-independent runs' difference, their ratio at equal rollouts (what the
-analytic pairs' table of ``ab_coverage.py`` reports against ``r``), the mean
-discordant share ``r``, the gate's outcomes, and the rollouts each way.
+two independent runs' difference at about the same rollouts, their ratio
+(what the analytic pairs' table of ``ab_coverage.py`` reports against
+``r``), the paired runs labelled caution, the mean discordant share ``r``,
+the gate's outcomes, and the rollouts each way. The runs before
+``PAIRED_DEFAULTS`` (``lidar_pair.jsonl``, ``lidar_pair_even*.jsonl`` but
+``_final_heavy``) are at earlier settings.
 """
 
 from __future__ import annotations
@@ -68,26 +74,31 @@ from avrisk.api import compare_egos, estimate  # noqa: E402
 from avrisk.rare.paired import PAIRED_DEFAULTS  # noqa: E402
 from avrisk.rare.splitting_importance import SplittingISSettings  # noqa: E402
 
-DEFAULT_OUT = ROOT / "benchmarks" / "results" / "ab" / "lidar_pair.jsonl"
 SCENARIO = "highway_default"
 EGOS = {
     which: ROOT / "examples" / "ab_lidar" / name
     for which, name in (("a", "lidar_ego.yaml"), ("b", "lidar_ego_degraded.yaml"))
 }
-#: Each independent run's settings: half a default single-version run's samples.
-INDEPENDENT = {
-    name: SplittingISSettings.model_fields[name].default // 2
+#: A default single-version run's samples (``avrisk run``'s).
+SINGLE = {
+    name: SplittingISSettings.model_fields[name].default
     for name in ("n_particles", "n_final")
 }
+#: Each independent run's settings: half a default single-version run's samples.
+INDEPENDENT = {name: value // 2 for name, value in SINGLE.items()}
 #: The paired run of the efficiency comparison, at half the default paired
 #: run's samples: each of its draws is simulated with both egos, so it
 #: simulates about as many rollouts as the two independent runs together.
 EVEN = {name: value // 2 for name, value in PAIRED_DEFAULTS.items()}
 RESULTS = ROOT / "benchmarks" / "results" / "ab"
-EVEN_OUT = RESULTS / "lidar_pair_even.jsonl"
+EVEN_OUT = RESULTS / "lidar_pair_even_final_heavy.jsonl"
 INDEPENDENT_OUT = RESULTS / "lidar_pair_independent.jsonl"
+SINGLE_OUT = RESULTS / "lidar_pair_single.jsonl"
+PAIRED_OUT = RESULTS / "lidar_pair_final_heavy.jsonl"
 #: Offset of the independent runs' seeds, so none shares a paired run's draws.
 INDEPENDENT_SEED = 1_000_000
+#: Offset of the default single runs' seeds, so none shares another run's draws.
+SINGLE_SEED = 2_000_000
 #: The gate's margin on ``p_B / p_A``.
 MAX_RATIO = 1.0
 
@@ -137,8 +148,16 @@ def paired_record(
     return out
 
 
-def independent_record(seed: int, scratch: Path) -> dict[str, Any]:
-    """Two independent runs, one per ego: their estimates and rollouts."""
+def independent_record(
+    seed: int,
+    scratch: Path,
+    settings: dict[str, int] = INDEPENDENT,
+    first_seed: int = INDEPENDENT_SEED,
+) -> dict[str, Any]:
+    """Two independent runs at ``settings``, one per ego: estimates and rollouts.
+
+    Their seeds are ``first_seed + 2 seed`` (ego A) and ``+ 1`` (ego B).
+    """
     start = time.perf_counter()
     runs = {}
     for offset, which in enumerate(("a", "b")):
@@ -146,9 +165,9 @@ def independent_record(seed: int, scratch: Path) -> dict[str, Any]:
             SCENARIO,
             ego=_ego(which),
             out=scratch / which,
-            seed=INDEPENDENT_SEED + 2 * seed + offset,
+            seed=first_seed + 2 * seed + offset,
             failures=0,
-            **INDEPENDENT,
+            **settings,
         )
         runs[which] = result.estimate
     return {
@@ -232,6 +251,40 @@ def run_independent(seeds: list[int], out: Path) -> None:
     )
 
 
+def run_paired(seeds: list[int], out: Path) -> None:
+    """Append the default paired run alone per seed not yet in ``out``."""
+    _append_per_seed(
+        seeds,
+        out,
+        lambda seed, scratch: {
+            "egos": {k: str(v.relative_to(ROOT)) for k, v in EGOS.items()},
+            "settings": dict(PAIRED_DEFAULTS),
+            "paired": paired_record(seed, scratch),
+        },
+        lambda rec: (
+            f"{rec['paired']['outcome']}, ratio {rec['paired']['ratio']['value']:.3g}, "
+            f"{rec['paired']['trust']}, {rec['paired']['seconds']:.0f} s"
+        ),
+    )
+
+
+def run_single(seeds: list[int], out: Path) -> None:
+    """Append two default single-version runs (``SINGLE``) per seed not in ``out``.
+
+    Together they simulate about as many rollouts as the default paired run
+    (whose draws each take both egos): the comparison at the default budget.
+    """
+    _append_per_seed(
+        seeds,
+        out,
+        lambda seed, scratch: {
+            "single_settings": SINGLE,
+            "single": independent_record(seed, scratch, SINGLE, SINGLE_SEED),
+        },
+        lambda rec: f"{rec['single']['seconds']:.0f} s",
+    )
+
+
 def run_even(seeds: list[int], out: Path) -> None:
     """Append the even paired run (``EVEN``) per seed not yet in ``out``."""
     _append_per_seed(
@@ -255,119 +308,135 @@ def _by_seed(path: Path) -> dict[int, dict[str, Any]]:
     return by_seed
 
 
-def summary(
-    results: Path, even: Path | None = None, independent: Path | None = None
-) -> tuple[dict[str, Any], str]:
-    """The spread, the discordant share and the gate's outcomes, as figures and text.
+def _spread(values: list[float]) -> float:
+    """Standard deviation over seeds (NaN below two)."""
+    return float(np.std(values, ddof=1)) if len(values) > 1 else math.nan
 
-    The independent runs' spread pools those of ``results`` with the seeds
-    ``independent`` adds (a seed in both: ``results``'s).
+
+def _comparison(
+    name: str, paired: list[dict[str, Any]], independent: list[dict[str, Any]]
+) -> dict[str, Any]:
+    """One row: a paired run's spread of ``p_B - p_A`` against two runs' one.
+
+    ``paired``: records' ``paired`` parts; ``independent``: pairs of runs
+    (``a``, ``b``, ``n_evals``).
+    """
+    spread_paired = _spread([r["difference"]["value"] for r in paired])
+    spread_independent = _spread([r["b"] - r["a"] for r in independent])
+    return {
+        "comparison": name,
+        "seeds_paired": len(paired),
+        "seeds_independent": len(independent),
+        "spread_paired": spread_paired,
+        "spread_independent": spread_independent,
+        "narrower_by": spread_independent / spread_paired,
+        "caution_paired": sum(r["trust"] != "ok" for r in paired),
+        "rollouts_paired": float(np.mean([2 * r["n_evals"] for r in paired])),
+        "rollouts_independent": float(np.mean([r["n_evals"] for r in independent])),
+    }
+
+
+def summary(
+    results: Path,
+    even: Path | None = None,
+    independent: Path | None = None,
+    single: Path | None = None,
+) -> tuple[dict[str, Any], str]:
+    """The spreads, the discordant share and the gate's outcomes, as figures and text.
+
+    ``results``: default paired runs (``run`` or ``run-paired``); their
+    discordant share, gate outcomes and labels head the table. Each row sets
+    a paired run's spread against two independent runs' at about the same
+    rollouts: the default paired run against two default single runs
+    (``single``), and the even paired run (``even``) against the runs at
+    half those settings (``independent``, pooled with any in ``results``; a
+    seed in both: ``results``'s). A row needs two seeds a side.
     """
     recs = list(_by_seed(results).values())
-    singles = (_by_seed(independent) if independent is not None else {}) | {
-        r["seed"]: r for r in recs
+    paired = [r["paired"] for r in recs]
+    halves = (_by_seed(independent) if independent is not None else {}) | {
+        r["seed"]: r for r in recs if "independent" in r
     }
-    paired = np.array([r["paired"]["difference"]["value"] for r in recs])
-    indep = np.array(
-        [r["independent"]["b"] - r["independent"]["a"] for r in singles.values()]
-    )
-    outcomes = [r["paired"]["outcome"] for r in recs]
-    row = {
-        "seeds": len(recs),
-        "independent_seeds": len(singles),
-        "r": float(np.mean([r["paired"]["r"] for r in recs])),
-        "p_a": float(np.mean([r["paired"]["a"]["value"] for r in recs])),
-        "p_b": float(np.mean([r["paired"]["b"]["value"] for r in recs])),
-        "spread_paired": float(paired.std(ddof=1)),
-        "spread_independent": float(indep.std(ddof=1)),
-        "mean_difference_paired": float(paired.mean()),
-        "mean_difference_independent": float(indep.mean()),
-        "rollouts_paired": float(np.mean([2 * r["paired"]["n_evals"] for r in recs])),
-        "rollouts_independent": float(
-            np.mean([r["independent"]["n_evals"] for r in singles.values()])
-        ),
+    outcomes = [r["outcome"] for r in paired]
+    head = {
+        "seeds": len(paired),
+        "r": float(np.mean([r["r"] for r in paired])),
+        "p_a": float(np.mean([r["a"]["value"] for r in paired])),
+        "p_b": float(np.mean([r["b"]["value"] for r in paired])),
         "outcomes": {o: outcomes.count(o) for o in ("pass", "fail", "inconclusive")},
-        "caution": sum(r["paired"]["trust"] != "ok" for r in recs),
+        "caution": sum(r["trust"] != "ok" for r in paired),
     }
-    row["narrower_by"] = row["spread_independent"] / row["spread_paired"]
-    lines = [
-        "| pair | seeds | r | mean p_A | mean p_B | spread of p_B - p_A: paired, "
-        "default | independent | independent / paired | rollouts: paired (both "
-        "egos) | independent | gate at 1.0: pass / fail / inconclusive |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|",
-        f"| `{SCENARIO}`, lidar ego / range x 1.3 | {row['seeds']} (independent: "
-        f"{row['independent_seeds']}) "
-        f"| {row['r']:.2f} | {row['p_a']:.3g} | {row['p_b']:.3g} "
-        f"| {row['spread_paired']:.3g} | {row['spread_independent']:.3g} "
-        f"| {row['narrower_by']:.2f} | {row['rollouts_paired']:,.0f} "
-        f"| {row['rollouts_independent']:,.0f} "
-        f"| {row['outcomes']['pass']} / {row['outcomes']['fail']} / "
-        f"{row['outcomes']['inconclusive']} |",
-    ]
-    evens = list(_by_seed(even).values()) if even is not None else []
-    if len(evens) > 1:
-        spread = float(
-            np.std([r["paired"]["difference"]["value"] for r in evens], ddof=1)
+    rows = []
+    singles = list(_by_seed(single).values()) if single is not None else []
+    if len(paired) > 1 and len(singles) > 1:
+        rows.append(
+            _comparison(
+                "default paired / two default single runs",
+                paired,
+                [r["single"] for r in singles],
+            )
         )
-        row |= {
-            "even_seeds": len(evens),
-            "spread_even": spread,
-            "narrower_by_even": row["spread_independent"] / spread,
-            "rollouts_even": float(
-                np.mean([2 * r["paired"]["n_evals"] for r in evens])
-            ),
-        }
-        lines += [
-            "",
-            "At equal rollouts (the even paired runs, `run-even`):",
-            "",
-            "| pair | seeds: even / independent | spread of p_B - p_A: paired, "
-            "even | independent | independent / paired | rollouts: paired "
-            "| independent |",
-            "|---|---|---:|---:|---:|---:|---:|",
-            f"| `{SCENARIO}`, lidar ego / range x 1.3 | {len(evens)} / "
-            f"{row['independent_seeds']} "
-            f"| {spread:.3g} | {row['spread_independent']:.3g} "
-            f"| {row['narrower_by_even']:.2f} | {row['rollouts_even']:,.0f} "
-            f"| {row['rollouts_independent']:,.0f} |",
-        ]
-    return row, "\n".join(lines)
+    evens = [r["paired"] for r in _by_seed(even).values()] if even else []
+    if len(evens) > 1 and len(halves) > 1:
+        rows.append(
+            _comparison(
+                "even paired / two runs at half the default",
+                evens,
+                [r["independent"] for r in halves.values()],
+            )
+        )
+    lines = [
+        f"`{SCENARIO}`, lidar ego / range x 1.3; default paired runs: "
+        f"{head['seeds']} seeds, r = {head['r']:.2f}, mean p_A {head['p_a']:.3g}, "
+        f"mean p_B {head['p_b']:.3g}, gate at {MAX_RATIO:g}: pass / fail / "
+        f"inconclusive {head['outcomes']['pass']} / {head['outcomes']['fail']} / "
+        f"{head['outcomes']['inconclusive']}, labelled caution {head['caution']}.",
+        "",
+        "| comparison | seeds: paired / independent | spread of p_B - p_A: paired "
+        "| independent | independent / paired | paired labelled caution "
+        "| rollouts: paired (both egos) | independent |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    lines += [
+        f"| {r['comparison']} | {r['seeds_paired']} / {r['seeds_independent']} "
+        f"| {r['spread_paired']:.3g} | {r['spread_independent']:.3g} "
+        f"| {r['narrower_by']:.2f} | {r['caution_paired']} "
+        f"| {r['rollouts_paired']:,.0f} | {r['rollouts_independent']:,.0f} |"
+        for r in rows
+    ]
+    return {**head, "comparisons": rows}, "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Command line: ``run``, ``run-independent``, ``run-even`` or ``table``."""
+    """Command line: ``run``, ``run-paired``, ``run-single``, ``run-independent``,
+    ``run-even`` or ``table``."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("run")
-    r.add_argument("--seeds", default="0-49")
-    r.add_argument("--out", type=Path, default=DEFAULT_OUT)
-    r.add_argument("--reverse", action="store_true", help="the seeds downwards")
-    i = sub.add_parser("run-independent")
-    i.add_argument("--seeds", default="0-49")
-    i.add_argument("--out", type=Path, default=INDEPENDENT_OUT)
-    i.add_argument("--reverse", action="store_true", help="the seeds downwards")
-    e = sub.add_parser("run-even")
-    e.add_argument("--seeds", default="0-49")
-    e.add_argument("--out", type=Path, default=EVEN_OUT)
+    runs = {
+        "run": (run, PAIRED_OUT),
+        "run-paired": (run_paired, PAIRED_OUT),
+        "run-single": (run_single, SINGLE_OUT),
+        "run-independent": (run_independent, INDEPENDENT_OUT),
+        "run-even": (run_even, EVEN_OUT),
+    }
+    for name, (_, out) in runs.items():
+        r = sub.add_parser(name)
+        r.add_argument("--seeds", default="0-49")
+        r.add_argument("--out", type=Path, default=out)
+        r.add_argument("--reverse", action="store_true", help="the seeds downwards")
     t = sub.add_parser("table")
-    t.add_argument("--results", type=Path, default=DEFAULT_OUT)
+    t.add_argument("--results", type=Path, default=PAIRED_OUT)
     t.add_argument("--even", type=Path, default=EVEN_OUT)
     t.add_argument("--independent", type=Path, default=INDEPENDENT_OUT)
+    t.add_argument("--single", type=Path, default=SINGLE_OUT)
     t.add_argument("--md", type=Path)
     t.add_argument("--json", type=Path)
     args = parser.parse_args(argv)
-    if args.command == "run":
+    if args.command in runs:
         seeds = parse_seeds(args.seeds)
-        run(seeds[::-1] if args.reverse else seeds, args.out)
+        runs[args.command][0](seeds[::-1] if args.reverse else seeds, args.out)
         return
-    if args.command == "run-independent":
-        seeds = parse_seeds(args.seeds)
-        run_independent(seeds[::-1] if args.reverse else seeds, args.out)
-        return
-    if args.command == "run-even":
-        run_even(parse_seeds(args.seeds), args.out)
-        return
-    row, md = summary(args.results, args.even, args.independent)
+    row, md = summary(args.results, args.even, args.independent, args.single)
     print(md)
     if args.md:
         args.md.write_text(md + "\n")
