@@ -195,9 +195,7 @@ class OneReplicate:
         current = state.sets[-1].level if state.sets else math.inf
         counted_from = 0
         if state.sets:
-            moved = move_chains(
-                state, problem, context, s.n_moves, s.n_particles, s.steps
-            )
+            moved = move_chains(state, problem, context, s.n_moves, s.n_particles)
         else:
             moved = draw_p0(state, problem, context, s.n_particles)
             if s.plateau_draws > 1 and on_plateau(

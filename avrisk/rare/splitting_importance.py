@@ -160,7 +160,7 @@ from avrisk.rare.splitting_is_answer import (
 )
 from avrisk.rare.splitting_is_tables import importance_sampling_tables
 from avrisk.rare.splitting_levels import SplittingState, levels_estimate
-from avrisk.rare.splitting_moves import MovedSet, Steps, move_chains
+from avrisk.rare.splitting_moves import MovedSet, move_chains
 from avrisk.rare.splitting_replicates import (
     ReplicatesState,
     combined_levels,
@@ -362,7 +362,6 @@ class SplittingImportanceSampling(SubsetSimulation):
             problem,
             context,
             self.settings.gamma_moves(),
-            self.settings.steps,
         )
         fitted = _fitted_proposal(moves, with_hits, problem, context, self.settings)
         n_evals = state.current.n_evals + sum(m.n_calls for m in moves)
@@ -408,7 +407,6 @@ def _moves_at_gamma(
     problem: RareEventProblem,
     context: EstimationContext,
     n_moves: int,
-    steps: Steps,
 ) -> list[MovedSet]:
     """Each replicate's chains moved once more at ``gamma``: the particles to fit.
 
@@ -418,7 +416,7 @@ def _moves_at_gamma(
     moves, stage = [], first_stage
     for r, n in with_hits:
         moves.append(
-            move_chains(r._replace(n_stages=stage), problem, context, n_moves, n, steps)
+            move_chains(r._replace(n_stages=stage), problem, context, n_moves, n)
         )
         stage = moves[-1].n_stages
     return moves

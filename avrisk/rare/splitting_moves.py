@@ -29,24 +29,6 @@ chain keeps every ``n_moves``-th state only (thinning). For a seeded
 seed)``, and a fresh seed is an independence proposal from its prior, so the
 move stays reversible.
 
-Steps along the set's principal directions
-------------------------------------------
-One ``beta`` for every direction moves a chain only as far as the set's
-narrowest direction allows: on a thin ridge (an event that trades one
-coordinate against another) the step shrinks to the ridge's width and the
-chains all but stop along it. With ``steps="principal"`` each level's moves
-use the directions of the seeds' covariance (Ledoit-Wolf shrunk, so that a
-level with fewer seeds than dimensions has one of full rank): with ``V`` its
-eigenvectors and ``s_k`` the square roots of its eigenvalues, ``z' = V (rho
-V^T z + sigma eps)`` with ``sigma_k = min(beta s_k, 1)`` and ``rho_k = sqrt(1
-- sigma_k^2)``. The kernel is the Gaussian autoregression ``z' = A z + B
-eps`` with ``A = V diag(rho) V^T`` symmetric and ``A^2 + B B^T = I``, so it
-is reversible with respect to ``N(0, I)`` as pCN is (pCN is the case ``s_k
-= 1``), and accepting iff ``f <= b_l`` keeps the conditional law invariant.
-``beta`` is adapted as above, now a multiple of each direction's spread.
-This is the adaptive conditional sampling of Papaioannou et al. (2015) with
-the seeds' principal directions in place of the coordinates.
-
 Seeds and resume
 ----------------
 Every batch of at most :data:`~avrisk.rare.problem.SAMPLE_CHUNK` points is
@@ -71,7 +53,7 @@ simulation." Probabilistic Engineering Mechanics 41, 2015.
 from __future__ import annotations
 
 import math
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
@@ -153,26 +135,18 @@ def drawn_more(
     )
 
 
-#: How a level's moves scale their steps (*Steps along the set's principal
-#: directions*): one ``beta`` for all directions, or ``beta`` times the seeds'
-#: spread along each principal direction.
-Steps = Literal["isotropic", "principal"]
-
-
 def move_chains(
     state: SplittingState,
     problem: RareEventProblem,
     context: EstimationContext,
     n_moves: int,
     n: int,
-    steps: Steps = "isotropic",
 ) -> MovedSet:
     """The next set, ``n`` states of chains from the last set's survivors (pCN)."""
     last = state.sets[-1]
     flat = last.flat
     seeds = np.flatnonzero(flat <= last.level)
     n_chains = seeds.size
-    directions = principal_directions(state.z[seeds]) if steps == "principal" else None
     lengths = np.full(n_chains, n // n_chains)
     lengths[: n % n_chains] += 1  # the longer chains first: who moves is a prefix
     z_chain = np.zeros((n_chains, lengths[0], state.z.shape[1]))
@@ -186,7 +160,7 @@ def move_chains(
         for _ in range(n_moves):
             stage = n_stages + 1
             eps = np.random.default_rng([context.seed, stage]).standard_normal(z.shape)
-            proposal = _proposed(z, eps, beta, directions)
+            proposal = math.sqrt(1 - beta * beta) * z + beta * eps
             f_new, failed, used = _evaluate(problem, context, proposal, stage)
             accept = f_new <= last.level
             z = np.where(accept[:, None], proposal, z)
@@ -217,49 +191,6 @@ def move_chains(
         n_failed,
         stuck,
     )
-
-
-def principal_directions(seeds: FloatArray) -> tuple[FloatArray, FloatArray] | None:
-    """The seeds' principal directions and the spread along each.
-
-    Parameters
-    ----------
-    seeds : ndarray of shape (n, D)
-        The chains' first states, in standard-normal space.
-
-    Returns
-    -------
-    (V, s) or None
-        ``V`` of shape (D, D), orthonormal columns; ``s`` of shape (D,), the
-        square roots of the Ledoit-Wolf shrunk covariance's eigenvalues. None
-        for fewer than two seeds (the steps are then pCN's).
-    """
-    if len(seeds) < 2:
-        return None
-    from sklearn.covariance import ledoit_wolf  # noqa: PLC0415 (slow import)
-
-    covariance, _ = ledoit_wolf(seeds)
-    eigenvalues, vectors = np.linalg.eigh(covariance)
-    return vectors, np.sqrt(np.clip(eigenvalues, 0.0, None))
-
-
-def _proposed(
-    z: FloatArray,
-    eps: FloatArray,
-    beta: float,
-    directions: tuple[FloatArray, FloatArray] | None,
-) -> FloatArray:
-    """The proposals from states ``z`` (n, D) with noise ``eps`` (n, D).
-
-    pCN with step ``beta`` in every direction, or along each principal
-    direction ``k`` with step ``min(beta s_k, 1)``.
-    """
-    if directions is None:
-        return math.sqrt(1 - beta * beta) * z + beta * eps
-    vectors, spread = directions
-    sigma = np.minimum(beta * spread, 1.0)
-    rho = np.sqrt(1.0 - sigma * sigma)
-    return ((z @ vectors) * rho + eps * sigma) @ vectors.T
 
 
 def _adapted(beta: float, n_accepted: int, n_proposed: int, n_chains: int) -> float:

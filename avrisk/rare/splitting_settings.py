@@ -13,7 +13,6 @@ from typing import Self
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from avrisk.rare.estimator import EstimatorSettings
-from avrisk.rare.splitting_moves import Steps
 
 __all__ = ["SplittingSettings"]
 
@@ -36,11 +35,6 @@ class SplittingSettings(EstimatorSettings):
         :class:`~avrisk.rare.splitting_levels.SplittingError`.
     n_moves : int, default=1
         pCN proposals per kept chain state (``> 1`` thins the chains).
-    steps : {"isotropic", "principal"}, default="isotropic"
-        How the moves' steps scale: pCN's one ``beta`` for every direction,
-        or ``beta`` times the spread of each level's seeds along each of
-        their principal directions (*Steps along the set's principal
-        directions* in :mod:`avrisk.rare.splitting_moves`).
     initial_beta : float, default=0.6
         pCN step of the first moves, in (0, 1]; then adapted.
     min_survivors : int, default=10
@@ -67,7 +61,7 @@ class SplittingSettings(EstimatorSettings):
         estimator's ``budget()`` is then the bound).
     """
 
-    OMIT_IF_DEFAULT = ("min_survivors", "plateau_draws", "max_calls", "steps")
+    OMIT_IF_DEFAULT = ("min_survivors", "plateau_draws", "max_calls")
 
     n_particles: int = Field(2000, ge=10, description="Particles per level N.")
     p0: float = Field(
@@ -84,11 +78,6 @@ class SplittingSettings(EstimatorSettings):
     )
     n_moves: int = Field(
         1, ge=1, description="pCN proposals per kept chain state (thinning)."
-    )
-    steps: Steps = Field(
-        "isotropic",
-        description="How the moves' steps scale: one beta for every direction "
-        "(pCN), or beta times the seeds' spread along each principal direction.",
     )
     initial_beta: float = Field(
         0.6, gt=0.0, le=1.0, description="pCN step of the first level's moves."
