@@ -154,7 +154,8 @@ class CostMeter:
         else:
             sooner = (
                 " (fewer if the levels reach gamma sooner; up to "
-                f"{grows:,} if levels that run out are run again, larger)"
+                f"{grows:,} if levels that run out are run again, larger, or "
+                "slowly mixing chains move more)"
             )
         self.console.print(
             f"plan: {escape(runs)}: {self.at_most}{self.total:,} rollouts{in_all}"

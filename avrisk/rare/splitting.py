@@ -54,6 +54,7 @@ dimensions by subset simulation." Probabilistic Engineering Mechanics 16, 2001.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import warnings
 from collections.abc import Sequence
@@ -79,7 +80,7 @@ from avrisk.rare.splitting_levels import (
     next_level,
     on_plateau,
 )
-from avrisk.rare.splitting_moves import draw_p0, drawn_more, move_chains
+from avrisk.rare.splitting_moves import draw_p0, drawn_more, move_chains, moves_after
 from avrisk.rare.splitting_replicates import (
     ReplicatesState,
     combined_levels,
@@ -133,6 +134,10 @@ class SplittingInfo(NamedTuple):
     replicate : int, default=0
         Independent replicate of the levels the set belongs to (several in
         :mod:`avrisk.rare.splitting_importance`).
+    moves : int, default=0
+        pCN proposals per kept state that made the set (0 for draws of
+        ``P0``; more than ``n_moves`` after correlated chains,
+        :func:`~avrisk.rare.splitting_moves.moves_after`).
     """
 
     index: int
@@ -146,6 +151,7 @@ class SplittingInfo(NamedTuple):
     n_evals: int
     last_stage: int
     replicate: int = 0
+    moves: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (NaN becomes ``None``)."""
@@ -193,9 +199,10 @@ class OneReplicate:
         """
         s = self.settings
         current = state.sets[-1].level if state.sets else math.inf
-        counted_from = 0
+        counted_from = moves = 0
         if state.sets:
-            moved = move_chains(state, problem, context, s.n_moves, s.n_particles)
+            moves = moves_after(state.sets[-1], s.n_moves, s.correlated_moves)
+            moved = move_chains(state, problem, context, moves, s.n_particles)
         else:
             moved = draw_p0(state, problem, context, s.n_particles)
             if s.plateau_draws > 1 and on_plateau(
@@ -235,6 +242,7 @@ class OneReplicate:
             n_failed=moved.n_failed,
             n_evals=n_evals,
             last_stage=moved.n_stages,
+            moves=moves,
         )
         return new_state, info
 
@@ -259,7 +267,7 @@ class SubsetSimulation:
         run that reaches ``gamma`` sooner, as most do, makes fewer calls.
         """
         s = self.settings
-        bound = s.bound(s.regrow)
+        bound = s.bound(s.regrow, correlated=s.moves_adapt())
         return bound if s.max_calls is None else min(bound, s.max_calls)
 
     def planned_budget(self) -> int:
@@ -304,8 +312,13 @@ class SubsetSimulation:
         regrown = round(math.log2(state.sizes[-1] / state.sizes[0]))
         if not state.current.exhausted or regrown >= s.regrow:
             return False
+        correlated = s.moves_adapt()
         return regrowth_fits(
-            state, s.replicates, s.levels_bound, s.tail_bound, self.budget()
+            state,
+            s.replicates,
+            functools.partial(s.levels_bound, correlated=correlated),
+            functools.partial(s.tail_bound, correlated=correlated),
+            self.budget(),
         )
 
     def step(
@@ -406,14 +419,14 @@ class SubsetSimulation:
 
     @staticmethod
     def diagnostics(estimate: dict[str, Any]) -> list[DiagnosticTable]:
-        """Levels of ``f``, survivors, acceptance and ``beta`` per set.
+        """Levels of ``f``, survivors, moves per state, acceptance and ``beta`` per set.
 
         One table per independent replicate of the levels (each numbers its
         sets from 0), titled with its number when there are several.
         """
         history = estimate.get("history") or []
-        columns = ("set", "level", "survivors", "acceptance", "beta")
-        keys = ("index", "level", "n_survivors", "acceptance", "beta")
+        columns = ("set", "level", "survivors", "moves", "acceptance", "beta")
+        keys = ("index", "level", "n_survivors", "moves", "acceptance", "beta")
         replicates = sorted({h.get("replicate", 0) for h in history})
         return [
             DiagnosticTable(
@@ -421,7 +434,7 @@ class SubsetSimulation:
                 + (f", replicate {r + 1}" if len(replicates) > 1 else ""),
                 columns,
                 [
-                    tuple(h[k] for k in keys)
+                    tuple(h.get(k) for k in keys)  # no moves: a run before them
                     for h in history
                     if h.get("replicate", 0) == r
                 ],

@@ -160,7 +160,7 @@ from avrisk.rare.splitting_is_answer import (
 )
 from avrisk.rare.splitting_is_tables import importance_sampling_tables
 from avrisk.rare.splitting_levels import SplittingState, levels_estimate
-from avrisk.rare.splitting_moves import MovedSet, move_chains
+from avrisk.rare.splitting_moves import MovedSet, move_chains, moves_after
 from avrisk.rare.splitting_replicates import (
     ReplicatesState,
     combined_levels,
@@ -194,6 +194,10 @@ class SplittingISSettings(SplittingSettings):
         spread over each level's conditional law matters here as well as their
         level; with one move per state a chain's kept states sit closer to its
         seed.
+    correlated_moves : int, default=2
+        As in :class:`~avrisk.rare.splitting.SplittingSettings` (1 there):
+        twice the moves at a level after chains correlated beyond
+        ``CORRELATED`` (:func:`~avrisk.rare.splitting_moves.moves_after`).
     n_final : int, default=10000
         Samples of the fitted proposal.
     n_components : int, default=4
@@ -222,6 +226,12 @@ class SplittingISSettings(SplittingSettings):
 
     n_moves: int = Field(
         2, ge=1, description="pCN proposals per kept chain state (thinning)."
+    )
+    correlated_moves: int = Field(
+        2,
+        ge=1,
+        description="Times n_moves a level's chains move after a set of correlated "
+        "chains (1: never).",
     )
     n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
     n_components: int = Field(
@@ -259,9 +269,14 @@ class SplittingISSettings(SplittingSettings):
         """The pCN proposals per kept state in the moves at ``gamma``."""
         return self.n_moves if self.moves_at_gamma is None else self.moves_at_gamma
 
-    def tail_bound(self, n: int) -> int:
-        """The moves at ``gamma`` on ``n`` particles in all, and the final stage."""
-        return n * self.gamma_moves() + self.n_final
+    def tail_bound(self, n: int, correlated: bool = False) -> int:
+        """The moves at ``gamma`` on ``n`` particles in all, and the final stage.
+
+        ``correlated``: the moves at ``gamma`` taken ``correlated_moves`` times
+        more, as after correlated chains.
+        """
+        moves = self.gamma_moves() * (self.correlated_moves if correlated else 1)
+        return n * moves + self.n_final
 
 
 @register_estimator
@@ -356,12 +371,14 @@ class SplittingImportanceSampling(SubsetSimulation):
             with_hits = list(zip(state.all, state.sizes, strict=True))
             deepest = [levels_estimate(r, problem, n) for r, n in with_hits]
             combined = combined_levels(deepest, problem, sum(state.sizes))
+        s = self.settings
         moves = _moves_at_gamma(
             with_hits,
             state.current.n_stages,
             problem,
             context,
-            self.settings.gamma_moves(),
+            s.gamma_moves(),
+            s.correlated_moves if s.moves_adapt() else 1,
         )
         fitted = _fitted_proposal(moves, with_hits, problem, context, self.settings)
         n_evals = state.current.n_evals + sum(m.n_calls for m in moves)
@@ -407,16 +424,20 @@ def _moves_at_gamma(
     problem: RareEventProblem,
     context: EstimationContext,
     n_moves: int,
+    correlated_moves: int,
 ) -> list[MovedSet]:
     """Each replicate's chains moved once more at ``gamma``: the particles to fit.
 
     Each replicate ``(state, n)`` moves ``n`` states on stages of its own,
-    numbered from ``first_stage`` (after every replicate's levels) in turn.
+    numbered from ``first_stage`` (after every replicate's levels) in turn,
+    ``n_moves`` proposals per kept state (times ``correlated_moves`` after
+    correlated chains: :func:`~avrisk.rare.splitting_moves.moves_after`).
     """
     moves, stage = [], first_stage
     for r, n in with_hits:
+        per_state = moves_after(r.sets[-1], n_moves, correlated_moves)
         moves.append(
-            move_chains(r._replace(n_stages=stage), problem, context, n_moves, n)
+            move_chains(r._replace(n_stages=stage), problem, context, per_state, n)
         )
         stage = moves[-1].n_stages
     return moves

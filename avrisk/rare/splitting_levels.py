@@ -272,15 +272,38 @@ def level_cov_squared(values: FloatArray, threshold: float) -> float:
     Returns
     -------
     float
-        ``(1 - p) / (N p) (1 + gamma)`` with ``gamma = 2 sum_k (pairs_k / N)
-        rho(k)`` over the lags ``k`` within chains; 0 when ``p`` is 0 or 1.
+        ``(1 - p) / (N p) (1 + gamma)`` (:func:`chain_correlation`); 0 when
+        ``p`` is 0 or 1.
+    """
+    n = int(np.count_nonzero(~np.isnan(values)))
+    p = np.count_nonzero(values <= threshold) / n
+    if p in (0.0, 1.0):
+        return 0.0
+    return (1 - p) / (n * p) * chain_correlation(values, threshold)
+
+
+def chain_correlation(values: FloatArray, threshold: float) -> float:
+    """How many times the chains' correlation inflates the variance of a set's share.
+
+    Parameters
+    ----------
+    values : ndarray of shape (n_chains, max_length)
+        ``f`` by chain, NaN past each chain's end (:class:`ParticleSet`).
+    threshold : float
+
+    Returns
+    -------
+    float
+        ``max(1, 1 + gamma)``, ``gamma = 2 sum_k (pairs_k / N) rho(k)`` over
+        the lags ``k`` within chains, ``rho(k)`` the autocorrelation of the
+        indicator ``f <= threshold`` (Au & Beck); 1 when ``p`` is 0 or 1.
     """
     present = ~np.isnan(values)
     hits = values <= threshold
     n = int(present.sum())
     p = np.count_nonzero(hits) / n
     if p in (0.0, 1.0):
-        return 0.0
+        return 1.0
     variance = p * (1 - p)
     correlation = 0.0
     for lag in range(1, values.shape[1]):
@@ -289,7 +312,7 @@ def level_cov_squared(values: FloatArray, threshold: float) -> float:
         correlation += pairs / n * (both / pairs - p * p) / variance
     # chains of pCN states are positively correlated; a negative estimate is
     # noise, and would make the interval narrower than independent draws'
-    return (1 - p) / (n * p) * max(1.0, 1 + 2 * correlation)
+    return max(1.0, 1 + 2 * correlation)
 
 
 def _survivors(sets: Sequence[ParticleSet]) -> list[int]:

@@ -24,7 +24,16 @@ chain accepts in ``MAX_ROUNDS_WITHOUT_MOVE`` rounds in a row with ``beta``
 already at ``MIN_BETA`` (a step that barely moves: the set below the level has
 no volume, or ``f`` jumps) does the run stop with a
 :class:`~avrisk.rare.splitting_levels.SplittingError`. With ``n_moves > 1`` a
-chain keeps every ``n_moves``-th state only (thinning). For a seeded
+chain keeps every ``n_moves``-th state only (thinning). Where the chains that
+made the last set mixed slowly -- their states' correlation inflated the
+variance of its share of survivors more than ``CORRELATED`` times (Au & Beck's
+factor, :func:`~avrisk.rare.splitting_levels.chain_correlation`) -- the next
+set's chains take ``correlated_moves`` times as many proposals per kept state
+(:func:`moves_after`): a chain that barely leaves its seed repeats its seed's
+position, not the conditional law's spread, and the levels built on it lose
+the mass its seeds did not hold. On the exact suite's problems the factor
+stays below about 2.7; on ``highway_rare``, whose event is a thin ridge, it
+reaches 3-5 (BENCHMARKS.md). For a seeded
 (stochastic) ``f`` each proposal has its own seed: the chain moves on ``(x,
 seed)``, and a fresh seed is an independence proposal from its prior, so the
 move stays reversible.
@@ -60,7 +69,12 @@ import numpy as np
 from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.families.base import FloatArray
 from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem
-from avrisk.rare.splitting_levels import SplittingError, SplittingState
+from avrisk.rare.splitting_levels import (
+    ParticleSet,
+    SplittingError,
+    SplittingState,
+    chain_correlation,
+)
 
 #: Acceptance rate the pCN step ``beta`` is adapted towards.
 TARGET_ACCEPTANCE = 0.3
@@ -70,6 +84,9 @@ ADAPT_GAIN = 1.0
 MIN_BETA = 1e-3
 #: Rounds in a row in which no chain accepts before the run stops.
 MAX_ROUNDS_WITHOUT_MOVE = 10
+#: Variance inflation of a set's share by its chains' correlation beyond which
+#: the next set's chains move ``correlated_moves`` times more.
+CORRELATED = 3.0
 
 
 class MovedSet(NamedTuple):
@@ -133,6 +150,16 @@ def drawn_more(
         n_stages=first.n_stages + n_stages,
         n_failed=first.n_failed + n_failed,
     )
+
+
+def moves_after(last: ParticleSet, n_moves: int, correlated_moves: int) -> int:
+    """Proposals per kept state for the chains that start from ``last``'s survivors.
+
+    ``n_moves``, times ``correlated_moves`` where the chains that made
+    ``last`` were correlated beyond ``CORRELATED`` at its level (*Moves*).
+    """
+    inflation = chain_correlation(last.values, last.level)
+    return n_moves * (correlated_moves if inflation > CORRELATED else 1)
 
 
 def move_chains(

@@ -54,6 +54,15 @@ class SplittingSettings(EstimatorSettings):
         again, fresh, with twice its particles (*Regrowth* there): how far the
         run may adapt its calls to an event whose levels are harder to follow
         than the settings planned for.
+    correlated_moves : int, default=1
+        Times ``n_moves`` the chains of a level move when the set their seeds
+        come from was made by chains whose states are correlated, inflating
+        the variance of its share of survivors more than ``CORRELATED`` times
+        (*Moves* in :mod:`avrisk.rare.splitting_moves`): how far the run may
+        adapt its calls to chains that mix slowly. 1: never (subset
+        simulation's own default: its one move per state leaves chains that
+        correlated at every level; ``splitting_is`` takes 2). Taken only where
+        the run's bound with every level so moved stays within ``max_calls``.
     max_calls : int or None, default=None
         The most calls of ``f`` the run may make, regrowths included: a
         replicate is regrown only while the most the rest of the run can take
@@ -61,7 +70,12 @@ class SplittingSettings(EstimatorSettings):
         estimator's ``budget()`` is then the bound).
     """
 
-    OMIT_IF_DEFAULT = ("min_survivors", "plateau_draws", "max_calls")
+    OMIT_IF_DEFAULT = (
+        "min_survivors",
+        "plateau_draws",
+        "correlated_moves",
+        "max_calls",
+    )
 
     n_particles: int = Field(2000, ge=10, description="Particles per level N.")
     p0: float = Field(
@@ -97,6 +111,12 @@ class SplittingSettings(EstimatorSettings):
         description="Times a replicate that ran out of levels runs again with "
         "twice its particles.",
     )
+    correlated_moves: int = Field(
+        1,
+        ge=1,
+        description="Times n_moves a level's chains move after a set of correlated "
+        "chains (1: never).",
+    )
     max_calls: int | None = Field(
         None,
         ge=1,
@@ -131,31 +151,51 @@ class SplittingSettings(EstimatorSettings):
             )
         return self
 
-    def levels_bound(self, n: int) -> int:
+    def levels_bound(self, n: int, correlated: bool = False) -> int:
         """The most calls of one replicate's levels with ``n`` particles per level.
 
         ``n`` draws (``plateau_draws n`` on a plateau), then at most ``n
-        n_moves`` proposals per further set.
+        n_moves`` proposals per further set (``correlated``: times
+        ``correlated_moves``, every set moved as after correlated chains).
         """
-        return n * self.plateau_draws + n * (self.max_levels - 1) * self.n_moves
+        moves = self.n_moves * (self.correlated_moves if correlated else 1)
+        return n * self.plateau_draws + n * (self.max_levels - 1) * moves
 
-    def tail_bound(self, n: int) -> int:
+    def tail_bound(self, n: int, correlated: bool = False) -> int:
         """The most calls after the levels, given ``n`` particles at ``gamma``: none."""
         return 0
 
-    def bound(self, regrow: int) -> int:
+    def bound(self, regrow: int, correlated: bool = False) -> int:
         """The most calls of a run whose replicates are each regrown ``regrow`` times.
 
         The replicates share the ``N`` particles of a level, so they change no
         bound; each regrown ``regrow`` times runs ``2^(regrow + 1) - 1`` times
         its levels' bound and ends with ``2^regrow`` times its particles at
-        ``gamma``.
+        ``gamma``. ``correlated``: every set moved ``correlated_moves`` times
+        more.
         """
-        levels = self.levels_bound(self.n_particles) * (2 ** (regrow + 1) - 1)
-        return levels + self.tail_bound(self.n_particles * 2**regrow)
+        levels = self.levels_bound(self.n_particles, correlated)
+        levels *= 2 ** (regrow + 1) - 1
+        return levels + self.tail_bound(self.n_particles * 2**regrow, correlated)
+
+    def moves_adapt(self) -> bool:
+        """Whether levels after correlated chains move more (``correlated_moves``).
+
+        Only where the run's bound without regrowth, every set so moved, stays
+        within ``max_calls``: a cap the plan already fills leaves no room.
+        """
+        return self.correlated_moves > 1 and (
+            self.max_calls is None or self.bound(0, correlated=True) <= self.max_calls
+        )
 
     def one_replicate(self, n_particles: int) -> SplittingSettings:
         """The settings of one replicate's levels, with ``n_particles`` per level."""
         return self.model_copy(
-            update={"n_particles": n_particles, "replicates": 1, "regrow": 0}
+            update={
+                "n_particles": n_particles,
+                "replicates": 1,
+                "regrow": 0,
+                # decided for the whole run, whose bound the cap is on
+                "correlated_moves": self.correlated_moves if self.moves_adapt() else 1,
+            }
         )

@@ -131,13 +131,15 @@ def test_the_default_method_is_splitting_is_its_plan_a_bound_and_its_tables_show
     # max_levels=12 sets of 100 (the first of 800 on a plateau, two moves per
     # state after it), the moves at gamma and the final stage: a bound; 7 times
     # the sets (each replicate regrown twice, to 2 and 4 times its particles)
-    # and 4 x 100 states moved at gamma if its levels run out
+    # and 4 x 100 states moved at gamma if its levels run out, every move twice
+    # over after correlated chains: (800 + 11 x 400) x 7 + 4 x 400 + 100
     assert (
         "plan: splitting + IS (subset simulation, 100 particles per level, p0 0.1, "
         "2 moves per state, regrown up to 2x, then IS 100 (4 components, "
         "defensive 0.1)): at most 3,300 rollouts (fewer if the levels reach "
-        "gamma sooner; up to 21,900 if "
-        "levels that run out are run again, larger); samples take at most about"
+        "gamma sooner; up to 38,100 if "
+        "levels that run out are run again, larger, or slowly mixing chains move "
+        "more); samples take at most about"
     ) in err
     # its first batch: the first replicate's first set, 50 particles
     assert "rollouts/s on the first 50: at most about" in err
@@ -300,9 +302,14 @@ def test_compare_defaults_finish_in_minutes():
     moved = s.n_moves * s.n_particles  # proposals a set after the first
     assert s.n_particles + 3 * moved + moved + s.n_final == 28_000
     # the bound: 12 sets (the first of 8 N on a plateau), 7 times over where each
-    # replicate runs out of levels twice and is regrown, 4 N states moved at gamma
-    levels = 8 * s.n_particles + 11 * moved
-    assert splitting.budget() == 7 * levels + 4 * moved + s.n_final == 446_000
+    # replicate runs out of levels twice and is regrown, 4 N states moved at
+    # gamma, every set after the first moved twice over after correlated chains
+    assert s.correlated_moves == 2
+    levels = 8 * s.n_particles + 11 * 2 * moved
+    assert splitting.budget() == 7 * levels + 4 * 2 * moved + s.n_final == 770_000
+    assert splitting.planned_budget() == 8 * s.n_particles + 11 * moved + moved + (
+        s.n_final
+    )
 
 
 def test_ctrl_c_says_how_to_resume_and_the_resumed_run_says_what_it_reused(

@@ -18,8 +18,13 @@ from avrisk.rare import (
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem
 from avrisk.rare.splitting import SubsetSimulation
-from avrisk.rare.splitting_levels import level_cov_squared, next_level
-from avrisk.rare.splitting_moves import MAX_ROUNDS_WITHOUT_MOVE
+from avrisk.rare.splitting_levels import (
+    ParticleSet,
+    chain_correlation,
+    level_cov_squared,
+    next_level,
+)
+from avrisk.rare.splitting_moves import CORRELATED, MAX_ROUNDS_WITHOUT_MOVE, moves_after
 from avrisk.rare.splitting_settings import SplittingSettings
 from avrisk.rare.trust import estimate_trust
 from avrisk.testing import (
@@ -391,6 +396,7 @@ def test_protocol_budget_progress_checkpoint_and_diagnostics():
     assert table.lines == ("level",) and table.bars == "survivors"
     assert table.column("level") == est.details["levels"]
     assert table.column("acceptance")[0] is None
+    assert table.column("moves")[0] == 0 and set(table.column("moves")[1:]) == {2}
     assert SubsetSimulation.diagnostics({"history": []}) == []
 
 
@@ -426,3 +432,49 @@ def test_subset_simulation_on_a_near_miss_says_caution_where_replicates_say_so()
     est, label = trust(6)  # regrown three times: the luckier of several tries
     assert est.details["replicates_regrown"] == 3
     assert "ran out before larger ones reached gamma" in str(label)
+
+
+def test_chains_correlated_beyond_the_limit_make_the_next_level_move_more():
+    independent = ParticleSet(np.arange(100.0).reshape(100, 1), 9.5)
+    assert chain_correlation(independent.values, independent.level) == 1.0
+    assert moves_after(independent, 2, 3) == 2
+    stuck = ParticleSet(np.repeat(np.arange(10.0), 10).reshape(10, 10), 0.5)
+    assert chain_correlation(stuck.values, stuck.level) == pytest.approx(10.0)
+    assert CORRELATED < 10.0
+    assert moves_after(stuck, 2, 3) == 6
+    assert moves_after(stuck, 2, 1) == 2
+
+
+def test_more_moves_only_where_the_cap_on_calls_leaves_room_for_them():
+    assert not SplittingSettings().moves_adapt()  # subset simulation's own default
+    free = SplittingSettings(n_particles=1000, correlated_moves=2)
+    assert free.moves_adapt()
+    assert free.bound(0, correlated=True) > free.bound(0)
+    assert SubsetSimulation(free).budget() == free.bound(free.regrow, correlated=True)
+    full = SplittingSettings(
+        n_particles=1000, correlated_moves=2, max_calls=free.bound(0)
+    )
+    assert not full.moves_adapt()
+    assert full.one_replicate(500).correlated_moves == 1
+    assert "correlated_moves" not in SplittingSettings().recorded()  # as before it
+
+
+def test_slowly_mixing_chains_move_more_and_p_is_found_the_same():
+    problem = gaussian_linear_problem(2, p=1e-5)
+    runs = {
+        k: subset_simulation(
+            problem.f,
+            problem.base,
+            problem.gamma,
+            n_particles=1000,
+            correlated_moves=k,
+            seed=3,
+        )
+        for k in (1, 3)
+    }
+    moves = {k: {h["moves"] for h in e.to_dict()["history"]} for k, e in runs.items()}
+    assert moves[1] == {0, 1}
+    assert 3 in moves[3]  # one move per state leaves the chains correlated
+    assert runs[3].n_evals > runs[1].n_evals
+    for e in runs.values():
+        assert abs(e.p - problem.p_exact) < 4 * e.stderr

@@ -82,7 +82,8 @@ def test_finds_p_of_exact_problems_within_its_stderr(problem):
 
 def test_more_moves_at_gamma_cost_their_calls_and_leave_the_levels_alone():
     problem = gaussian_linear_problem(10, p=1e-6)
-    one, three = sis(problem, seed=2), sis(problem, seed=2, moves_at_gamma=3)
+    fixed = {"seed": 2, "correlated_moves": 1}  # moves at gamma as set, no more
+    one, three = sis(problem, **fixed), sis(problem, **fixed, moves_at_gamma=3)
     assert one.history == three.history  # the same levels, draw for draw
     lasts = [h for h in one.history if h.level == problem.gamma]
     moved = sum(1000 - h.n_survivors for h in lasts)  # states moved at gamma
@@ -364,15 +365,16 @@ def test_settings_budget_and_description():
     plan = dict(n_particles=400, max_levels=6, n_final=900)
     method = get_estimator("splitting_is", **plan, regrow=0)
     # 8 N draws on a plateau, 2 proposals per state at 5 further levels and at
-    # gamma, then the final draws
-    assert method.budget() == 400 * (8 + 5 * 2) + 400 * 2 + 900
+    # gamma, then the final draws; twice the moves after correlated chains
+    assert method.planned_budget() == 400 * (8 + 5 * 2) + 400 * 2 + 900
+    assert method.budget() == 400 * (8 + 5 * 2 * 2) + 400 * 2 * 2 + 900
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, 2 moves per state, "
         "then IS 900 (4 components, defensive 0.1)"
     )
     # each replicate regrown twice: 1 + 2 + 4 times the levels, 4 times at gamma
     regrown = get_estimator("splitting_is", **plan)
-    assert regrown.budget() == 7 * 400 * (8 + 5 * 2) + 4 * 400 * 2 + 900
+    assert regrown.budget() == 7 * 400 * (8 + 5 * 2 * 2) + 4 * 400 * 2 * 2 + 900
     assert "regrown up to 2x" in regrown.describe()
     capped = get_estimator("splitting_is", **plan, max_calls=10_000)
     assert capped.budget() == 10_000
@@ -491,12 +493,13 @@ def test_a_replicate_whose_levels_run_out_is_left_out_with_a_caution():
 def _decoy_run(seed, **options):
     """splitting_is on a near-miss mechanism that never ends in the event.
 
-    One move per state, so that the seeds below follow the decoy as described.
+    One move per state, never more (``correlated_moves=1``), so that the seeds
+    below follow the decoy as described.
     """
     problem = decoy_problem(0.03)
     est = splitting_is(
         problem.f, problem.base, problem.gamma, seed=seed, n_particles=400,
-        n_final=5000, n_moves=1, **options,
+        n_final=5000, n_moves=1, correlated_moves=1, **options,
     )  # fmt: skip
     return problem, est, trust_of(est)
 
@@ -515,7 +518,9 @@ def test_a_replicate_that_runs_out_of_levels_runs_again_twice_as_large():
     assert est.details["replicate_particles"] == [200, 800]
     assert abs(est.p - problem.p_exact) < 3 * est.stderr
     assert "did not reach gamma" not in str(trust)  # both replicates did
-    planned = get_estimator("splitting_is", n_particles=400, n_final=5000, n_moves=1)
+    planned = get_estimator(
+        "splitting_is", n_particles=400, n_final=5000, n_moves=1, correlated_moves=1
+    )
     assert est.n_evals <= planned.budget()
     # without regrowth the same seed rests on one replicate; the decoy it
     # followed holds about 1e-12 at its deepest level, far below the
@@ -528,7 +533,12 @@ def test_a_replicate_that_runs_out_of_levels_runs_again_twice_as_large():
     assert "did not reach gamma" not in str(plain_trust) and not plain_trust.ok
     # a cap that holds only the plan leaves no room to regrow
     cap = get_estimator(
-        "splitting_is", n_particles=400, n_final=5000, n_moves=1, regrow=0
+        "splitting_is",
+        n_particles=400,
+        n_final=5000,
+        n_moves=1,
+        correlated_moves=1,
+        regrow=0,
     )
     _, capped, _ = _decoy_run(1, max_calls=cap.budget())
     assert capped.details["replicates_regrown"] == 0
