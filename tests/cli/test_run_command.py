@@ -150,9 +150,9 @@ def test_every_registered_method_is_offered_and_foreign_settings_refused(tmp_pat
         "error: --n-iter, --rho: not settings of method 'splitting_is', the default "
         "(--n-iter, --rho belong to ce, defensive, mixture: choose one with "
         "--method); its settings: n_particles, p0, p0_max, max_levels, n_moves, "
-        "initial_beta, min_survivors, plateau_draws, replicates, regrow, max_calls, "
-        "n_final, n_components, defensive, min_weight, shift, fit_variances, "
-        "moves_at_gamma"
+        "initial_beta, min_survivors, plateau_draws, replicates, regrow, "
+        "correlated_moves, max_calls, n_final, n_components, defensive, "
+        "min_weight, shift, fit_variances, moves_at_gamma"
     )
     by_name = invoke(
         "run", "highway_idm", "--out", out, "--method", "ce", "--set", "n_particles=9"
