@@ -378,9 +378,9 @@ class SplittingImportanceSampling(SubsetSimulation):
             problem,
             context,
             s.gamma_moves(),
-            s.correlated_moves if s.moves_adapt() else 1,
+            s.correlated_factor(),
         )
-        fitted = _fitted_proposal(moves, with_hits, problem, context, self.settings)
+        fitted = _fitted_proposal(moves, with_hits, problem, context, s)
         n_evals = state.current.n_evals + sum(m.n_calls for m in moves)
         stage, sampled, from_levels = importance_stage(
             fitted,

@@ -188,6 +188,10 @@ class SplittingSettings(EstimatorSettings):
             self.max_calls is None or self.bound(0, correlated=True) <= self.max_calls
         )
 
+    def correlated_factor(self) -> int:
+        """``correlated_moves`` where :meth:`moves_adapt` allows it, else 1."""
+        return self.correlated_moves if self.moves_adapt() else 1
+
     def one_replicate(self, n_particles: int) -> SplittingSettings:
         """The settings of one replicate's levels, with ``n_particles`` per level."""
         return self.model_copy(
@@ -196,6 +200,6 @@ class SplittingSettings(EstimatorSettings):
                 "replicates": 1,
                 "regrow": 0,
                 # decided for the whole run, whose bound the cap is on
-                "correlated_moves": self.correlated_moves if self.moves_adapt() else 1,
+                "correlated_moves": self.correlated_factor(),
             }
         )
