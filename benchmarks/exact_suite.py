@@ -173,6 +173,8 @@ def _run_engine(problem: Any, method: str, seed: int, settings: dict) -> dict:
         "reasons": list(trust.reasons),
         # which of its estimates answered, where a method has two
         "answer": (estimate.details or {}).get("answer"),
+        # the check by rays where X is low-dimensional (avrisk.rare.directional_audit)
+        "rays": (estimate.details or {}).get("directional"),
         # whether splitting_is's proposal fitted variances too
         "fitted_variances": (estimate.details or {}).get("fitted_variances"),
     }

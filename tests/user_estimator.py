@@ -61,6 +61,7 @@ class PlainMonteCarlo:
     weighted = False
     decomposable = True
     budget_is_bound = False
+    searches = False  # every sample is a draw of P0
 
     def __init__(self, settings: PlainSettings) -> None:
         self.settings = settings

@@ -157,9 +157,9 @@ def _exact_problems(
     """Naive MC and CE on each exact problem, ``budget`` calls of ``f`` each.
 
     CE takes 8 iterations of ``budget / 25`` samples (at least 100) and its
-    final stage the rest, with no audit (:mod:`avrisk.rare.proposal_audit`):
-    the part compares precision at equal calls, and each problem has one
-    failure region.
+    final stage the rest, with no audit (:mod:`avrisk.rare.proposal_audit`,
+    :mod:`avrisk.rare.directional_audit`): the part compares precision at
+    equal calls, and each problem has one failure region.
     """
     problems = [beta_sum_problem(6, p=1e-5), gaussian_linear_problem(100, p=1e-6)]
     n_iter, n_per_iter = 8, max(100, budget // 25)
@@ -193,6 +193,7 @@ def _cross_entropy(
             seed=seed,
             callback=lambda info, state: monitor.status(method.progress(info)),
             on_batch=lambda batch: monitor.advance(len(batch.ids), replayed=False),
+            directional_audit=False,
         )
 
 

@@ -14,6 +14,7 @@ from typing import Any
 from avrisk.pipeline import RunDirectory
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.results import jsonable
+from avrisk.rare.trust import estimate_diagnostics
 from avrisk.report.answer import Headline, headline, search_sentence, threshold_trust
 from avrisk.report.plots import comparison_rows
 from avrisk.scenario import ScenarioSpec
@@ -140,7 +141,9 @@ def result_document(
                 else search.to_dict() | {"sentence": search_sentence(search)},
                 "by_gamma": by_gamma,
                 "mechanisms": mechanisms(summary),
-                "diagnostics": [t.to_dict() for t in estimator.diagnostics(est)],
+                "diagnostics": [
+                    t.to_dict() for t in estimate_diagnostics(estimator, est)
+                ],
             }
         )
     doc = {

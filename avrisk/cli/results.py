@@ -22,6 +22,7 @@ from avrisk.cli.common import err_console, out_console
 from avrisk.cli.tables import add_columns, compact_table
 from avrisk.pipeline.files import json_text
 from avrisk.rare.estimator import estimator_class
+from avrisk.rare.trust import estimate_diagnostics
 from avrisk.report.answer import run_trust, search_sentence, threshold_trust
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, table_cells
 from avrisk.scenario import ScenarioSpec
@@ -88,7 +89,7 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
 def print_diagnostic_tables(label: str, summary: dict[str, Any]) -> None:
     """The diagnostic tables of a run's estimator that are not drawn, as tables."""
     estimator = estimator_class(summary["method"])
-    for diagnostic in estimator.diagnostics(summary["estimate"]):
+    for diagnostic in estimate_diagnostics(estimator, summary["estimate"]):
         if diagnostic.drawn:
             continue
         table = compact_table(f"{label}: {diagnostic.title}")

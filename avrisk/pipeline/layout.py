@@ -32,7 +32,7 @@ CHECKPOINT_FILE = "checkpoint.json"
 CHUNKS_DIR = "chunks"
 LOCK_FILE = ".lock"
 
-_CHUNK_NAME = re.compile(r"stage(\d{4})-chunk(\d{6})\.parquet")
+_CHUNK_NAME = re.compile(r"stage(\d{4,7})-chunk(\d{6})\.parquet")
 
 
 class RunDirectoryError(ValueError):

@@ -272,7 +272,9 @@ def run_estimation(
                 return run_dir.summary()
             clock = _Clock()
             start = time.perf_counter()
-            monitor.start(settings.total_rollouts, settings.estimator.describe())
+            # the plan, and the check by rays a search takes where X is small
+            total = planned_budget(settings.estimator, base.dim)
+            monitor.start(total, settings.estimator.describe())
             if replay_check is not None:
                 check_repeatable(run_dir, base, replay_check, settings.seed)
             timed = _TimedEvaluator(evaluator or LocalEvaluator(), clock)

@@ -46,6 +46,7 @@ def estimate(
     cache: BatchCache | None = None,
     evaluator: Evaluator | None = None,
     stopping: StoppingRule | None = None,
+    directional_audit: bool = True,
     **overrides: Any,
 ) -> Estimate:
     """Estimate ``P0(f(X) <= gamma)`` with the estimator ``method``.
@@ -94,6 +95,12 @@ def estimate(
     stopping : StoppingRule, optional
         Ends a sampling stage early (:mod:`avrisk.rare.stopping`); the
         result's ``stopped_by`` says what ended it.
+    directional_audit : bool, default=True
+        Whether a method that searches is checked by random rays where ``X``
+        has at most 8 dimensions (:mod:`avrisk.rare.directional_audit`:
+        ``details["directional"]``, its 6,144 calls in ``n_evals``; a failure
+        region the search missed makes the trust rule say caution). False
+        compares methods at exactly their own calls.
     **overrides
         The method's settings by name (CE: ``rho``, ``n_per_iter``,
         ``n_iter``, ``n_final`` ...; splitting: ``n_particles``, ``p0`` ...),
@@ -152,4 +159,10 @@ def estimate(
         estimator = method
     problem = RareEventProblem(base, f, gamma, threshold_list(gamma_test), batch_size)
     context = EstimationContext(seed, evaluator, on_batch, cache, stopping=stopping)
-    return run_estimator(estimator, problem, context, callback=callback)
+    return run_estimator(
+        estimator,
+        problem,
+        context,
+        callback=callback,
+        directional_audit=directional_audit,
+    )

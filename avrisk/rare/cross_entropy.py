@@ -199,6 +199,7 @@ class CrossEntropy:
     weighted = True
     decomposable = True
     budget_is_bound = True  # the audit's levels may reach gamma early
+    searches = True
 
     def __init__(self, settings: CESettings) -> None:
         self.settings = settings

@@ -29,11 +29,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any, ClassVar, Generic, Protocol, Self, TypeVar
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from avrisk.rare.diagnostic_table import DiagnosticTable
+from avrisk.rare.directional_audit import audit_calls, with_directional_audit
 from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.problem import RareEventProblem
 from avrisk.rare.results import Estimate, SearchConvergence
@@ -152,58 +154,6 @@ class EstimatorSettings(BaseModel):
         return out
 
 
-@dataclass(frozen=True)
-class DiagnosticTable:
-    """Diagnostics an estimator contributes to reports (engine-neutral).
-
-    A report draws ``lines`` against the first column (a top panel, with the
-    threshold ``gamma`` marked) and ``bars`` below it; a table with neither
-    (a summary rather than steps) it shows as a table.
-
-    Attributes
-    ----------
-    title : str
-    columns : tuple of str
-        Column names, the step index (or what else a row stands for) first;
-        units in brackets.
-    rows : list of tuple
-        One row per step (numbers, ``(low, high)`` intervals, or None).
-    lines : tuple of str
-        Columns drawn as lines on the top panel (in the unit of ``f``).
-    bars : str or None
-        A column drawn as bars on the bottom panel (counts).
-    note : str
-        What it shows, in plain words, for a reader who does not know the
-        method (a report prints it under the table or plot).
-    """
-
-    title: str
-    columns: tuple[str, ...]
-    rows: list[tuple[Any, ...]]
-    lines: tuple[str, ...] = ()
-    bars: str | None = None
-    note: str = ""
-
-    @property
-    def drawn(self) -> bool:
-        """Whether a report draws it (it has ``lines`` or ``bars``)."""
-        return bool(self.lines or self.bars)
-
-    def column(self, name: str) -> list[Any]:
-        """The values of one column, in step order."""
-        j = self.columns.index(name)
-        return [row[j] for row in self.rows]
-
-    def to_dict(self) -> dict[str, Any]:
-        """``title``, ``columns``, ``rows`` (lists) and ``note``: for JSON."""
-        return {
-            "title": self.title,
-            "columns": list(self.columns),
-            "rows": [list(row) for row in self.rows],
-            "note": self.note,
-        }
-
-
 class Estimator(Protocol, Generic[State, Info]):
     """What every estimator implements (see the module docstring).
 
@@ -226,6 +176,12 @@ class Estimator(Protocol, Generic[State, Info]):
         Whether :meth:`budget` is an upper bound rather than the calls it
         makes (subset simulation's levels usually reach ``gamma`` before
         ``max_levels``): a plan then says "at most".
+    searches : bool
+        Whether it searches for the event, and so may miss a failure region
+        its search never reached: :func:`run_estimator` then checks it by
+        rays where ``X`` is low-dimensional
+        (:mod:`avrisk.rare.directional_audit`). An estimator that does not
+        say is taken to search; naive sampling does not.
     """
 
     name: ClassVar[str]
@@ -234,6 +190,7 @@ class Estimator(Protocol, Generic[State, Info]):
     weighted: ClassVar[bool]
     decomposable: ClassVar[bool]
     budget_is_bound: ClassVar[bool]
+    searches: ClassVar[bool]
     settings: EstimatorSettings
 
     def budget(self) -> int:
@@ -354,15 +311,17 @@ def get_estimator(name: str, **settings: Any) -> Estimator[Any, Any]:
         raise ValueError(f"estimator {name!r}: {err}") from None
 
 
-def planned_budget(estimator: Estimator[Any, Any]) -> int:
+def planned_budget(estimator: Estimator[Any, Any], dim: int | None = None) -> int:
     """Calls of ``f`` the estimator plans before it grows its budget.
 
     An estimator that may grow its budget as the event turns out harder
     (subset simulation's regrown replicates) says what it plans without
     growing by a ``planned_budget()`` method; for the others it is
-    :meth:`Estimator.budget`.
+    :meth:`Estimator.budget`. With ``dim`` (of ``X``), the check by rays
+    that :func:`run_estimator` adds in low dimension is counted too.
     """
-    return int(getattr(estimator, "planned_budget", estimator.budget)())
+    planned = int(getattr(estimator, "planned_budget", estimator.budget)())
+    return planned + (0 if dim is None else audit_calls(estimator, dim))
 
 
 def run_estimator(
@@ -371,6 +330,7 @@ def run_estimator(
     context: EstimationContext,
     *,
     callback: Callable[[Info, Any], None] | None = None,
+    directional_audit: bool = True,
 ) -> Estimate:
     """Run any estimator to its estimate (the loop of the module docstring).
 
@@ -381,11 +341,19 @@ def run_estimator(
     context : EstimationContext
     callback : callable, optional
         ``callback(info, state)`` after every step (progress, checkpoints).
+    directional_audit : bool, default=True
+        Whether an estimator that searches is checked by rays where ``X`` is
+        low-dimensional (below); False compares estimators at exactly their
+        own calls.
 
     Returns
     -------
     Estimate
-        With the steps' infos as ``history`` and ``wall_time_s`` measured here.
+        With the steps' infos as ``history`` and ``wall_time_s`` measured here;
+        for an estimator that searches, on ``X`` of at most
+        :data:`~avrisk.rare.directional_audit.MAX_DIM` dimensions, checked by
+        rays after its own stages (``details["directional"]``, its calls in
+        ``n_evals``; the estimate itself is unchanged).
     """
     start = time.perf_counter()
     state = estimator.init(problem)
@@ -396,6 +364,8 @@ def run_estimator(
         if callback is not None:
             callback(info, state)
     estimate = estimator.finalize(state, problem, context)
+    if directional_audit:
+        estimate = with_directional_audit(estimator, estimate, problem, context)
     return replace(
         estimate, history=tuple(history), wall_time_s=time.perf_counter() - start
     )

@@ -163,6 +163,7 @@ class MixtureCrossEntropy:
     weighted = True
     decomposable = True
     budget_is_bound = True  # the audit's levels may reach gamma early
+    searches = True
 
     def __init__(self, settings: MixtureSettings) -> None:
         self.settings = settings

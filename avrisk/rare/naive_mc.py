@@ -58,6 +58,7 @@ class NaiveMC:
     weighted = False
     decomposable = True
     budget_is_bound = False
+    searches = False  # every draw is of P0: no region can be left out
 
     def __init__(self, settings: NaiveSettings) -> None:
         self.settings = settings

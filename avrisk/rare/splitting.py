@@ -256,6 +256,7 @@ class SubsetSimulation:
     Settings: type[SplittingSettings] = SplittingSettings
     weighted = False
     budget_is_bound = True  # its levels may reach gamma before max_levels
+    searches = True
 
     def __init__(self, settings: SplittingSettings) -> None:
         self.settings = settings

@@ -20,10 +20,19 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from avrisk.rare.directional_audit import directional_doubts, directional_table
+from avrisk.rare.estimator import DiagnosticTable
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 
-__all__ = ["GENERIC", "Trust", "Wording", "estimate_trust", "trust_at"]
+__all__ = [
+    "GENERIC",
+    "Trust",
+    "Wording",
+    "estimate_diagnostics",
+    "estimate_trust",
+    "trust_at",
+]
 
 
 @dataclass(frozen=True)
@@ -159,7 +168,9 @@ def estimate_trust(
     -------
     Trust
         The search's failure to converge first, then the estimator's own
-        doubts, then :func:`trust_at`'s reasons.
+        doubts, then the check by rays
+        (:func:`~avrisk.rare.directional_audit.directional_doubts`), then
+        :func:`trust_at`'s reasons.
     """
     gamma = threshold["gamma"]
     reasons = []
@@ -167,5 +178,17 @@ def estimate_trust(
     if search is not None and not search.converged:
         reasons.append(search.sentence(wording.measure, wording.unit))
     reasons.extend(estimator.doubts(estimate, gamma))
+    reasons.extend(directional_doubts(estimate, gamma))
     reasons.extend(trust_at(threshold, estimator.weighted, wording).reasons)
     return Trust(tuple(reasons))
+
+
+def estimate_diagnostics(
+    estimator: Any, estimate: Mapping[str, Any]
+) -> list[DiagnosticTable]:
+    """The tables behind the rule: the estimator's own, then the check by rays.
+
+    ``estimate`` is a summary's (``Estimate.to_dict()``); the check's table is
+    there only where it ran (:func:`~avrisk.rare.directional_audit.directional_table`).
+    """
+    return [*estimator.diagnostics(estimate), *directional_table(dict(estimate))]

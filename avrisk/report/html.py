@@ -28,6 +28,7 @@ from avrisk.pipeline.samples import BOOKKEEPING, DENSITIES
 from avrisk.pipeline.store import RunDirectory
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS
+from avrisk.rare.trust import estimate_diagnostics
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 from avrisk.report.answer import (
     headline,
@@ -312,7 +313,7 @@ def _run_views(
         summary = run_dir.summary()
         estimator = estimator_class(summary["method"])
         images, tables = [], []
-        for j, table in enumerate(estimator.diagnostics(summary["estimate"])):
+        for j, table in enumerate(estimate_diagnostics(estimator, summary["estimate"])):
             if not table.drawn:
                 tables.append(
                     {

@@ -41,8 +41,10 @@ def run(path, f=PROBLEM.f):
 
 
 def expected_rows(summary):
-    """The run's samples: CE's stages, then its audit's (after the final stage)."""
-    return 2 * 2000 + 20_000 + summary["estimate"]["details"]["audit"]["n_calls"]
+    """The run's samples: CE's stages, then its audit's and its rays' (after them)."""
+    details = summary["estimate"]["details"]
+    rays = details["directional"]["n_calls"]  # X in two dimensions
+    return 2 * 2000 + 20_000 + details["audit"]["n_calls"] + rays
 
 
 def estimate(summary):

@@ -63,7 +63,10 @@ def test_a_run_leaves_config_samples_checkpoint_and_a_versioned_summary(tmp_path
     est = summary["estimate"]
     assert abs(est["p"] - PROBLEM.p_exact) < 5 * est["stderr"]
     assert [g["gamma"] for g in est["by_gamma"]] == [0.0, 0.5]
-    audit = est["details"]["audit"]["n_calls"]  # CE's check, after its stages
+    # CE's check after its stages, and the rays a search takes in low dimension
+    audit = (
+        est["details"]["audit"]["n_calls"] + est["details"]["directional"]["n_calls"]
+    )
     assert summary["timing"]["rollouts_evaluated"] == 4 * 2000 + 20_000 + audit
     table = pq.read_table(tmp_path / "run" / "samples.parquet")
     assert table.num_rows == 4 * 2000 + 20_000 + audit

@@ -142,11 +142,13 @@ def test_estimate_counts_every_call_of_f_and_serialises_to_json():
         batch_size=128,
         gamma_test=[0.5, -0.5],
     )
-    # the search, the final stage, and the audit's subset simulation after them
+    # the search, the final stage, the audit's subset simulation after them,
+    # and (X in one dimension) the check by rays
     audit = est.details["audit"]
     assert audit["particles"] == 20  # the fewest: 1,000 final draws / 50
     assert audit["reached"] and 0 < audit["n_calls"] <= audit_bound(20)
-    assert est.n_evals == sum(calls) == 3 * 500 + 1000 + audit["n_calls"]
+    rays = est.details["directional"]["n_calls"]
+    assert est.n_evals == sum(calls) == 3 * 500 + 1000 + audit["n_calls"] + rays
     assert max(calls) <= 128
     out = json.loads(json.dumps(est.to_dict()))
     assert [g["gamma"] for g in out["by_gamma"]] == [0.0, 0.5, -0.5]

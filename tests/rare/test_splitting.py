@@ -15,6 +15,7 @@ from avrisk.rare import (
     run_estimator,
     subset_simulation,
 )
+from avrisk.rare.directional_audit import audit_calls
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem
 from avrisk.rare.splitting import SubsetSimulation
@@ -39,8 +40,9 @@ NORMAL_1D = FixedCovNormal(np.zeros(1), cov=np.eye(1))
 
 
 #: One replicate's levels, never regrown: the mechanics the tests below check
-#: (the replicates have tests of their own).
-ONE = {"replicates": 1, "regrow": 0}
+#: (the replicates have tests of their own, and so has the check by rays that
+#: a run adds in low dimension, tests/rare/test_directional_audit.py).
+ONE = {"replicates": 1, "regrow": 0, "directional_audit": False}
 
 
 def one_replicate(f, base, gamma, **kw):
@@ -376,7 +378,9 @@ def test_settings_are_validated_by_name():
 
 
 def test_protocol_budget_progress_checkpoint_and_diagnostics():
-    method = get_estimator("splitting", n_particles=400, max_levels=6, n_moves=2, **ONE)
+    method = get_estimator(
+        "splitting", n_particles=400, max_levels=6, n_moves=2, replicates=1, regrow=0
+    )
     assert method.budget() == 400 * (8 + 5 * 2)  # 8 N draws on a plateau
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, 2 moves per state"
@@ -387,7 +391,9 @@ def test_protocol_budget_progress_checkpoint_and_diagnostics():
     est = run_estimator(
         method, rp, EstimationContext(seed=3), callback=lambda i, s: steps.append(s)
     )
-    assert est.n_evals <= method.budget()
+    # its own calls within its budget, and the rays a run adds in low dimension
+    assert est.n_evals <= method.budget() + audit_calls(method, rp.base.dim)
+    assert est.details["directional"]["n_calls"] == audit_calls(method, 2) > 0
     assert method.progress(est.history[0]).endswith("independent draws")
     assert "accepted" in method.progress(est.history[1])
     record = method.checkpoint(steps[-1], est.history)

@@ -73,7 +73,8 @@ def test_finds_p_of_exact_problems_within_its_stderr(problem):
     assert [h.replicate for h in lasts] == [0, 1]
     per_state = SplittingISSettings().gamma_moves()
     moves = per_state * sum(1000 - h.n_survivors for h in lasts)
-    assert est.n_evals == est.history[-1].n_evals + moves + 5000
+    rays = est.details.get("directional", {}).get("n_calls", 0)  # X in d <= 8
+    assert est.n_evals == est.history[-1].n_evals + moves + 5000 + rays
     assert not est.details["replicates_disagree"]
     assert est.main.pareto_k < 0.7
     levels = est.details["splitting"][str(problem.gamma)]
@@ -445,8 +446,11 @@ def test_a_plateau_nothing_leaves_gives_the_levels_bound():
         lambda x: np.where(x[:, 0] > 6.0, -1.0, 7.0), base, 0.0, n_particles=500
     )
     assert est.method == "splitting_is" and est.details["bound_only"]
-    # two replicates of 250 particles, each of 2,000 draws, 1,750 counted
-    assert est.p == 0.0 and est.n_evals == 4000
+    # two replicates of 250 particles, each of 2,000 draws, 1,750 counted; then
+    # the rays (X in two dimensions), which reach x_0 > 6 but not above the bound
+    rays = est.details["directional"]
+    assert est.p == 0.0 and est.n_evals == 4000 + rays["n_calls"]
+    assert rays["rays_in_event"] > 0 and not rays["doubt"]
     assert est.ci == (0.0, pytest.approx(-np.expm1(np.log(0.025) / 1750)))
 
 

@@ -83,9 +83,10 @@ def test_replaying_recorded_chunks_reproduces_the_run_without_evaluating_them():
     )
     assert resumed.p == full.p and resumed.stderr == full.stderr
     assert resumed.history == full.history and resumed.details == full.details
-    # stages 1 and 2 were not re-run; the rest and the audit after them were
+    # stages 1 and 2 were not re-run; the rest, the audit and the rays were
     audit_calls = full.details["audit"]["n_calls"]
-    assert sum(evaluated) == 2 * 3000 + 20_000 + audit_calls
+    rays = full.details["directional"]["n_calls"]
+    assert sum(evaluated) == 2 * 3000 + 20_000 + audit_calls + rays
     assert first.rows == 0
 
 
