@@ -125,3 +125,20 @@ def test_the_rays_run_only_for_searches_in_low_dimension():
         get_estimator("naive", n_final=1000), rare(small), EstimationContext()
     )
     assert est.n_evals == 1000 and "directional" not in (est.details or {})
+
+
+def test_points_far_out_where_f_fails_count_safe_and_never_stop_the_run():
+    problem = suite_problem("kregions_k1_d2_p1e-03")
+
+    def f(x):  # fails beyond radius 5 of P0's centre, as a simulator may
+        bad = np.linalg.norm(x, axis=1) > 5.0
+        return {"f": np.where(bad, np.nan, problem.f(x)), "status": bad.astype(np.int8)}
+
+    est = run_estimator(
+        get_estimator("splitting", n_particles=500),
+        RareEventProblem(problem.base, f, problem.gamma),
+        EstimationContext(seed=2),
+    )
+    record = est.details["directional"]
+    assert record["n_failed"] > 0.2 * record["n_calls"]  # far above the run's 1%
+    assert not record["doubt"] and 0 < record["p"] < 2 * problem.p_exact
