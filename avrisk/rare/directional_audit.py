@@ -29,13 +29,14 @@ further out than any search; a point where ``f`` fails to evaluate there
 counts safe (the record says how many), and never stops a run whose estimate
 is already made.
 
-Its error grows with the dimension: with 256 rays it is 10-40% of ``p`` on the
-exact suite's problems in two to seven dimensions and several times ``p`` in
-ten, where the share of directions that reach a region rare enough to matter
-is too small. So it runs only where ``D <= MAX_DIM``, after the estimator's
-own stages (the estimate is the same with or without it), on every method
-that searches (naive sampling cannot miss a region: its interval is the
-binomial one).
+Its error grows with the dimension and with how narrow the event's cone of
+directions is: with 256 rays it is under half of ``p`` on most of the exact
+suite's problems in two to seven dimensions (up to twice ``p`` on a few) and
+several times ``p`` in ten, where the share of directions that reach a region
+rare enough to matter is too small. So it runs only where ``D <= MAX_DIM``,
+after the estimator's own stages (the estimate is the same with or without
+it), on every method that searches (naive sampling cannot miss a region: its
+interval is the binomial one).
 
 The run says caution when the check's low end, its estimate minus ``Z`` of
 its standard errors, lies above the upper end of the estimate's interval: the
