@@ -56,7 +56,7 @@ from scipy import stats
 from avrisk.rare.diagnostic_table import DiagnosticTable
 from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem, chunk_rng
-from avrisk.rare.results import Estimate
+from avrisk.rare.results import Estimate, doubting_check
 
 __all__ = [
     "MAX_DIM",
@@ -227,8 +227,8 @@ def directional_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...
     ``estimate`` is a summary's ``estimate`` (:meth:`Estimate.to_dict`); one
     without the check, or asked of a test threshold, has none.
     """
-    record = (estimate.get("details") or {}).get("directional")
-    if not record or not record.get("doubt") or gamma != estimate.get("gamma"):
+    record = doubting_check(estimate, "directional", gamma)
+    if record is None:
         return ()
     return (
         f"{record['rays']} random rays through P0 (directional simulation, no "

@@ -46,7 +46,7 @@ import numpy as np
 from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import DiagnosticTable
 from avrisk.rare.problem import RareEventProblem
-from avrisk.rare.results import Estimate
+from avrisk.rare.results import Estimate, doubting_check
 from avrisk.rare.splitting import SubsetSimulation
 from avrisk.rare.splitting_levels import SplittingError
 from avrisk.rare.splitting_settings import SplittingSettings
@@ -154,8 +154,8 @@ def audit_doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
     ``estimate`` is a summary's ``estimate`` (:meth:`Estimate.to_dict`); an
     estimate with no audit, or asked of a test threshold, has none.
     """
-    record = (estimate.get("details") or {}).get("audit")
-    if not record or not record.get("doubt") or gamma != estimate.get("gamma"):
+    record = doubting_check(estimate, "audit", gamma)
+    if record is None:
         return ()
     share = record["n_uncovered"] / record["n_at_gamma"]
     return (

@@ -391,3 +391,18 @@ def jsonable(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [jsonable(v) for v in value]
     return value
+
+
+def doubting_check(
+    estimate: dict[str, Any], name: str, gamma: float
+) -> dict[str, Any] | None:
+    """The record ``details[name]`` of a check made after an estimate, if it doubts.
+
+    ``estimate`` is a summary's (:meth:`Estimate.to_dict`). A check (the
+    proposal audit, the rays) speaks of the run's own ``gamma`` only: without
+    the check, asked of a test threshold, or where it found nothing, None.
+    """
+    record = (estimate.get("details") or {}).get(name)
+    if not record or not record.get("doubt") or gamma != estimate.get("gamma"):
+        return None
+    return record
