@@ -28,14 +28,15 @@ their errors, or that ran out of levels, make the run say caution. One that
 ran out runs again with twice its particles (*Replicates* and *Regrowth* in
 :mod:`avrisk.rare.splitting_replicates`).
 
-The method is five modules: this one, the estimator; its settings and their
+The method is six modules: this one, the estimator; its settings and their
 bounds on the calls of ``f`` (:mod:`avrisk.rare.splitting_settings`);
 :mod:`avrisk.rare.splitting_levels`, the particle sets, the choice of each
 level and the estimate with its error (its sections *Ties*, *Plateaus* and
-*Standard error*, which the sections named here refer to);
-:mod:`avrisk.rare.splitting_moves`, the draws of ``P0`` and the pCN chains
-that make the sets (*Moves*, *Seeds and resume*); and
-:mod:`avrisk.rare.splitting_replicates`, what the replicates share.
+*Standard error*, which the sections named here refer to), that error's
+family tree (:mod:`avrisk.rare.splitting_genealogy`); the draws of ``P0``
+and the pCN chains that make the sets (:mod:`avrisk.rare.splitting_moves`:
+*Moves*, *Seeds and resume*); what the replicates share
+(:mod:`avrisk.rare.splitting_replicates`).
 
 Failed samples
 --------------
@@ -86,6 +87,7 @@ from avrisk.rare.splitting_replicates import (
     combined_levels,
     disagreement_doubts,
     exhausted_doubts,
+    few_ancestors,
     few_survivors,
     regrown_doubts,
     regrowth_fits,
@@ -385,7 +387,7 @@ class SubsetSimulation:
                 UserWarning,
                 stacklevel=2,
             )
-        own = [levels_estimate(r, problem, n) for r, n in reached]
+        own = [levels_estimate(r, problem, n, genealogy=True) for r, n in reached]
         combined = combined_levels(own, problem, sum(n for _, n in reached))
         record = replicates_record(state, own, self.settings.replicates)
         return dataclasses.replace(combined, details=combined.details | record)
@@ -468,23 +470,22 @@ class SubsetSimulation:
 
     @staticmethod
     def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
-        """A level held by a handful of particles, or replicates that disagree.
+        """Too few particles under a level or the hits; replicates that disagree.
 
-        A level held by fewer than ``MIN_RELIABLE_ESS`` particles (a plateau):
-        its factor then rests on a handful of draws and its chains on as many
-        seeds, so the interval, from normal approximations, is too narrow.
-        Replicates whose estimates differ beyond their errors
-        (:func:`~avrisk.rare.splitting_replicates.replicates_disagree`)
-        followed different regions or mechanisms: their mean is of products
-        that each miss part of the event. A replicate that ran out of levels
-        leaves the answer to the others, and one regrown after running out
-        leans high (:func:`~avrisk.rare.splitting_replicates.regrown_doubts`).
+        A level held by fewer than ``MIN_RELIABLE_ESS`` particles (a plateau),
+        or hits that descend from fewer than two effective particles of a set
+        (:func:`~avrisk.rare.splitting_replicates.few_ancestors`): the interval
+        rests on too few draws or families. Replicates that differ beyond their
+        errors followed different regions or mechanisms: their mean is of
+        products that each miss part of the event. One that ran out of levels
+        leaves the answer to the others; one regrown after it leans high.
         """
         details = estimate.get("details") or {}
         reasons = list(few_survivors(details.get("survivors") or []))
         if gamma == estimate.get("gamma"):
             reasons.extend(
-                disagreement_doubts(details)
+                few_ancestors(details.get("ancestors"))
+                + disagreement_doubts(details)
                 + exhausted_doubts(details)
                 + regrown_doubts(details)
             )

@@ -45,12 +45,17 @@ rho_l(k)``, ``rho_l(k)`` the correlation of the indicators ``1{f <= b_{l+1}}``
 ``k`` states apart in a chain, estimated over the ``pairs_k`` such pairs of
 the level's chains (set 0 is independent: ``gamma_0 = 0``), and ``delta^2 =
 sum_l delta_l^2``. The levels are taken as uncorrelated (Au & Beck's
-approximation; their positive correlation makes it somewhat optimistic).
-``stderr = p_hat delta``; the interval is normal on ``log p`` with ``Var(log
-p_hat) = log(1 + delta^2)``: ``log p_hat`` is a sum over levels, so closer to
-normal than the skewed product, and the interval stays above 0. The estimator
-also has Au & Beck's ``O(1/N)`` bias, upwards; the interval's calibration and
-the bias at two ``N`` are measured in BENCHMARKS.md, "Subset simulation and
+approximation; their positive correlation makes it optimistic, grossly so
+where the event is reached through a few particles of some set). ``stderr =
+p_hat delta``; the interval is normal on ``log p`` with ``Var(log p_hat) =
+log(1 + delta^2)``: ``log p_hat`` is a sum over levels, so closer to normal
+than the skewed product, and the interval stays above 0. Subset simulation's
+own answer takes this interval or the family tree's
+(:mod:`avrisk.rare.splitting_genealogy`: that correlation counted, with
+Student's t), whichever is wider; ``splitting_is``'s levels, which only place
+its proposal, keep this one. The estimator also has Au & Beck's ``O(1/N)``
+bias, upwards; the interval's calibration and the bias at two ``N`` are
+measured in BENCHMARKS.md, "Subset simulation and
 the four-branch problem": use ``N >= 1000``.
 """
 
@@ -67,6 +72,11 @@ from avrisk.rare.families.base import FloatArray
 from avrisk.rare.final_stage import CONFIDENCE
 from avrisk.rare.problem import RareEventProblem
 from avrisk.rare.results import Estimate, GammaEstimate
+from avrisk.rare.splitting_genealogy import (
+    FamilyTreeError,
+    family_tree_error,
+    interval_quantile,
+)
 
 #: Standard normal quantile of the intervals' confidence (1.96 for 95%).
 Z_CONFIDENCE = float(stats.norm.ppf(0.5 + CONFIDENCE / 2))
@@ -75,6 +85,11 @@ STDERR_METHOD = (
     "Au & Beck (2001) coefficient of variation: per level (1 - p_l) / (N p_l) "
     "(1 + gamma_l), gamma_l from the indicators' correlation along the chains, "
     "summed over levels taken as uncorrelated"
+)
+TREE_METHOD = (
+    "the family tree's: the spread of the hits over the chains of a set they "
+    "descend from, with Au & Beck's for the levels before it, and Student's t "
+    "at their effective number less one (the widest interval of either)"
 )
 INTERVAL_METHOD = (
     "log-normal: normal on log p, Var(log p) = log(1 + cov^2), cov from the "
@@ -170,34 +185,50 @@ def exhausted_error(
 
 
 def levels_estimate(
-    state: SplittingState, problem: RareEventProblem, n_particles: int
+    state: SplittingState,
+    problem: RareEventProblem,
+    n_particles: int,
+    genealogy: bool = False,
 ) -> Estimate:
     """Subset simulation's estimate of every threshold from a run's particle sets.
 
     ``details`` holds the levels, the survivors of each set, their c.o.v.s,
     the first set's draws, whether the answer is a bound only (no particle at
-    or below ``gamma``: *Plateaus*) and the failed evaluations.
+    or below ``gamma``: *Plateaus*) and the failed evaluations. With
+    ``genealogy`` the error is the larger of Au & Beck's and the family tree's
+    (:mod:`avrisk.rare.splitting_genealogy`), and ``details["ancestors"]`` is
+    the fewest effective ancestors of the hits at ``gamma`` in any set (None
+    with no hit), ``details["dof"]`` each threshold's interval's degrees of
+    freedom (None: normal).
     """
-    by_gamma = {problem.gamma: _estimate_at(state.sets, problem.gamma)}
-    for g in problem.thresholds[1:]:
-        by_gamma[g] = _estimate_at(state.sets, g, by_gamma[problem.gamma].ci[1])
+    by_gamma, dofs = {}, []
+    for g in problem.thresholds:  # gamma first: its upper end bounds the others'
+        bound = by_gamma[problem.gamma].ci[1] if by_gamma else 1.0
+        by_gamma[g], dof = _estimate_at(state.sets, g, genealogy, bound)
+        dofs.append(None if math.isinf(dof) else dof)
+    details = {
+        "levels": [ps.level for ps in state.sets],
+        "survivors": _survivors(state.sets),
+        "level_cov": [
+            math.sqrt(level_cov_squared(ps.counted, ps.level)) for ps in state.sets
+        ],
+        "n_particles": n_particles,
+        "first_set_draws": state.sets[0].flat.size,
+        "bound_only": by_gamma[problem.gamma].n_hits == 0,
+        "n_failed": state.n_failed,
+        "stderr_method": STDERR_METHOD,
+    }
+    if genealogy:
+        ancestors = _family_tree(state.sets, problem.gamma).ancestors
+        details["ancestors"] = ancestors if math.isfinite(ancestors) else None
+        details["dof"] = dofs
+        details["stderr_method"] = f"{STDERR_METHOD}, or {TREE_METHOD}"
     return Estimate(
         method="subset_simulation",
         gamma=problem.gamma,
         by_gamma=by_gamma,
         n_evals=state.n_evals,
-        details={
-            "levels": [ps.level for ps in state.sets],
-            "survivors": _survivors(state.sets),
-            "level_cov": [
-                math.sqrt(level_cov_squared(ps.counted, ps.level)) for ps in state.sets
-            ],
-            "n_particles": n_particles,
-            "first_set_draws": state.sets[0].flat.size,
-            "bound_only": by_gamma[problem.gamma].n_hits == 0,
-            "n_failed": state.n_failed,
-            "stderr_method": STDERR_METHOD,
-        },
+        details=details,
     )
 
 
@@ -209,7 +240,7 @@ def deepest_mass(state: SplittingState) -> GammaEstimate:
     chains followed, which bounds what that mechanism can still hold of the
     event below ``l``.
     """
-    return _estimate_at(state.sets, state.sets[-1].level)
+    return _estimate_at(state.sets, state.sets[-1].level, genealogy=False)[0]
 
 
 def next_level(
@@ -358,26 +389,48 @@ def on_plateau(
     return level > gamma and (survivors < few or survivors == flat.size)
 
 
-def lognormal_interval(p: float, cov_squared: float) -> tuple[float, float]:
+def _deepest(sets: Sequence[ParticleSet], g: float) -> int:
+    """The deepest set conditioned on a level at or above ``g``."""
+    return max(i for i in range(len(sets)) if i == 0 or sets[i - 1].level >= g)
+
+
+def _family_tree(sets: Sequence[ParticleSet], g: float) -> FamilyTreeError:
+    """The family tree's error of ``P0(f <= g)`` from the sets."""
+    deepest = _deepest(sets, g)
+    tree = [(ps.values, ps.level, ps.counted_from) for ps in sets[: deepest + 1]]
+    level_cov = [level_cov_squared(ps.counted, ps.level) for ps in sets[:deepest]]
+    return family_tree_error(tree, sets[deepest].flat <= g, level_cov)
+
+
+def lognormal_interval(
+    p: float, cov_squared: float, dof: float = math.inf
+) -> tuple[float, float]:
     """``p``'s interval, normal on ``log p`` with ``Var(log p) = log(1 + cov^2)``.
 
+    With finite ``dof``, Student's t quantile instead of the normal one (a
+    variance estimated from few families: :mod:`avrisk.rare.splitting_genealogy`).
     The upper end is at most 1.
     """
-    half = Z_CONFIDENCE * math.sqrt(math.log1p(cov_squared))
+    half = interval_quantile(dof) * math.sqrt(math.log1p(cov_squared))
     return (p * math.exp(-half), min(1.0, p * math.exp(half)))
 
 
 def _estimate_at(
-    sets: Sequence[ParticleSet], g: float, bound: float = 1.0
-) -> GammaEstimate:
+    sets: Sequence[ParticleSet], g: float, genealogy: bool, bound: float = 1.0
+) -> tuple[GammaEstimate, float]:
     """``P0(f <= g)`` from the deepest set conditioned on a level ``>= g``.
+
+    With its interval's degrees of freedom: ``inf`` (normal) unless
+    ``genealogy`` and the family tree's interval
+    (:func:`~avrisk.rare.splitting_genealogy.family_tree_error`) is wider
+    than Au & Beck's, whose error and t it then takes.
 
     With no particle of that set at or below ``g``, ``p`` is 0 and the
     interval reaches up to the upper end of the factors above times the exact
     upper bound of a share of 0 of that set, or ``bound`` if lower (the
     interval of ``gamma``, for ``g`` below it).
     """
-    deepest = max(i for i in range(len(sets)) if i == 0 or sets[i - 1].level >= g)
+    deepest = _deepest(sets, g)
     above = sets[:deepest]
     counted = sets[deepest].counted
     n_last = int(np.count_nonzero(~np.isnan(counted)))
@@ -387,15 +440,20 @@ def _estimate_at(
     cov_squared = sum(
         level_cov_squared(ps.counted, ps.level) for ps in above
     ) + level_cov_squared(counted, g)
+    dof = math.inf
+    if genealogy:
+        tree = _family_tree(sets, g)
+        if tree.half_width() > Z_CONFIDENCE * math.sqrt(math.log1p(cov_squared)):
+            cov_squared, dof = tree.cov_squared, tree.dof
     if n_hits:
-        ci = lognormal_interval(p, cov_squared)
+        ci = lognormal_interval(p, cov_squared, dof)
     else:  # the upper ends of the factors above and of a share of 0
         cov_above = cov_squared - level_cov_squared(counted, g)
         half = Z_CONFIDENCE * math.sqrt(math.log1p(cov_above))
         upper_above = p_above * math.exp(half)
         upper = -math.expm1(math.log((1 - CONFIDENCE) / 2) / n_last)
         ci = (0.0, min(bound, upper_above * upper))
-    return GammaEstimate(
+    estimate = GammaEstimate(
         gamma=g,
         p=p,
         stderr=p * math.sqrt(cov_squared),
@@ -406,3 +464,4 @@ def _estimate_at(
         confidence=CONFIDENCE,
         interval=INTERVAL_METHOD,
     )
+    return estimate, dof

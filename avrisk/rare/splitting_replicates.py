@@ -24,6 +24,7 @@ estimate: their product is that of the wrong mechanism.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
@@ -33,6 +34,7 @@ from avrisk.rare.families.base import FloatArray
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS
 from avrisk.rare.problem import RareEventProblem
 from avrisk.rare.results import Estimate
+from avrisk.rare.splitting_genealogy import MIN_ANCESTORS, satterthwaite_dof
 from avrisk.rare.splitting_levels import (
     Z_CONFIDENCE,
     SplittingState,
@@ -47,6 +49,7 @@ __all__ = [
     "disagreement_doubts",
     "estimates_disagree",
     "exhausted_doubts",
+    "few_ancestors",
     "few_survivors",
     "per_replicate",
     "pooled_chains",
@@ -208,22 +211,29 @@ def combined_levels(
 
     Each replicate's product estimate has its own error; their mean has
     variance ``sum(stderr_r^2) / R^2`` and a log-normal interval as one
-    replicate's. Zero hits in every replicate: the largest of their bounds
-    (each is a 95% bound of ``p`` on its own). ``details`` hold the levels,
-    survivors, level c.o.v.s and first set draws per replicate (a list each;
-    one replicate's estimate is its own, with one list each:
-    :func:`per_replicate` reads both).
+    replicate's, with Welch and Satterthwaite's degrees of freedom where a
+    replicate's interval took Student's t
+    (:func:`~avrisk.rare.splitting_genealogy.satterthwaite_dof`). Zero hits
+    in every replicate: the largest of their bounds (each is a 95% bound of
+    ``p`` on its own). ``details`` hold the levels, survivors, level
+    c.o.v.s, first set draws and, where the levels' error read their family
+    tree, the hits' fewest ancestors and the intervals' degrees of freedom
+    per replicate (a list each; one replicate's estimate is its own, with
+    one list each: :func:`per_replicate` reads both).
     """
     first = own[0]
     if len(own) == 1:
         return first
     by_gamma = {}
-    for g in first.by_gamma:
+    for i, g in enumerate(first.by_gamma):
         parts = [e.by_gamma[g] for e in own]
         p = float(np.mean([e.p for e in parts]))
         stderr = float(np.sqrt(sum(e.stderr**2 for e in parts))) / len(parts)
         if p > 0:
-            ci = lognormal_interval(p, (stderr / p) ** 2)
+            dof = satterthwaite_dof(
+                [e.stderr**2 for e in parts], [_dof(e.details, i) for e in own]
+            )
+            ci = lognormal_interval(p, (stderr / p) ** 2, dof)
         else:
             ci = (0.0, max(e.ci[1] for e in parts))
         by_gamma[g] = dataclasses.replace(
@@ -235,10 +245,9 @@ def combined_levels(
             ess=float(sum(e.ess for e in parts)),
             n_samples=sum(e.n_samples for e in parts),
         )
-    details = {
-        key: [e.details[key] for e in own]
-        for key in ("levels", "survivors", "level_cov", "first_set_draws")
-    }
+    keys = ("levels", "survivors", "level_cov", "first_set_draws", "ancestors", "dof")
+    present = [key for key in keys if key in first.details]
+    details = {key: [e.details[key] for e in own] for key in present}
     details |= {
         "n_particles": n_particles,
         "bound_only": by_gamma[problem.gamma].n_hits == 0,
@@ -248,6 +257,12 @@ def combined_levels(
     return dataclasses.replace(
         first, by_gamma=by_gamma, n_evals=own[-1].n_evals, details=details
     )
+
+
+def _dof(details: dict[str, Any], i: int) -> float:
+    """Degrees of freedom of a replicate's ``i``-th threshold (``inf``: normal)."""
+    dof = (details.get("dof") or [None] * (i + 1))[i]
+    return math.inf if dof is None else dof
 
 
 def replicates_record(
@@ -372,4 +387,24 @@ def few_survivors(survivors: Sequence[Any]) -> tuple[str, ...]:
     return (
         f"a level of the search held only {min(few)} particles below it (f "
         "ties on a plateau?): its interval is likely too narrow",
+    )
+
+
+def few_ancestors(ancestors: float | list[float | None] | None) -> tuple[str, ...]:
+    """The doubt of hits that descend from fewer than ``MIN_ANCESTORS`` particles.
+
+    ``ancestors``: the fewest effective ancestors of each replicate's hits
+    at ``gamma`` (:mod:`avrisk.rare.splitting_genealogy`, None where none
+    was counted), one number for a single run. The answer rests on which of
+    one or two particles found the way down.
+    """
+    values = ancestors if isinstance(ancestors, list) else [ancestors]
+    values = [a for a in values if a is not None]
+    few = [a for a in values if a < MIN_ANCESTORS]
+    if not few:
+        return ()
+    return (
+        f"the hits at gamma descend from only {min(few):.1f} effective particles "
+        "of one of the search's sets: the answer rests on which of them found the "
+        "way down, and no interval can be read from so few",
     )
