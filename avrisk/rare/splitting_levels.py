@@ -97,6 +97,16 @@ INTERVAL_METHOD = (
 )
 
 
+def interval_method(dof: float) -> str:
+    """How a levels' interval was made: normal (``inf``), or Student's t."""
+    if math.isinf(dof):
+        return INTERVAL_METHOD
+    return (
+        f"log-normal with Student's t at {dof:.1f} degrees of freedom: cov from "
+        "the spread of the hits over the families they descend from"
+    )
+
+
 class SplittingError(ValueError):
     """The levels cannot reach ``gamma`` (the message says why)."""
 
@@ -462,6 +472,6 @@ def _estimate_at(
         ess=float(n_hits),
         n_samples=n_last,
         confidence=CONFIDENCE,
-        interval=INTERVAL_METHOD,
+        interval=interval_method(dof),
     )
     return estimate, dof

@@ -39,6 +39,7 @@ from avrisk.rare.splitting_levels import (
     Z_CONFIDENCE,
     SplittingState,
     deepest_mass,
+    interval_method,
     lognormal_interval,
 )
 
@@ -234,13 +235,15 @@ def combined_levels(
                 [e.stderr**2 for e in parts], [_dof(e.details, i) for e in own]
             )
             ci = lognormal_interval(p, (stderr / p) ** 2, dof)
+            interval = interval_method(dof)
         else:
-            ci = (0.0, max(e.ci[1] for e in parts))
+            ci, interval = (0.0, max(e.ci[1] for e in parts)), parts[0].interval
         by_gamma[g] = dataclasses.replace(
             parts[0],
             p=p,
             stderr=stderr,
             ci=ci,
+            interval=interval,
             n_hits=sum(e.n_hits for e in parts),
             ess=float(sum(e.ess for e in parts)),
             n_samples=sum(e.n_samples for e in parts),

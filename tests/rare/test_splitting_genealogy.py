@@ -107,6 +107,7 @@ def test_two_regions_one_reached_through_few_particles_are_covered():
     p = problem.p_exact
     assert sum(_covers(e.ci, p) for e in runs) >= 32
     assert sum(_covers(_au_beck_interval(e), p) for e in runs) <= 24
+    assert any("Student's t at" in e.main.interval for e in runs)
     spread = np.std([e.p for e in runs], ddof=1) / p
     reported = math.sqrt(np.mean([(e.stderr / e.p) ** 2 for e in runs]))
     assert 0.6 * spread < reported < 1.6 * spread
