@@ -75,7 +75,6 @@ from avrisk.rare.results import Estimate, SearchConvergence
 from avrisk.rare.splitting_levels import (
     ParticleSet,
     SplittingState,
-    exhausted_error,
     level_cov_squared,
     levels_estimate,
     next_level,
@@ -89,6 +88,7 @@ from avrisk.rare.splitting_replicates import (
     exhausted_doubts,
     few_ancestors,
     few_survivors,
+    first_draws_estimate,
     regrown_doubts,
     regrowth_fits,
     replicates_record,
@@ -364,20 +364,12 @@ class SubsetSimulation:
     ) -> Estimate:
         """The replicates' mean product and its error, for every threshold.
 
-        Each replicate that reached ``gamma`` estimates ``p`` by its product
-        with Au & Beck's error; the answer is their mean
-        (:func:`~avrisk.rare.splitting_replicates.combined_levels`).
-
-        Raises
-        ------
-        SplittingError
-            If no replicate's ``max_levels`` sets reached ``gamma``.
+        Each replicate that reached ``gamma`` estimates ``p`` by its product;
+        the answer is their mean
+        (:func:`~avrisk.rare.splitting_replicates.combined_levels`). With
+        none, naive sampling's of their first draws
+        (:func:`~avrisk.rare.splitting_replicates.first_draws_estimate`).
         """
-        reached = state.reached()
-        if not reached:
-            raise exhausted_error(
-                state.current, problem.gamma, self.settings.max_levels
-            )
         n_failed = sum(r.n_failed for r in state.all)
         if n_failed:
             warnings.warn(
@@ -387,9 +379,15 @@ class SubsetSimulation:
                 UserWarning,
                 stacklevel=2,
             )
-        own = [levels_estimate(r, problem, n, genealogy=True) for r, n in reached]
-        combined = combined_levels(own, problem, sum(n for _, n in reached))
-        record = replicates_record(state, own, self.settings.replicates)
+        reached, n = state.reached(), self.settings.replicates
+        if not reached:  # a bound, most often: labelled caution (exhausted_doubts)
+            bound = first_draws_estimate(state, problem, state.sizes[-1])
+            return dataclasses.replace(
+                bound, details=bound.details | replicates_record(state, [], n)
+            )
+        own = [levels_estimate(r, problem, m, genealogy=True) for r, m in reached]
+        combined = combined_levels(own, problem, sum(m for _, m in reached))
+        record = replicates_record(state, own, n)
         return dataclasses.replace(combined, details=combined.details | record)
 
     def progress(self, info: SplittingInfo) -> str:

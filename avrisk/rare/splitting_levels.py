@@ -166,7 +166,9 @@ class SplittingState(NamedTuple):
         Rounds in a row in which no chain accepted.
     exhausted : bool, default=False
         Whether ``max_levels`` sets ended above ``gamma`` (the steps are over,
-        without an estimate: :func:`exhausted_error`).
+        without a product: its run is regrown, or the answer falls back on
+        the first draws,
+        :func:`~avrisk.rare.splitting_replicates.first_draws_estimate`).
     """
 
     z: FloatArray
@@ -178,20 +180,6 @@ class SplittingState(NamedTuple):
     n_failed: int
     rounds_without_move: int
     exhausted: bool = False
-
-
-def exhausted_error(
-    state: SplittingState, gamma: float, max_levels: int
-) -> SplittingError:
-    """The error of levels that ``max_levels`` sets did not bring to ``gamma``."""
-    level = state.sets[-1].level
-    p_so_far = math.prod(_factors(state.sets))
-    return SplittingError(
-        f"after max_levels={max_levels} levels the level is f <= {level:g}, still "
-        f"above gamma = {gamma:g} (P0(f <= {level:g}) is about {p_so_far:.2g}): the "
-        "event may be impossible, or rarer than that many levels reach; raise "
-        "max_levels (or p0)"
-    )
 
 
 def levels_estimate(

@@ -31,9 +31,10 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from avrisk.rare.families.base import FloatArray
-from avrisk.rare.final_stage import MIN_RELIABLE_ESS
+from avrisk.rare.final_stage import CONFIDENCE, MIN_RELIABLE_ESS
+from avrisk.rare.intervals import clopper_pearson
 from avrisk.rare.problem import RareEventProblem
-from avrisk.rare.results import Estimate
+from avrisk.rare.results import Estimate, GammaEstimate
 from avrisk.rare.splitting_genealogy import MIN_ANCESTORS, satterthwaite_dof
 from avrisk.rare.splitting_levels import (
     Z_CONFIDENCE,
@@ -52,6 +53,7 @@ __all__ = [
     "exhausted_doubts",
     "few_ancestors",
     "few_survivors",
+    "first_draws_estimate",
     "per_replicate",
     "pooled_chains",
     "regrown_doubts",
@@ -341,11 +343,17 @@ def exhausted_doubts(
         if max(m["upper"] for m in masses) <= sampled["stderr"]:
             return ()
     of = len(details.get("replicates") or []) + exhausted
+    rests = (
+        "the answer rests on the others (compare runs with other seeds, or raise "
+        "n_particles)"
+        if exhausted < of
+        else "the answer is naive sampling's of their first draws of P0, a bound "
+        "where none hit (raise max_levels or n_particles, or use splitting_is)"
+    )
     return (
         f"{exhausted} of the {of} replicates of the search did not reach gamma "
         "within max_levels levels, regrown as far as regrow and max_calls allow "
-        "(they followed a mechanism that does not end in the event): the answer "
-        "rests on the others (compare runs with other seeds, or raise n_particles)",
+        f"(they followed a mechanism that does not end in the event): {rests}",
     )
 
 
@@ -410,4 +418,54 @@ def few_ancestors(ancestors: float | list[float | None] | None) -> tuple[str, ..
         f"the hits at gamma descend from only {min(few):.1f} effective particles "
         "of one of the search's sets: the answer rests on which of them found the "
         "way down, and no interval can be read from so few",
+    )
+
+
+def first_draws_estimate(
+    state: ReplicatesState, problem: RareEventProblem, n_particles: int
+) -> Estimate:
+    """Naive sampling's estimate of every threshold from the runs' first draws.
+
+    The answer where no run of the levels reached ``gamma``. Every run's first
+    set (regrown ones' too) is independent draws of ``P0`` (those counted:
+    *Plateaus* in :mod:`avrisk.rare.splitting_levels`); their share at or
+    below each threshold, with its exact (Clopper-Pearson) interval, is an
+    honest answer: most often 0 with the exact upper bound, as naive Monte
+    Carlo's with no hit. The deeper sets' product is not: their chains
+    followed a mechanism that does not end in the event, and their estimate
+    of ``P0(f <= l)`` at their deepest level can lie far below ``p``.
+    """
+    draws = np.concatenate([r.sets[0].counted.ravel() for r in state.all])
+    draws = draws[~np.isnan(draws)]
+    n = draws.size
+    by_gamma = {}
+    for g in problem.thresholds:
+        hits = int(np.count_nonzero(draws <= g))
+        p = hits / n
+        by_gamma[g] = GammaEstimate(
+            gamma=g,
+            p=p,
+            stderr=math.sqrt(p * (1 - p) / n),
+            ci=clopper_pearson(hits, n, CONFIDENCE),
+            n_hits=hits,
+            ess=float(hits),
+            n_samples=n,
+            confidence=CONFIDENCE,
+            interval="Clopper-Pearson, of the first sets' draws of P0 alone "
+            "(no run of the levels reached gamma)",
+        )
+    details = {
+        "levels": [[ps.level for ps in r.sets] for r in state.all],
+        "n_particles": n_particles,
+        "first_set_draws": n,
+        "bound_only": by_gamma[problem.gamma].n_hits == 0,
+        "n_failed": sum(r.n_failed for r in state.all),
+        "stderr_method": "binomial, of the first sets' draws of P0",
+    }
+    return Estimate(
+        method="subset_simulation",
+        gamma=problem.gamma,
+        by_gamma=by_gamma,
+        n_evals=state.current.n_evals,
+        details=details,
     )

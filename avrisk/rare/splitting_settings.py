@@ -30,9 +30,9 @@ class SplittingSettings(EstimatorSettings):
         Largest share of survivors ties of ``f`` may leave at a level before
         the level moves below the tied value (at least ``p0``).
     max_levels : int, default=12
-        Most particle sets, the draws of ``P0`` included; not reaching
-        ``gamma`` within them is a
-        :class:`~avrisk.rare.splitting_levels.SplittingError`.
+        Most particle sets, the draws of ``P0`` included; a run that does not
+        reach ``gamma`` within them is regrown (``regrow``), and with none
+        left the answer leans on the others, or on the first draws alone.
     n_moves : int, default=1
         pCN proposals per kept chain state (``> 1`` thins the chains).
     initial_beta : float, default=0.6

@@ -293,13 +293,23 @@ def test_a_plateau_nothing_leaves_gives_an_honest_bound_not_an_error():
     assert est.ci == (0.0, pytest.approx(zero_hit_bound(3500)))
 
 
-def test_an_event_out_of_reach_of_the_levels_is_an_error_not_a_number():
+def test_an_event_out_of_reach_of_the_levels_is_naive_samplings_bound_with_caution():
     # f >= 10 everywhere: the levels creep towards 10 and never reach gamma = 5
     def f(x):
         return 10.0 + x[:, 0] ** 2
 
-    with pytest.raises(SplittingError, match="after max_levels=4 levels"):
-        one_replicate(f, NORMAL_1D, 5.0, n_particles=500, max_levels=4)
+    est = one_replicate(f, NORMAL_1D, 5.0, n_particles=500, max_levels=4)
+    assert est.p == 0.0 and est.details["bound_only"]
+    assert est.details["replicates_exhausted"] == 1 and len(est.details["levels"]) == 1
+    # the first set's 500 draws of P0, none at or below gamma: naive's exact bound
+    assert est.ci == (0.0, pytest.approx(zero_hit_bound(500)))
+    as_dict = est.to_dict()
+    label = estimate_trust(
+        estimator_class("splitting"), as_dict, as_dict["by_gamma"][0]
+    )
+    assert label.word == "caution"
+    assert "1 of the 1 replicates of the search did not reach gamma" in str(label)
+    assert "naive sampling's of their first draws of P0" in str(label)
 
 
 def test_chains_that_never_move_are_an_error_once_their_step_is_smallest():
