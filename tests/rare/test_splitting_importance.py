@@ -12,7 +12,6 @@ from avrisk.rare import (
     FixedCovNormal,
     Product,
     ScaledBeta,
-    SplittingError,
     get_estimator,
     splitting_is,
     subset_simulation,
@@ -486,12 +485,13 @@ def test_a_replicate_whose_levels_run_out_is_left_out_with_a_caution():
     )
     assert "1 of the 2 replicates of the search did not reach gamma" in str(trust)
     # with one level fewer neither does: importance sampling from the deepest
-    # sets, with caution (subset simulation alone raises)
+    # sets, with caution (subset simulation alone: its first draws' bound)
     deepest = splitting_is(f, base, 0.0, **plan, max_levels=5)
     assert deepest.details["replicates_exhausted"] == 2
     assert "no replicate of the search reached gamma" in str(trust_of(deepest))
-    with pytest.raises(SplittingError, match="after max_levels=5 levels"):
-        subset_simulation(f, base, 0.0, n_particles=400, max_levels=5)
+    alone = subset_simulation(f, base, 0.0, n_particles=400, max_levels=5)
+    assert alone.p == 0.0 and alone.details["bound_only"] and alone.ci[1] > 1e-6
+    assert "naive sampling's of their first draws" in str(trust_of(alone))
 
 
 def _decoy_run(seed, **options):
