@@ -199,10 +199,11 @@ def levels_estimate(
     with no hit), ``details["dof"]`` each threshold's interval's degrees of
     freedom (None: normal).
     """
-    by_gamma, dofs = {}, []
+    by_gamma, dofs, trees = {}, [], {}
     for g in problem.thresholds:  # gamma first: its upper end bounds the others'
         bound = by_gamma[problem.gamma].ci[1] if by_gamma else 1.0
-        by_gamma[g], dof = _estimate_at(state.sets, g, genealogy, bound)
+        trees[g] = _family_tree(state.sets, g) if genealogy else None
+        by_gamma[g], dof = _estimate_at(state.sets, g, trees[g], bound)
         dofs.append(None if math.isinf(dof) else dof)
     details = {
         "levels": [ps.level for ps in state.sets],
@@ -217,7 +218,7 @@ def levels_estimate(
         "stderr_method": STDERR_METHOD,
     }
     if genealogy:
-        ancestors = _family_tree(state.sets, problem.gamma).ancestors
+        ancestors = trees[problem.gamma].ancestors
         details["ancestors"] = ancestors if math.isfinite(ancestors) else None
         details["dof"] = dofs
         details["stderr_method"] = f"{STDERR_METHOD}, or {TREE_METHOD}"
@@ -238,7 +239,7 @@ def deepest_mass(state: SplittingState) -> GammaEstimate:
     chains followed, which bounds what that mechanism can still hold of the
     event below ``l``.
     """
-    return _estimate_at(state.sets, state.sets[-1].level, genealogy=False)[0]
+    return _estimate_at(state.sets, state.sets[-1].level, tree=None)[0]
 
 
 def next_level(
@@ -414,13 +415,16 @@ def lognormal_interval(
 
 
 def _estimate_at(
-    sets: Sequence[ParticleSet], g: float, genealogy: bool, bound: float = 1.0
+    sets: Sequence[ParticleSet],
+    g: float,
+    tree: FamilyTreeError | None,
+    bound: float = 1.0,
 ) -> tuple[GammaEstimate, float]:
     """``P0(f <= g)`` from the deepest set conditioned on a level ``>= g``.
 
-    With its interval's degrees of freedom: ``inf`` (normal) unless
-    ``genealogy`` and the family tree's interval
-    (:func:`~avrisk.rare.splitting_genealogy.family_tree_error`) is wider
+    With its interval's degrees of freedom: ``inf`` (normal) unless the
+    family tree's interval at ``g`` (``tree``,
+    :func:`~avrisk.rare.splitting_genealogy.family_tree_error`) is wider
     than Au & Beck's, whose error and t it then takes.
 
     With no particle of that set at or below ``g``, ``p`` is 0 and the
@@ -439,10 +443,10 @@ def _estimate_at(
         level_cov_squared(ps.counted, ps.level) for ps in above
     ) + level_cov_squared(counted, g)
     dof = math.inf
-    if genealogy:
-        tree = _family_tree(sets, g)
-        if tree.half_width() > Z_CONFIDENCE * math.sqrt(math.log1p(cov_squared)):
-            cov_squared, dof = tree.cov_squared, tree.dof
+    if tree is not None and tree.half_width() > Z_CONFIDENCE * math.sqrt(
+        math.log1p(cov_squared)
+    ):
+        cov_squared, dof = tree.cov_squared, tree.dof
     if n_hits:
         ci = lognormal_interval(p, cov_squared, dof)
     else:  # the upper ends of the factors above and of a share of 0

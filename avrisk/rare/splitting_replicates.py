@@ -31,10 +31,9 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from avrisk.rare.families.base import FloatArray
-from avrisk.rare.final_stage import CONFIDENCE, MIN_RELIABLE_ESS
-from avrisk.rare.intervals import clopper_pearson
+from avrisk.rare.final_stage import MIN_RELIABLE_ESS, binomial_estimates
 from avrisk.rare.problem import RareEventProblem
-from avrisk.rare.results import Estimate, GammaEstimate
+from avrisk.rare.results import Estimate
 from avrisk.rare.splitting_genealogy import MIN_ANCESTORS, satterthwaite_dof
 from avrisk.rare.splitting_levels import (
     Z_CONFIDENCE,
@@ -437,27 +436,11 @@ def first_draws_estimate(
     """
     draws = np.concatenate([r.sets[0].counted.ravel() for r in state.all])
     draws = draws[~np.isnan(draws)]
-    n = draws.size
-    by_gamma = {}
-    for g in problem.thresholds:
-        hits = int(np.count_nonzero(draws <= g))
-        p = hits / n
-        by_gamma[g] = GammaEstimate(
-            gamma=g,
-            p=p,
-            stderr=math.sqrt(p * (1 - p) / n),
-            ci=clopper_pearson(hits, n, CONFIDENCE),
-            n_hits=hits,
-            ess=float(hits),
-            n_samples=n,
-            confidence=CONFIDENCE,
-            interval="Clopper-Pearson, of the first sets' draws of P0 alone "
-            "(no run of the levels reached gamma)",
-        )
+    by_gamma = binomial_estimates(draws, problem.thresholds)
     details = {
         "levels": [[ps.level for ps in r.sets] for r in state.all],
         "n_particles": n_particles,
-        "first_set_draws": n,
+        "first_set_draws": draws.size,
         "bound_only": by_gamma[problem.gamma].n_hits == 0,
         "n_failed": sum(r.n_failed for r in state.all),
         "stderr_method": "binomial, of the first sets' draws of P0",
