@@ -86,7 +86,6 @@ from avrisk.rare.splitting_replicates import (
     combined_levels,
     disagreement_doubts,
     exhausted_doubts,
-    few_ancestors,
     few_survivors,
     first_draws_estimate,
     regrown_doubts,
@@ -468,22 +467,23 @@ class SubsetSimulation:
 
     @staticmethod
     def doubts(estimate: dict[str, Any], gamma: float) -> tuple[str, ...]:
-        """Too few particles under a level or the hits; replicates that disagree.
+        """Too few particles under a level; replicates that disagree.
 
-        A level held by fewer than ``MIN_RELIABLE_ESS`` particles (a plateau),
-        or hits that descend from fewer than two effective particles of a set
-        (:func:`~avrisk.rare.splitting_replicates.few_ancestors`): the interval
-        rests on too few draws or families. Replicates that differ beyond their
-        errors followed different regions or mechanisms: their mean is of
-        products that each miss part of the event. One that ran out of levels
-        leaves the answer to the others; one regrown after it leans high.
+        A level held by fewer than ``MIN_RELIABLE_ESS`` particles (a plateau):
+        the interval rests on too few draws. Hits that descend from one or two
+        families of a set are no doubt of their own: the family tree's
+        interval takes Student's t at their number less one (at least 1),
+        wide enough to say it (:mod:`avrisk.rare.splitting_genealogy`).
+        Replicates that differ beyond their errors followed different regions
+        or mechanisms: their mean is of products that each miss part of the
+        event. One that ran out of levels leaves the answer to the others; one
+        regrown after it leans high.
         """
         details = estimate.get("details") or {}
         reasons = list(few_survivors(details.get("survivors") or []))
         if gamma == estimate.get("gamma"):
             reasons.extend(
-                few_ancestors(details.get("ancestors"))
-                + disagreement_doubts(details)
+                disagreement_doubts(details)
                 + exhausted_doubts(details)
                 + regrown_doubts(details)
             )

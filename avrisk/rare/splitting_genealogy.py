@@ -31,9 +31,9 @@ interval normal on ``log p`` takes Student's t quantile with ``a - 1``
 degrees of freedom (at least 1) instead of the normal one, as cluster-robust
 errors of few clusters do, and the replicates' mean takes Welch and
 Satterthwaite's degrees of freedom. With many families this changes little
-(t at 30 degrees of freedom is 4% above the normal quantile); below
-``MIN_ANCESTORS`` (two) the hits are in effect one family, whose spread says
-nothing of the error, and the run says caution. Set 0's draws are
+(t at 30 degrees of freedom is 4% above the normal quantile); with fewer
+than two the hits are in effect one family, and t at one degree of freedom
+(12.7) gives the interval that says so. Set 0's draws are
 independent, each its own cluster (``k = 0``, every factor), unless the first
 set grew on a plateau (*Plateaus*), whose first draws are not counted. This
 is the idea of Lee & Whiteley's (2018) and Du & Guyader's (2021) variance
@@ -62,10 +62,6 @@ from scipy import stats
 
 from avrisk.rare.families.base import FloatArray
 from avrisk.rare.final_stage import CONFIDENCE
-
-#: Fewest effective ancestors of the hits whose spread estimates an error: below
-#: two, the hits are one family in effect.
-MIN_ANCESTORS = 2.0
 
 
 class FamilyTreeError(NamedTuple):

@@ -34,7 +34,7 @@ from avrisk.rare.families.base import FloatArray
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS, binomial_estimates
 from avrisk.rare.problem import RareEventProblem
 from avrisk.rare.results import Estimate
-from avrisk.rare.splitting_genealogy import MIN_ANCESTORS, satterthwaite_dof
+from avrisk.rare.splitting_genealogy import interval_quantile, satterthwaite_dof
 from avrisk.rare.splitting_levels import (
     Z_CONFIDENCE,
     SplittingState,
@@ -50,7 +50,6 @@ __all__ = [
     "disagreement_doubts",
     "estimates_disagree",
     "exhausted_doubts",
-    "few_ancestors",
     "few_survivors",
     "first_draws_estimate",
     "per_replicate",
@@ -71,16 +70,16 @@ def replicates_disagree(own: Sequence[Estimate]) -> bool:
     """Whether two replicates' estimates of ``p`` disagree beyond their errors.
 
     Two with hits disagree when their ``log p`` differ by more than
-    ``DISAGREEMENT_Z`` standard errors (``Var(log p) = log(1 + cov^2)``); one
-    with hits and one without, when the first's interval lies above the
-    second's bound. Independent searches that end in different places are the
-    sign of a failure region one of them did not find, and so perhaps one
-    that none found.
+    ``DISAGREEMENT_Z`` standard errors (:func:`_log_variance`); one with hits
+    and one without, when the first's interval lies above the second's
+    bound. Independent searches that end in different places are the sign of
+    a failure region one of them did not find, and so perhaps one that none
+    found.
     """
     for i, a in enumerate(own):
         for b in own[i + 1 :]:
             if a.n_hits and b.n_hits:
-                var = sum(np.log1p((e.stderr / e.p) ** 2) for e in (a, b))
+                var = sum(_log_variance(e) for e in (a, b))
                 if abs(np.log(a.p / b.p)) > DISAGREEMENT_Z * np.sqrt(var):
                     return True
             elif a.n_hits or b.n_hits:
@@ -88,6 +87,22 @@ def replicates_disagree(own: Sequence[Estimate]) -> bool:
                 if hit.ci[0] > bound.ci[1]:
                     return True
     return False
+
+
+def _log_variance(own: Estimate) -> float:
+    """A replicate's ``Var(log p)`` at ``gamma``, as wide as its interval says.
+
+    Where the interval took Student's t at ``dof`` degrees of freedom (hits
+    of few families: :mod:`avrisk.rare.splitting_genealogy`), the variance
+    is scaled by ``(t_dof / z)^2``, so that its normal multiple spans what the
+    interval does: a spread read off one or two families is no evidence that
+    two replicates differ.
+    """
+    var = float(np.log1p((own.stderr / own.p) ** 2))
+    dof = _dof(own.details, list(own.by_gamma).index(own.gamma))
+    if math.isinf(dof):
+        return var
+    return var * (interval_quantile(dof) / Z_CONFIDENCE) ** 2
 
 
 def estimates_disagree(sampled: dict[str, Any], levels: dict[str, Any]) -> bool:
@@ -397,26 +412,6 @@ def few_survivors(survivors: Sequence[Any]) -> tuple[str, ...]:
     return (
         f"a level of the search held only {min(few)} particles below it (f "
         "ties on a plateau?): its interval is likely too narrow",
-    )
-
-
-def few_ancestors(ancestors: float | list[float | None] | None) -> tuple[str, ...]:
-    """The doubt of hits that descend from fewer than ``MIN_ANCESTORS`` particles.
-
-    ``ancestors``: the fewest effective ancestors of each replicate's hits
-    at ``gamma`` (:mod:`avrisk.rare.splitting_genealogy`, None where none
-    was counted), one number for a single run. The answer rests on which of
-    one or two particles found the way down.
-    """
-    values = ancestors if isinstance(ancestors, list) else [ancestors]
-    values = [a for a in values if a is not None]
-    few = [a for a in values if a < MIN_ANCESTORS]
-    if not few:
-        return ()
-    return (
-        f"the hits at gamma descend from only {min(few):.1f} effective particles "
-        "of one of the search's sets: the answer rests on which of them found the "
-        "way down, and no interval can be read from so few",
     )
 
 

@@ -19,7 +19,6 @@ from avrisk.rare.directional_audit import audit_calls
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.problem import SAMPLE_CHUNK, RareEventProblem
 from avrisk.rare.splitting import SubsetSimulation
-from avrisk.rare.splitting_genealogy import MIN_ANCESTORS
 from avrisk.rare.splitting_levels import (
     ParticleSet,
     chain_correlation,
@@ -447,9 +446,14 @@ def test_subset_simulation_on_a_near_miss_says_caution():
         main = as_dict["by_gamma"][0]
         return est, estimate_trust(estimator_class("splitting"), as_dict, main)
 
-    est, label = trust(2)  # each replicate reached the event through one particle
-    assert max(est.details["ancestors"]) < MIN_ANCESTORS and est.p > 2 * problem.p_exact
-    assert "the hits at gamma descend from only 1.0 effective particles" in str(label)
+    est, label = trust(2)  # the hits descend from one or two particles of a set
+    assert min(est.details["ancestors"]) < 2.0 and est.p > 2 * problem.p_exact
+    # Student's t at about one degree of freedom: an interval that holds p
+    # and, decades wide, says itself how little one family tells
+    assert "Student's t at 1.1 degrees of freedom" in est.main.interval
+    low, high = est.ci
+    assert low < problem.p_exact < high and high / low > 1e4
+    assert "effective particles" not in str(label)
     est, label = trust(6)  # regrown three times: the luckier of several tries
     assert est.details["replicates_regrown"] == 3
     assert "ran out before larger ones reached gamma" in str(label)
