@@ -7,14 +7,12 @@ import pytest
 from scipy import stats
 
 from avrisk.rare import subset_simulation
-from avrisk.rare.results import Estimate, GammaEstimate
 from avrisk.rare.splitting_genealogy import (
     family_tree_error,
     interval_quantile,
     satterthwaite_dof,
 )
 from avrisk.rare.splitting_levels import lognormal_interval
-from avrisk.rare.splitting_replicates import replicates_disagree
 from avrisk.testing import gaussian_linear_problem
 from avrisk.testing.suite import suite_problem
 
@@ -122,26 +120,3 @@ def test_without_a_pinch_the_family_tree_keeps_the_error_near_the_spread():
     reported = math.sqrt(np.mean([(e.stderr / e.p) ** 2 for e in runs]))
     assert 0.7 * spread < reported < 1.5 * spread
     assert min(min(e.details["ancestors"]) for e in runs) > 2.0
-
-
-def test_replicates_disagree_only_beyond_the_errors_their_intervals_state():
-    def replicate(p, cov, dof):
-        ci = lognormal_interval(p, cov**2, dof)
-        main = GammaEstimate(0.0, p, cov * p, ci, n_hits=50, ess=50.0, n_samples=500)
-        return Estimate(
-            "subset_simulation",
-            0.0,
-            {0.0: main},
-            100,
-            details={"dof": [None if math.isinf(dof) else dof]},
-        )
-
-    # log p 3.0 apart, each with Var(log p) = log(1 + 0.5^2) = 0.223: 4.5 normal
-    # standard errors of the difference, beyond DISAGREEMENT_Z = 3
-    normal = [replicate(1e-6, 0.5, math.inf), replicate(20e-6, 0.5, math.inf)]
-    assert replicates_disagree(normal)
-    # the same spread read off two families (t at 1 degree of freedom, 12.7
-    # against 1.96): 0.7 of such errors apart, well inside the intervals
-    few = [replicate(1e-6, 0.5, 1.0), replicate(20e-6, 0.5, 1.0)]
-    assert not replicates_disagree(few)
-    assert few[0].ci[1] > few[1].p and few[1].ci[0] < few[0].p

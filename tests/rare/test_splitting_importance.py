@@ -491,11 +491,7 @@ def test_a_replicate_whose_levels_run_out_is_left_out_with_a_caution():
     assert "no replicate of the search reached gamma" in str(trust_of(deepest))
     alone = subset_simulation(f, base, 0.0, n_particles=400, max_levels=5)
     assert alone.p == 0.0 and alone.details["bound_only"] and alone.ci[1] > 1e-6
-    as_dict = alone.to_dict()
-    label = estimate_trust(
-        estimator_class("splitting"), as_dict, as_dict["by_gamma"][0]
-    )
-    assert "naive sampling's of their first draws" in str(label)
+    assert "naive sampling's of their first draws" in str(trust_of(alone, "splitting"))
 
 
 def _decoy_run(seed, **options):
@@ -512,10 +508,10 @@ def _decoy_run(seed, **options):
     return problem, est, trust_of(est)
 
 
-def trust_of(est):
+def trust_of(est, method="splitting_is"):
     as_dict = est.to_dict()
     main = next(g for g in as_dict["by_gamma"] if g["gamma"] == est.gamma)
-    return estimate_trust(estimator_class("splitting_is"), as_dict, main)
+    return estimate_trust(estimator_class(method), as_dict, main)
 
 
 def test_a_replicate_that_runs_out_of_levels_runs_again_twice_as_large():

@@ -1,5 +1,7 @@
 """The engine's one trust rule: diagnostics, search, and each estimator's doubts."""
 
+import math
+
 import numpy as np
 from scipy import stats
 
@@ -11,6 +13,7 @@ from avrisk.rare import (
     subset_simulation,
 )
 from avrisk.rare.estimator import estimator_class
+from avrisk.rare.splitting_genealogy import interval_quantile
 from avrisk.rare.splitting_replicates import (
     estimates_disagree,
     exhausted_doubts,
@@ -53,12 +56,17 @@ def trust_of(method, estimate):
     return estimate_trust(estimator_class(method), as_dict, main)
 
 
-def replicate(p, stderr, n_hits=100):
-    """A replicate's estimate at gamma 0 (its interval log-normal)."""
-    half = 1.96 * np.sqrt(np.log1p((stderr / p) ** 2)) if p else 0.0
+def replicate(p, stderr, n_hits=100, dof=math.inf):
+    """A replicate's estimate at gamma 0 (its interval log-normal).
+
+    With finite ``dof``, the interval takes Student's t at ``dof`` degrees
+    of freedom, as a family tree's of few families does.
+    """
+    half = interval_quantile(dof) * np.sqrt(np.log1p((stderr / p) ** 2)) if p else 0
     ci = (p * np.exp(-half), p * np.exp(half)) if p else (0.0, stderr)
     g = GammaEstimate(0.0, p, stderr, ci, n_hits, float(n_hits), 1000)
-    return Estimate("subset_simulation", 0.0, {0.0: g}, 1000)
+    details = {"dof": [None if math.isinf(dof) else dof]}
+    return Estimate("subset_simulation", 0.0, {0.0: g}, 1000, details=details)
 
 
 def test_replicates_disagree_beyond_their_errors_only():
@@ -68,6 +76,18 @@ def test_replicates_disagree_beyond_their_errors_only():
     # a bound below the other's interval, and one that is not
     assert replicates_disagree([replicate(1e-5, 2e-6), replicate(0.0, 1e-6, 0)])
     assert not replicates_disagree([replicate(1e-6, 2e-7), replicate(0.0, 1e-5, 0)])
+
+
+def test_replicates_disagree_only_beyond_the_errors_their_intervals_state():
+    # log p 3.0 apart, each with Var(log p) = log(1 + 0.5^2) = 0.223: 4.5 normal
+    # standard errors of the difference, beyond DISAGREEMENT_Z = 3
+    normal = [replicate(1e-6, 5e-7), replicate(20e-6, 1e-5)]
+    assert replicates_disagree(normal)
+    # the same spread read off two families (t at 1 degree of freedom, 12.7
+    # against 1.96): 0.7 of such errors apart, well inside the intervals
+    few = [replicate(1e-6, 5e-7, dof=1.0), replicate(20e-6, 1e-5, dof=1.0)]
+    assert not replicates_disagree(few)
+    assert few[0].ci[1] > few[1].p and few[1].ci[0] < few[0].p
 
 
 def test_replicates_that_disagree_are_recorded_not_a_caution_of_their_own():
