@@ -94,10 +94,11 @@ class ChunkFiles:
         tables = []
         for path in files:
             table = self.read(path, columns)
+            present = set(table.column_names)
             tables.append(
                 pa.table(
                     {
-                        c: table[c] if c in table.column_names else pa.nulls(len(table))
+                        c: table[c] if c in present else pa.nulls(len(table))
                         for c in columns
                     }
                 )

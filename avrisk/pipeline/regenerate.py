@@ -175,8 +175,9 @@ class Regenerator:
         chunk = table["chunk"].to_numpy()
         ids = table["sample_id"].to_numpy()
         values = np.full((n, len(names)), np.nan)
+        stored = set(table.column_names)
         for j, name in enumerate(names):
-            if name in table.column_names:  # stored in some chunks, null in others
+            if name in stored:  # stored in some chunks, null in others
                 values[:, j] = np.asarray(
                     table[name].to_numpy(zero_copy_only=False), dtype=np.float64
                 )

@@ -140,7 +140,8 @@ def full_order(names: Sequence[str], param_names: Sequence[str]) -> list[str]:
 
 def leaving_out(table: pa.Table, meta: dict[str, Any]) -> pa.Table:
     """A chunk's rows without the columns ``meta`` lists, ``meta`` in the schema."""
-    present = [c for c in meta["columns"] if c in table.column_names]
+    stored = set(table.column_names)
+    present = [c for c in meta["columns"] if c in stored]
     return table.drop_columns(present).replace_schema_metadata(
         {META_KEY: json.dumps(meta)}
     )
@@ -191,8 +192,9 @@ def table_meta(
 
 def conformed(table: pa.Table, schema: pa.Schema) -> pa.Table:
     """``table`` cast to ``schema``, missing columns filled with nulls."""
+    present = set(table.column_names)
     columns = [
-        table[f.name] if f.name in table.column_names else pa.nulls(len(table), f.type)
+        table[f.name] if f.name in present else pa.nulls(len(table), f.type)
         for f in schema
     ]
     return pa.Table.from_arrays(columns, schema=schema.remove_metadata()).cast(schema)
