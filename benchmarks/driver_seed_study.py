@@ -60,7 +60,11 @@ def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
     fitted to the fold's training windows
     (:func:`~avrisk.learning.guard_fit.fit_brake_guard`), trained with as the
     shipped recipe trains with its brake. Each is a rule on the training
-    windows alone.
+    windows alone. ``network_alone``: the shipped recipe with every closed-loop
+    replay driven by the network alone (``ClosedLoopConfig.drive_with_guard =
+    False``; the weights still carry the shipped brake), so that the network
+    meets the outcome of its own closing in ordinary traffic too, not only in
+    the stress replays.
     """
     from avrisk.learning.guard_fit import fit_brake_guard
     from avrisk.learning.train_config import TrainConfig
@@ -75,8 +79,13 @@ def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
     elif name == "fitted_brake":
         windows = training_windows(None, default.closed_loop.window_steps, periods)
         config = replace(default, guard=fit_brake_guard(windows).guard)
+    elif name == "network_alone":
+        alone = replace(default.closed_loop, drive_with_guard=False)
+        config = replace(default, closed_loop=alone)
     else:
-        raise SystemExit(f"unknown recipe {name!r}: shipped, balanced, fitted_brake")
+        raise SystemExit(
+            f"unknown recipe {name!r}: shipped, balanced, fitted_brake, network_alone"
+        )
     return replace(config, periods=periods)
 
 
