@@ -12,7 +12,15 @@ and estimates ``p`` by importance sampling from it:
    at the level ``gamma`` itself: ``N`` particles of ``P0(. | f <= gamma)``
    (``N`` states, the hits among them: fewer than ``N`` new calls of ``f``;
    the last set alone may hold as few as ``p0 N`` hits), taken in the base's
-   standard-normal space, ``z = T(x)``;
+   standard-normal space, ``z = T(x)``; then, ``refresh_rounds`` times, draw
+   afresh the coordinates the particles do not inform (one proposal per
+   particle, kept if still below the level: *Moves* in
+   :mod:`avrisk.rare.splitting_moves`). After a few levels the particles
+   can descend from a handful of the first set's draws, each keeping some of
+   its ancestor's coordinates where ``f`` does not pull them; fitted, such an
+   accident is a shift the event does not have, and the weights it makes
+   have a heavy tail (on ``highway_rare`` it multiplied the weights' second
+   moment several times; BENCHMARKS.md);
 3. keep the coordinates the particles say something about: those where the
    particles' mean differs from 0, or their mean square from 1, by more than
    ``t`` standard errors (from the means of ``N_BLOCKS`` blocks of chains, so
@@ -60,7 +68,9 @@ and estimates ``p`` by importance sampling from it:
    defensive share, and near it the conditional law's own tail (that of
    ``P0``, cut by the event) outruns the fit.
    Chains are numbered in the order of their ancestors at every level, so the two halves
-   descend from different draws of ``P0`` and are close to independent. The
+   descend from different draws of ``P0`` where the particles descend from
+   many (where they descend from a few, both halves share them, which is
+   what the refresh of step 2 is for). The
    held-out likelihood of a mean shift falls with its squared distance from
    the other half's mean, so it scores noise admitted and signal dropped
    alike. In high dimension k-means splits one failure region into clusters
@@ -135,20 +145,19 @@ using Gaussian densities revisited." Structural Safety 76, 2019.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
-from pydantic import Field
 
 from avrisk.rare.black_box import estimate
-from avrisk.rare.cross_entropy import ShareOfP0
+from avrisk.rare.chain_moments import uninformed_coordinates
 from avrisk.rare.estimation_context import EstimationContext
 from avrisk.rare.estimator import (
     DiagnosticTable,
     register_estimator,
 )
 from avrisk.rare.families.base import ExponentialFamily
-from avrisk.rare.particle_fit import ParticleFit, particle_proposal
+from avrisk.rare.particle_fit import THRESHOLDS, ParticleFit, particle_proposal
 from avrisk.rare.particle_shifts import slope_direction
 from avrisk.rare.problem import FINAL_STAGE, BatchFunction, RareEventProblem
 from avrisk.rare.results import Estimate
@@ -160,14 +169,19 @@ from avrisk.rare.splitting_is_answer import (
 )
 from avrisk.rare.splitting_is_tables import importance_sampling_tables
 from avrisk.rare.splitting_levels import SplittingState, levels_estimate
-from avrisk.rare.splitting_moves import MovedSet, move_chains, moves_after
+from avrisk.rare.splitting_is_settings import SplittingISSettings
+from avrisk.rare.splitting_moves import (
+    MovedSet,
+    move_chains,
+    moves_after,
+    refreshed,
+)
 from avrisk.rare.splitting_replicates import (
     ReplicatesState,
     combined_levels,
     pooled_chains,
     replicates_record,
 )
-from avrisk.rare.splitting_settings import SplittingSettings
 
 __all__ = [
     "SplittingISSettings",
@@ -178,105 +192,6 @@ __all__ = [
 #: Extra key of the fit's generator (k-means++ seeding), so that it draws no
 #: chunk's stream.
 FIT_STREAM = 0x736973
-
-
-class SplittingISSettings(SplittingSettings):
-    """Settings of subset simulation followed by importance sampling.
-
-    Those of :class:`~avrisk.rare.splitting.SplittingSettings` (the levels),
-    and of the importance-sampling stage:
-
-    Attributes
-    ----------
-    n_moves : int, default=2
-        pCN proposals per kept chain state at every level (one for subset
-        simulation alone): the proposal is fitted to the particles, so their
-        spread over each level's conditional law matters here as well as their
-        level; with one move per state a chain's kept states sit closer to its
-        seed.
-    correlated_moves : int, default=2
-        As in :class:`~avrisk.rare.splitting.SplittingSettings` (1 there):
-        twice the moves at a level after chains correlated beyond
-        ``CORRELATED`` (:func:`~avrisk.rare.splitting_moves.moves_after`).
-    n_final : int, default=10000
-        Samples of the fitted proposal.
-    n_components : int, default=4
-        Mean shifts seeded from the particles (fewer survive merging on one
-        failure region).
-    defensive : float, default=0.1
-        Weight ``lam`` of ``P0`` in the proposal, in [0, 1): every weight is
-        at most ``1 / lam``.
-    min_weight : float, default=0.02
-        Share of the particles below which a component dies in EM.
-    shift : {"all", "searched"}, default="all"
-        Which standard coordinates the shifts may move: all of them, or only
-        those the base's cross-entropy box searches
-        (:meth:`~avrisk.rare.families.base.ExponentialFamily.searched_coordinates`).
-    fit_variances : bool, default=True
-        Whether the proposal may also fit each shifted coordinate's variance
-        (where the held-out likelihood clearly prefers it; step 3).
-    moves_at_gamma : int or None, default=None
-        pCN proposals per kept state in the moves at ``gamma`` (step 2), the
-        particles the proposal is fitted to; None: ``n_moves``, as at every
-        level. More spread those particles over the event's law where one
-        move per state leaves them narrower than it, at ``N`` calls each.
-    """
-
-    OMIT_IF_DEFAULT = (*SplittingSettings.OMIT_IF_DEFAULT, "moves_at_gamma")
-
-    n_moves: int = Field(
-        2, ge=1, description="pCN proposals per kept chain state (thinning)."
-    )
-    correlated_moves: int = Field(
-        2,
-        ge=1,
-        description="Times n_moves a level's chains move after a set of correlated "
-        "chains (1: never).",
-    )
-    n_final: int = Field(10_000, ge=1, description="Samples of the fitted proposal.")
-    n_components: int = Field(
-        4, ge=1, description="Mean shifts seeded from the particles."
-    )
-    defensive: ShareOfP0 = Field(
-        0.1, description="Weight of P0 in the proposal (weights <= 1/defensive)."
-    )
-    min_weight: float = Field(
-        0.02,
-        gt=0.0,
-        lt=1.0,
-        description="Share of the particles below which a component dies.",
-    )
-    shift: Literal["all", "searched"] = Field(
-        "all",
-        description="Standard coordinates the shifts may move: 'all', or those the "
-        "base's CE box searches ('searched').",
-    )
-
-    fit_variances: bool = Field(
-        True,
-        description="Whether the proposal may fit each shifted coordinate's "
-        "variance too (where held-out particles clearly prefer it).",
-    )
-
-    moves_at_gamma: int | None = Field(
-        None,
-        ge=1,
-        description="pCN proposals per kept state in the moves at gamma "
-        "(None: n_moves).",
-    )
-
-    def gamma_moves(self) -> int:
-        """The pCN proposals per kept state in the moves at ``gamma``."""
-        return self.n_moves if self.moves_at_gamma is None else self.moves_at_gamma
-
-    def tail_bound(self, n: int, correlated: bool = False) -> int:
-        """The moves at ``gamma`` on ``n`` particles in all, and the final stage.
-
-        ``correlated``: the moves at ``gamma`` taken ``correlated_moves`` times
-        more, as after correlated chains.
-        """
-        moves = self.gamma_moves() * (self.correlated_moves if correlated else 1)
-        return n * moves + self.n_final
 
 
 @register_estimator
@@ -380,6 +295,9 @@ class SplittingImportanceSampling(SubsetSimulation):
             s.gamma_moves(),
             s.correlated_factor(),
         )
+        moves, refreshes = _refreshed_at_gamma(
+            moves, with_hits, problem, context, s.refresh_rounds
+        )
         fitted = _fitted_proposal(moves, with_hits, problem, context, s)
         n_evals = state.current.n_evals + sum(m.n_calls for m in moves)
         stage, sampled, from_levels = importance_stage(
@@ -401,6 +319,7 @@ class SplittingImportanceSampling(SubsetSimulation):
             details={
                 **combined.details,
                 **_fit_record(combined, moves, fitted),
+                "refreshed": refreshes,
                 "splitting": {  # none where no replicate reached gamma
                     str(g): {"p": e.p, "ci": list(e.ci)}
                     for g, e in combined.by_gamma.items()
@@ -441,6 +360,46 @@ def _moves_at_gamma(
         )
         stage = moves[-1].n_stages
     return moves
+
+
+def _refreshed_at_gamma(
+    moves: list[MovedSet],
+    with_hits: list[tuple[SplittingState, int]],
+    problem: RareEventProblem,
+    context: EstimationContext,
+    rounds: int,
+) -> tuple[list[MovedSet], list[dict[str, float]]]:
+    """The moved particles after ``rounds`` refreshes of what they do not inform.
+
+    Each round draws afresh the coordinates that all replicates' particles
+    pooled leave within the sparsest of ``THRESHOLDS`` widened standard
+    errors of ``N(0, 1)`` (:func:`~avrisk.rare.chain_moments.uninformed_coordinates`),
+    one proposal per particle below its replicate's last level
+    (:func:`~avrisk.rare.splitting_moves.refreshed`), on stages numbered on
+    from the moves'. Returns the particles and, per round, the coordinates
+    drawn and the share accepted (``details["refreshed"]``).
+    """
+    record = []
+    for _ in range(rounds):
+        z = np.concatenate([m.z for m in moves])
+        block = uninformed_coordinates(
+            z, pooled_chains([m.values for m in moves]), THRESHOLDS[0]
+        )
+        if not block.any():
+            break
+        stage, accepted, fresh = moves[-1].n_stages, 0.0, []
+        for m, (r, _) in zip(moves, with_hits, strict=True):
+            m, share = refreshed(
+                m._replace(n_stages=stage), r.sets[-1].level, block, problem, context
+            )
+            fresh.append(m)
+            accepted += share * len(m.z)
+            stage = m.n_stages
+        moves = fresh
+        record.append(
+            {"coordinates": int(block.sum()), "acceptance": accepted / len(z)}
+        )
+    return moves, record
 
 
 def _fitted_proposal(

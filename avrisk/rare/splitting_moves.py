@@ -33,7 +33,14 @@ set's chains take ``correlated_moves`` times as many proposals per kept state
 position, not the conditional law's spread, and the levels built on it lose
 the mass its seeds did not hold. On the exact suite's problems the factor
 stays below about 2.7; on ``highway_rare``, whose event is a thin ridge, it
-reaches 3-5 (BENCHMARKS.md). For a seeded
+reaches 3-5 (BENCHMARKS.md). After the moves at ``gamma``, ``splitting_is`` refreshes the coordinates
+its particles do not inform (:func:`refreshed`): each particle proposes
+fresh ``N(0, 1)`` draws of them, the rest kept, and keeps the proposal if it
+is still below the level. That is pCN with ``beta = 1`` on those coordinates,
+reversible with respect to ``N(0, I)`` as any pCN step is, so the
+conditional law stays invariant; where ``f`` does not depend on them it is
+accepted every time and forgets in one step what the particle's ancestors
+left there. For a seeded
 (stochastic) ``f`` each proposal has its own seed: the chain moves on ``(x,
 seed)``, and a fresh seed is an independence proposal from its prior, so the
 move stays reversible.
@@ -217,6 +224,55 @@ def move_chains(
         n_stages,
         n_failed,
         stuck,
+    )
+
+
+def refreshed(
+    moved: MovedSet,
+    level: float,
+    block: np.ndarray,
+    problem: RareEventProblem,
+    context: EstimationContext,
+) -> tuple[MovedSet, float]:
+    """``moved`` after one proposal per state of fresh draws of ``block`` (*Moves*).
+
+    Parameters
+    ----------
+    moved : MovedSet
+        States below ``level``; its ``n_stages`` is the last stage used.
+    level : float
+        The level a proposal must stay at or below.
+    block : ndarray of bool, shape (D,)
+        The coordinates drawn afresh.
+    problem, context
+        As for :func:`move_chains`.
+
+    Returns
+    -------
+    MovedSet
+        The states, each replaced by its proposal where accepted, with the
+        calls, stages and failures counted (``acceptance`` stays the moves').
+    float
+        The share of proposals accepted.
+    """
+    stage = moved.n_stages + 1
+    rng = np.random.default_rng([context.seed, stage])
+    proposal = moved.z.copy()
+    proposal[:, block] = rng.standard_normal((len(proposal), int(block.sum())))
+    f_new, failed, used = _evaluate(problem, context, proposal, stage)
+    accept = f_new <= level
+    values = moved.values.copy()
+    present = ~np.isnan(values)
+    values[present] = np.where(accept, f_new, values[present])
+    return (
+        moved._replace(
+            z=np.where(accept[:, None], proposal, moved.z),
+            values=values,
+            n_calls=moved.n_calls + len(proposal),
+            n_stages=moved.n_stages + used,
+            n_failed=moved.n_failed + failed,
+        ),
+        float(np.mean(accept)) if len(accept) else math.nan,
     )
 
 

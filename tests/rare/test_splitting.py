@@ -26,7 +26,13 @@ from avrisk.rare.splitting_levels import (
     lognormal_interval,
     next_level,
 )
-from avrisk.rare.splitting_moves import CORRELATED, MAX_ROUNDS_WITHOUT_MOVE, moves_after
+from avrisk.rare.splitting_moves import (
+    CORRELATED,
+    MAX_ROUNDS_WITHOUT_MOVE,
+    MovedSet,
+    moves_after,
+    refreshed,
+)
 from avrisk.rare.splitting_settings import SplittingSettings
 from avrisk.rare.trust import estimate_trust
 from avrisk.testing import (
@@ -503,3 +509,33 @@ def test_slowly_mixing_chains_move_more_and_p_is_found_the_same():
     assert runs[3].n_evals > runs[1].n_evals
     for e in runs.values():
         assert abs(e.p - problem.p_exact) < 4 * e.stderr
+
+
+def test_a_refresh_forgets_the_ancestors_and_keeps_the_conditional_law():
+    # f depends on z0 alone (a half-space); particles of f <= 0 that two
+    # ancestors left with offsets in coordinates 1-5: drawing those afresh is
+    # always accepted and leaves them N(0, 1), z0 untouched; drawing z0 afresh
+    # too keeps only proposals below the level
+    d, n, c = 6, 4000, 2.0
+    base = FixedCovNormal(np.zeros(d), cov=np.eye(d))
+
+    def f(x):
+        return c - x[:, 0]
+
+    problem = RareEventProblem(base, f, 0.0)
+    rng = np.random.default_rng(0)
+    ancestors = np.repeat(rng.normal(0.0, 1.0, (2, d)), n // 2, axis=0)
+    z = rng.standard_normal((n, d)) * 0.5 + ancestors
+    z[:, 0] = stats.truncnorm.rvs(c, np.inf, size=n, random_state=rng)
+    values = f(z).reshape(400, 10)
+    moved = MovedSet(z, values, 0.3, 0, 0.5, 7, 0, 0)
+    others = np.arange(d) > 0
+    out, accepted = refreshed(moved, 0.0, others, problem, EstimationContext(seed=1))
+    assert accepted == 1.0 and out.n_calls == n and out.n_stages == 8
+    assert np.array_equal(out.z[:, 0], z[:, 0])
+    assert np.abs(out.z[:, 1:].mean(axis=0)).max() < 4 / np.sqrt(n)
+    assert out.z[:, 1:].var(axis=0) == pytest.approx(np.ones(d - 1), abs=0.1)
+    every = np.ones(d, dtype=bool)
+    out, accepted = refreshed(moved, 0.0, every, problem, EstimationContext(seed=1))
+    assert accepted == pytest.approx(stats.norm.sf(c), abs=0.01)  # P0(f <= 0)
+    assert np.all(f(out.z) <= 0.0) and np.array_equal(out.values.ravel(), f(out.z))

@@ -73,7 +73,9 @@ def test_finds_p_of_exact_problems_within_its_stderr(problem):
     per_state = SplittingISSettings().gamma_moves()
     moves = per_state * sum(1000 - h.n_survivors for h in lasts)
     rays = est.details.get("directional", {}).get("n_calls", 0)  # X in d <= 8
-    assert est.n_evals == est.history[-1].n_evals + moves + 5000 + rays
+    # each refresh round proposes once for each of the 2 x 1000 moved states
+    refreshes = 2000 * len(est.details["refreshed"])
+    assert est.n_evals == est.history[-1].n_evals + moves + refreshes + 5000 + rays
     assert not est.details["replicates_disagree"]
     assert est.main.pareto_k < 0.7
     levels = est.details["splitting"][str(problem.gamma)]
@@ -365,16 +367,17 @@ def test_settings_budget_and_description():
     plan = dict(n_particles=400, max_levels=6, n_final=900)
     method = get_estimator("splitting_is", **plan, regrow=0)
     # 8 N draws on a plateau, 2 proposals per state at 5 further levels and at
-    # gamma, then the final draws; twice the moves after correlated chains
-    assert method.planned_budget() == 400 * (8 + 5 * 2) + 400 * 2 + 900
-    assert method.budget() == 400 * (8 + 5 * 2 * 2) + 400 * 2 * 2 + 900
+    # gamma, 2 refreshes there, then the final draws; twice the moves after
+    # correlated chains
+    assert method.planned_budget() == 400 * (8 + 5 * 2) + 400 * (2 + 2) + 900
+    assert method.budget() == 400 * (8 + 5 * 2 * 2) + 400 * (2 * 2 + 2) + 900
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, 2 moves per state, "
         "then IS 900 (4 components, defensive 0.1)"
     )
     # each replicate regrown twice: 1 + 2 + 4 times the levels, 4 times at gamma
     regrown = get_estimator("splitting_is", **plan)
-    assert regrown.budget() == 7 * 400 * (8 + 5 * 2 * 2) + 4 * 400 * 2 * 2 + 900
+    assert regrown.budget() == 7 * 400 * (8 + 5 * 2 * 2) + 4 * 400 * (2 * 2 + 2) + 900
     assert "regrown up to 2x" in regrown.describe()
     capped = get_estimator("splitting_is", **plan, max_calls=10_000)
     assert capped.budget() == 10_000
