@@ -167,9 +167,9 @@ from avrisk.rare.splitting_is_answer import (
     answer_doubts,
     importance_stage,
 )
+from avrisk.rare.splitting_is_settings import SplittingISSettings
 from avrisk.rare.splitting_is_tables import importance_sampling_tables
 from avrisk.rare.splitting_levels import SplittingState, levels_estimate
-from avrisk.rare.splitting_is_settings import SplittingISSettings
 from avrisk.rare.splitting_moves import (
     MovedSet,
     move_chains,

@@ -120,8 +120,7 @@ class SplittingISSettings(SplittingSettings):
         return self.n_moves if self.moves_at_gamma is None else self.moves_at_gamma
 
     def tail_bound(self, n: int, correlated: bool = False) -> int:
-        """The moves at ``gamma`` on ``n`` particles in all, their refreshes and
-        the final stage.
+        """The moves at ``gamma`` on ``n`` particles, their refreshes, the final stage.
 
         ``correlated``: the moves at ``gamma`` taken ``correlated_moves`` times
         more, as after correlated chains.

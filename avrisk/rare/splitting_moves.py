@@ -33,7 +33,9 @@ set's chains take ``correlated_moves`` times as many proposals per kept state
 position, not the conditional law's spread, and the levels built on it lose
 the mass its seeds did not hold. On the exact suite's problems the factor
 stays below about 2.7; on ``highway_rare``, whose event is a thin ridge, it
-reaches 3-5 (BENCHMARKS.md). After the moves at ``gamma``, ``splitting_is`` refreshes the coordinates
+reaches 3-5 (BENCHMARKS.md).
+
+After the moves at ``gamma``, ``splitting_is`` refreshes the coordinates
 its particles do not inform (:func:`refreshed`): each particle proposes
 fresh ``N(0, 1)`` draws of them, the rest kept, and keeps the proposal if it
 is still below the level. That is pCN with ``beta = 1`` on those coordinates,
