@@ -154,17 +154,21 @@ def empirical_null_scale(mean: FloatArray, stderr: FloatArray) -> float:
 
     The lower quartile of ``|mean / stderr|`` over the coordinates, over its
     value 0.3186 under ``N(0, 1)``, and at least 1 (module docstring); 1
-    where a standard error is NaN or 0.
+    where a standard error is NaN or 0, or with fewer than 4 coordinates (a
+    quartile of fewer says nothing of the null).
 
     Examples
     --------
     >>> t = np.array([0.6, -0.9, 1.2, 40.0, 30.0])
     >>> round(empirical_null_scale(t, np.ones(5)), 2)
     2.82
-    >>> empirical_null_scale(np.array([0.01, -0.02]), np.full(2, 0.1))
+    >>> empirical_null_scale(np.array([0.01, -0.02, 0.03, 0.01]), np.full(4, 0.1))
+    1.0
+    >>> empirical_null_scale(np.array([30.0, 40.0]), np.ones(2))  # too few
     1.0
     """
-    if not (np.isfinite(stderr).all() and (stderr > 0).all()):
+    few = len(mean) * NULL_QUANTILE < 1
+    if few or not (np.isfinite(stderr).all() and (stderr > 0).all()):
         return 1.0
     spread = float(np.quantile(np.abs(mean / stderr), NULL_QUANTILE))
     return max(1.0, spread / NULL_QUANTILE_VALUE)
