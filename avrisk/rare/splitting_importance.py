@@ -12,7 +12,8 @@ and estimates ``p`` by importance sampling from it:
    at the level ``gamma`` itself: ``N`` particles of ``P0(. | f <= gamma)``
    (``N`` states, the hits among them: fewer than ``N`` new calls of ``f``;
    the last set alone may hold as few as ``p0 N`` hits), taken in the base's
-   standard-normal space, ``z = T(x)``; then, ``refresh_rounds`` times, draw
+   standard-normal space, ``z = T(x)``; then, ``refresh_rounds`` times (none
+   by default yet), draw
    afresh the coordinates the particles do not inform (one proposal per
    particle, kept if still below the level: *Moves* in
    :mod:`avrisk.rare.splitting_moves`). After a few levels the particles
@@ -319,7 +320,7 @@ class SplittingImportanceSampling(SubsetSimulation):
             details={
                 **combined.details,
                 **_fit_record(combined, moves, fitted),
-                "refreshed": refreshes,
+                **({"refreshed": refreshes} if s.refresh_rounds else {}),
                 "splitting": {  # none where no replicate reached gamma
                     str(g): {"p": e.p, "ci": list(e.ci)}
                     for g, e in combined.by_gamma.items()
@@ -376,8 +377,11 @@ def _refreshed_at_gamma(
     errors of ``N(0, 1)`` (:func:`~avrisk.rare.chain_moments.uninformed_coordinates`),
     one proposal per particle below its replicate's last level
     (:func:`~avrisk.rare.splitting_moves.refreshed`), on stages numbered on
-    from the moves'. Returns the particles and, per round, the coordinates
-    drawn and the share accepted (``details["refreshed"]``).
+    from the moves'. None is made where no coordinate is uninformed, or every
+    one (the widened errors of an event that moves most coordinates; a fresh
+    draw of every coordinate is a draw of ``P0``, not a refresh). Returns the
+    particles and, per round, the coordinates drawn and the share accepted
+    (``details["refreshed"]``).
     """
     record = []
     for _ in range(rounds):
@@ -385,7 +389,7 @@ def _refreshed_at_gamma(
         block = uninformed_coordinates(
             z, pooled_chains([m.values for m in moves]), THRESHOLDS[0]
         )
-        if not block.any():
+        if not block.any() or block.all():  # all: a fresh draw of P0, no refresh
             break
         stage, accepted, fresh = moves[-1].n_stages, 0.0, []
         for m, (r, _) in zip(moves, with_hits, strict=True):

@@ -57,15 +57,20 @@ class SplittingISSettings(SplittingSettings):
         particles the proposal is fitted to; None: ``n_moves``, as at every
         level. More spread those particles over the event's law where one
         move per state leaves them narrower than it, at ``N`` calls each.
-    refresh_rounds : int, default=2
+    refresh_rounds : int, default=0
         Rounds of fresh draws of the coordinates the particles at ``gamma``
         do not inform, after the moves there (step 2;
         :func:`~avrisk.rare.splitting_moves.refreshed`), at one call per
         particle each: what their ancestors left in those coordinates is
-        not fitted as a shift. 0: none.
+        not fitted as a shift. 0: none (the default until the bundled
+        scenarios' coverage is measured with it; BENCHMARKS.md).
     """
 
-    OMIT_IF_DEFAULT = (*SplittingSettings.OMIT_IF_DEFAULT, "moves_at_gamma")
+    OMIT_IF_DEFAULT = (
+        *SplittingSettings.OMIT_IF_DEFAULT,
+        "moves_at_gamma",
+        "refresh_rounds",
+    )
 
     n_moves: int = Field(
         2, ge=1, description="pCN proposals per kept chain state (thinning)."
@@ -109,7 +114,7 @@ class SplittingISSettings(SplittingSettings):
     )
 
     refresh_rounds: int = Field(
-        2,
+        0,
         ge=0,
         description="Rounds of fresh draws of the coordinates the particles at "
         "gamma do not inform (0: none).",

@@ -2,6 +2,7 @@
 
 import json
 import re
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -73,9 +74,7 @@ def test_finds_p_of_exact_problems_within_its_stderr(problem):
     per_state = SplittingISSettings().gamma_moves()
     moves = per_state * sum(1000 - h.n_survivors for h in lasts)
     rays = est.details.get("directional", {}).get("n_calls", 0)  # X in d <= 8
-    # each refresh round proposes once for each of the 2 x 1000 moved states
-    refreshes = 2000 * len(est.details["refreshed"])
-    assert est.n_evals == est.history[-1].n_evals + moves + refreshes + 5000 + rays
+    assert est.n_evals == est.history[-1].n_evals + moves + 5000 + rays
     assert not est.details["replicates_disagree"]
     assert est.main.pareto_k < 0.7
     levels = est.details["splitting"][str(problem.gamma)]
@@ -367,17 +366,16 @@ def test_settings_budget_and_description():
     plan = dict(n_particles=400, max_levels=6, n_final=900)
     method = get_estimator("splitting_is", **plan, regrow=0)
     # 8 N draws on a plateau, 2 proposals per state at 5 further levels and at
-    # gamma, 2 refreshes there, then the final draws; twice the moves after
-    # correlated chains
-    assert method.planned_budget() == 400 * (8 + 5 * 2) + 400 * (2 + 2) + 900
-    assert method.budget() == 400 * (8 + 5 * 2 * 2) + 400 * (2 * 2 + 2) + 900
+    # gamma, then the final draws; twice the moves after correlated chains
+    assert method.planned_budget() == 400 * (8 + 5 * 2) + 400 * 2 + 900
+    assert method.budget() == 400 * (8 + 5 * 2 * 2) + 400 * 2 * 2 + 900
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, 2 moves per state, "
         "then IS 900 (4 components, defensive 0.1)"
     )
     # each replicate regrown twice: 1 + 2 + 4 times the levels, 4 times at gamma
     regrown = get_estimator("splitting_is", **plan)
-    assert regrown.budget() == 7 * 400 * (8 + 5 * 2 * 2) + 4 * 400 * (2 * 2 + 2) + 900
+    assert regrown.budget() == 7 * 400 * (8 + 5 * 2 * 2) + 4 * 400 * 2 * 2 + 900
     assert "regrown up to 2x" in regrown.describe()
     capped = get_estimator("splitting_is", **plan, max_calls=10_000)
     assert capped.budget() == 10_000
@@ -557,3 +555,31 @@ def test_no_replicate_reaching_gamma_is_an_estimate_with_caution_not_an_error():
     assert est.details["replicates_exhausted"] == 2 and est.p == 0.0
     assert est.details["splitting"] == {}  # the decoy's product is no estimate
     assert not trust.ok and "no replicate of the search reached gamma" in str(trust)
+
+
+def test_refreshes_at_gamma_cost_their_calls_and_leave_the_levels_alone():
+    # a half-space along z0 in 10 coordinates: the refresh draws the other
+    # nine afresh, always accepted
+    base = FixedCovNormal(np.zeros(10), cov=np.eye(10))
+    beta = stats.norm.isf(1e-6)
+
+    def f(x):
+        return beta - x[:, 0]
+
+    half_space = SimpleNamespace(base=base, f=f, gamma=0.0, p_exact=1e-6)
+    fixed = {"seed": 2, "correlated_moves": 1}
+    plain, fresh = sis(half_space, **fixed), sis(half_space, **fixed, refresh_rounds=2)
+    assert plain.history == fresh.history  # the same levels, draw for draw
+    assert "refreshed" not in plain.details
+    assert fresh.details["refreshed"] == [{"coordinates": 9, "acceptance": 1.0}] * 2
+    assert fresh.n_evals - plain.n_evals == 2 * 2000  # one call per particle
+    assert abs(fresh.p - 1e-6) < 4 * fresh.stderr
+    # along every coordinate alike, every coordinate looks uninformed once the
+    # errors are widened: no refresh is made
+    linear = gaussian_linear_problem(10, p=1e-6)
+    assert sis(linear, **fixed, refresh_rounds=2).details["refreshed"] == []
+    settings = estimator_class("splitting_is").Settings
+    assert "refresh_rounds" not in settings().recorded()  # older records hold
+    plan = dict(n_particles=400, max_levels=6, n_final=900, regrow=0)
+    more = settings(**plan, refresh_rounds=2).bound(0) - settings(**plan).bound(0)
+    assert more == 2 * 400
