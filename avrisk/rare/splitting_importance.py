@@ -288,16 +288,12 @@ class SplittingImportanceSampling(SubsetSimulation):
             deepest = [levels_estimate(r, problem, n) for r, n in with_hits]
             combined = combined_levels(deepest, problem, sum(state.sizes))
         s = self.settings
-        moves = _moves_at_gamma(
+        moves, refreshes = _refreshed_at_gamma(
+            _moves_at_gamma(with_hits, state.current.n_stages, problem, context, s),
             with_hits,
-            state.current.n_stages,
             problem,
             context,
-            s.gamma_moves(),
-            s.correlated_factor(),
-        )
-        moves, refreshes = _refreshed_at_gamma(
-            moves, with_hits, problem, context, s.refresh_rounds
+            s.refresh_rounds,
         )
         fitted = _fitted_proposal(moves, with_hits, problem, context, s)
         n_evals = state.current.n_evals + sum(m.n_calls for m in moves)
@@ -343,17 +339,18 @@ def _moves_at_gamma(
     first_stage: int,
     problem: RareEventProblem,
     context: EstimationContext,
-    n_moves: int,
-    correlated_moves: int,
+    settings: SplittingISSettings,
 ) -> list[MovedSet]:
     """Each replicate's chains moved once more at ``gamma``: the particles to fit.
 
     Each replicate ``(state, n)`` moves ``n`` states on stages of its own,
     numbered from ``first_stage`` (after every replicate's levels) in turn,
-    ``n_moves`` proposals per kept state (times ``correlated_moves`` after
-    correlated chains: :func:`~avrisk.rare.splitting_moves.moves_after`).
+    ``settings.gamma_moves()`` proposals per kept state (times its
+    ``correlated_factor()`` after correlated chains:
+    :func:`~avrisk.rare.splitting_moves.moves_after`).
     """
     moves, stage = [], first_stage
+    n_moves, correlated_moves = settings.gamma_moves(), settings.correlated_factor()
     for r, n in with_hits:
         per_state = moves_after(r.sets[-1], n_moves, correlated_moves)
         moves.append(
