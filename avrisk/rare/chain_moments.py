@@ -179,7 +179,7 @@ def uninformed_coordinates(
 ) -> np.ndarray:
     """Coordinates whose particle mean and mean square stay near ``N(0, 1)``'s.
 
-    Within ``threshold`` standard errors of 0 (:func:`moment_errors`), each
+    Those :func:`informative_by_moments` does not name at ``threshold``, each
     moment's errors widened by :func:`empirical_null_scale`: the coordinates
     the particles do not show the event to depend on, once what their
     ancestors share is allowed for (module docstring).
@@ -196,7 +196,7 @@ def uninformed_coordinates(
     Returns
     -------
     ndarray of bool, shape (D,)
-        None True with fewer than 4 chains (no standard errors).
+        None with fewer than 4 chains (no standard errors).
 
     Examples
     --------
@@ -213,9 +213,8 @@ def uninformed_coordinates(
     >>> np.flatnonzero(~uninformed_coordinates(z, chain, 4.0)).tolist()
     [0]
     """
-    moments = moment_errors(z, chain)
-    uninformed = np.full(z.shape[1], not np.isnan(moments[0][1]).all())
-    for mean, stderr in moments:
-        widened = stderr * empirical_null_scale(mean, stderr)
-        uninformed &= np.abs(mean) <= threshold * widened
-    return uninformed
+    widened = [
+        (mean, stderr * empirical_null_scale(mean, stderr))
+        for mean, stderr in moment_errors(z, chain)
+    ]
+    return ~informative_by_moments(widened, threshold)

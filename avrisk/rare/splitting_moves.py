@@ -42,10 +42,11 @@ is still below the level. That is pCN with ``beta = 1`` on those coordinates,
 reversible with respect to ``N(0, I)`` as any pCN step is, so the
 conditional law stays invariant; where ``f`` does not depend on them it is
 accepted every time and forgets in one step what the particle's ancestors
-left there. For a seeded
-(stochastic) ``f`` each proposal has its own seed: the chain moves on ``(x,
-seed)``, and a fresh seed is an independence proposal from its prior, so the
-move stays reversible.
+left there.
+
+For a seeded (stochastic) ``f`` each proposal has its own seed: the chain
+moves on ``(x, seed)``, and a fresh seed is an independence proposal from its
+prior, so the move stays reversible.
 
 Seeds and resume
 ----------------
