@@ -34,8 +34,8 @@ if TYPE_CHECKING:  # the comparison's module loads the simulator (torch)
 def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
     """The answer in one sentence, then every run's estimate at every threshold.
 
-    After each run's table: that its search converged (a search that did not
-    is a reason of its trust), its trust when not ok (the answer's reasons
+    After each run's table: how its search ended (unless that is a reason of
+    its trust), its trust when not ok (the answer's reasons
     are in the answer), and the tables of its estimator's diagnostics that
     the report does not draw (splitting_is: its proposal, and the estimate
     beside subset simulation's own).
@@ -65,11 +65,11 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
             )
         out_console.print(table)
         search = estimator_class(summary["method"]).convergence(est, est["gamma"])
-        if search is not None and search.converged:  # else a reason of its trust
+        trust = run_trust(summary)
+        if search is not None and search_sentence(search) not in trust.reasons:
             out_console.print(
                 f"{escape(label)}: {escape(search_sentence(search))}", highlight=False
             )
-        trust = run_trust(summary)
         if not trust.ok and label != lead.label:  # the answer's reasons are above
             out_console.print(
                 f"{escape(label)}: trust at {est['gamma']:g} s: {escape(str(trust))}",

@@ -3,8 +3,9 @@
 An estimate carries its own diagnostics at every threshold: hits, effective
 hits (ESS), the Pareto tail index of the hits' weights, samples that failed to
 evaluate; and its estimator may know more of how it got there (a
-cross-entropy search that never reached the threshold,
-:meth:`Estimator.convergence <avrisk.rare.estimator.Estimator.convergence>`;
+cross-entropy search that reached the threshold and drifted back, or never
+reached it, :meth:`Estimator.convergence
+<avrisk.rare.estimator.Estimator.convergence>`, :func:`search_doubts`;
 independent replicates of a splitting search that disagree, or a level held
 by a handful of particles, :meth:`Estimator.doubts
 <avrisk.rare.estimator.Estimator.doubts>`). :func:`estimate_trust` reads them
@@ -16,13 +17,14 @@ rollouts for a scenario).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from avrisk.rare.directional_audit import directional_doubts, directional_table
 from avrisk.rare.estimator import DiagnosticTable
 from avrisk.rare.final_stage import MIN_RELIABLE_ESS
+from avrisk.rare.results import SearchConvergence
 from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 
 __all__ = [
@@ -31,6 +33,7 @@ __all__ = [
     "Wording",
     "estimate_diagnostics",
     "estimate_trust",
+    "search_doubts",
     "trust_at",
 ]
 
@@ -167,20 +170,44 @@ def estimate_trust(
     Returns
     -------
     Trust
-        The search's failure to converge first, then the estimator's own
-        doubts, then the check by rays
+        The search's failure to converge first (where :func:`search_doubts`),
+        then the estimator's own doubts, then the check by rays
         (:func:`~avrisk.rare.directional_audit.directional_doubts`), then
         :func:`trust_at`'s reasons.
     """
     gamma = threshold["gamma"]
-    reasons = []
+    others = [
+        *estimator.doubts(estimate, gamma),
+        *directional_doubts(estimate, gamma),
+        *trust_at(threshold, estimator.weighted, wording).reasons,
+    ]
     search = estimator.convergence(estimate, gamma)
-    if search is not None and not search.converged:
-        reasons.append(search.sentence(wording.measure, wording.unit))
-    reasons.extend(estimator.doubts(estimate, gamma))
-    reasons.extend(directional_doubts(estimate, gamma))
-    reasons.extend(trust_at(threshold, estimator.weighted, wording).reasons)
-    return Trust(tuple(reasons))
+    if search_doubts(search, others):
+        others.insert(0, search.sentence(wording.measure, wording.unit))
+    return Trust(tuple(others))
+
+
+def search_doubts(search: SearchConvergence | None, others: Sequence[str]) -> bool:
+    """Whether a search's end is a reason of an estimate's trust.
+
+    A search that reached ``gamma`` and drifted back had not settled: a doubt
+    of its own. One that never reached it leaves a proposal aimed at a less
+    rare event, and its final sample is importance sampling all the same:
+    its interval rests on that sample's weights, which :func:`trust_at`
+    judges (effective hits, their tail) and the check by rays complements,
+    so the search's shortfall is said beside their reasons, as their likely
+    cause, and is no doubt of its own where they raise none.
+
+    Parameters
+    ----------
+    search : SearchConvergence or None
+        The estimator's :meth:`~avrisk.rare.estimator.Estimator.convergence`.
+    others : sequence of str
+        The estimate's other reasons.
+    """
+    if search is None or search.converged:
+        return False
+    return search.reached_at is not None or bool(others)
 
 
 def estimate_diagnostics(

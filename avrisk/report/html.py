@@ -123,6 +123,7 @@ def _run_view(
     timing = summary["timing"]
     rate = timing.get("rollouts_per_second")
     search = estimator_class(summary["method"]).convergence(est, est["gamma"])
+    trust = run_trust(summary)
     by_gamma = [  # older summaries have no pareto_k
         {"pareto_k": None, **g, "trust": threshold_trust(summary, g)}
         for g in sorted(est["by_gamma"], key=lambda g: g["gamma"])
@@ -138,7 +139,7 @@ def _run_view(
         "ess": est["ess"] or 0.0,
         "n_evals": est["n_evals"],
         "by_gamma": by_gamma,
-        "trust": run_trust(summary),
+        "trust": trust,
         "interval": next(g for g in by_gamma if g["gamma"] == est["gamma"]).get(
             "interval"  # absent from older summaries
         ),
@@ -154,8 +155,12 @@ def _run_view(
         ),
         "diagnostics": diagnostics,
         "tables": tables,
-        # a search that did not converge is a reason of the run's trust
-        "search": search_sentence(search) if search and search.converged else None,
+        # how the search ended, unless that is a reason of the run's trust
+        "search": (
+            search_sentence(search)
+            if search and search_sentence(search) not in trust.reasons
+            else None
+        ),
         "mechanisms": next(
             (
                 m["by_label"]

@@ -50,7 +50,7 @@ def test_the_headline_states_its_time_base_and_per_hour_approximation():
     assert unknown.per_hour is None and unknown.to_dict()["per_hour_approx"] is None
 
 
-def test_a_search_that_did_not_converge_is_the_first_reason_for_caution():
+def test_a_search_short_of_gamma_is_said_first_beside_the_sample_s_doubts():
     stalled = summary(quantiles=(1.9, 1.2, 0.8), pareto_k=0.9)
     trust = run_trust(stalled)
     assert trust.reasons[0].startswith(
@@ -58,6 +58,16 @@ def test_a_search_that_did_not_converge_is_the_first_reason_for_caution():
         "TTC in 3 iterations was 0.8 s, so its proposal aims at a less rare event"
     )
     assert "Pareto k = 0.90" in trust.reasons[1]  # the final stage's own, after
+    assert len(trust.reasons) == 2
+    # short of gamma, but its final sample's weights raise no doubt: their
+    # interval stands (importance sampling from a proposal aimed higher)
+    assert run_trust(summary(quantiles=(1.9, 1.2, 0.8), pareto_k=0.4)).ok
+    # reached gamma and drifted back: not settled, a doubt of its own
+    drifted = run_trust(summary(quantiles=(1.9, 0.05, 0.8), pareto_k=0.4))
+    assert len(drifted.reasons) == 1
+    assert drifted.reasons[0].startswith(
+        "the search reached min TTC <= 0.1 s after 2 of its 3 iterations but"
+    )
     converged = summary(quantiles=(1.9, 0.05, 0.02))
     assert run_trust(converged).ok
     # each threshold is judged on its own: the same search reached 1 s
