@@ -28,6 +28,11 @@ level / quantile level 0.1) run in the base's standard-normal space with
 ``OT_PER_STEP`` samples per level or iteration, stopped with an error past
 ``SUITE_BUDGET`` calls. ``settings`` prints all of it.
 
+``run --set NAME=VALUE`` runs a variant, its sample counts scaled to the same
+budget; with ``--on-top`` it keeps the default's sample counts and adds its own
+calls, so that its runs are the default's bit for bit wherever it changes nothing
+(a paired comparison, not one of two random streams).
+
 ``run`` appends one JSON line per run to ``--out`` and skips runs already there
 (same problem, method, seed and settings), so an interrupted sweep goes on where
 it stopped. A run that raises is a result (its error's first line recorded),
@@ -97,20 +102,42 @@ LABELS = {
 }
 
 
+def _on_top(
+    method: str, default: dict[str, Any], changed: dict[str, Any]
+) -> dict[str, Any]:
+    """``default`` with ``changed`` set, ``max_calls`` raised by what they add."""
+    from avrisk.rare.estimator import get_estimator, planned_budget
+
+    uncapped = {k: v for k, v in default.items() if k != "max_calls"}
+    extra = planned_budget(get_estimator(method, **uncapped, **changed)) - (
+        planned_budget(get_estimator(method, **uncapped))
+    )
+    if "max_calls" not in default:
+        return {**default, **changed}
+    return {**default, **changed, "max_calls": default["max_calls"] + max(0, extra)}
+
+
 class BudgetExceeded(RuntimeError):
     """A method asked for more calls of f than the suite's budget."""
 
 
 def suite_settings(
-    method: str, changed: dict[str, Any] | None = None
+    method: str, changed: dict[str, Any] | None = None, on_top: bool = False
 ) -> dict[str, Any]:
     """The suite's one setting of ``method`` (see the module docstring).
 
     ``changed``: settings of the method set otherwise before the sample counts
-    are scaled to the budget (a variant measured beside the default).
+    are scaled to the budget (a variant measured beside the default). With
+    ``on_top``, set after them instead: the variant runs at the default's
+    sample counts, its own calls on top of the budget (``max_calls`` raised to
+    its bound), so that where it changes nothing its runs are the default's
+    bit for bit and where it does, the difference is its own, not that of
+    other sample counts drawing other random numbers.
     """
     if method in OT_METHODS:
         return {"per_step": OT_PER_STEP, "block": OT_BLOCK, "max_calls": SUITE_BUDGET}
+    if on_top and changed:
+        return _on_top(method, suite_settings(method), changed)
     from avrisk.cli.estimator_options import CLI_DEFAULTS
     from avrisk.rare.estimator import estimator_class, get_estimator, planned_budget
 
@@ -303,7 +330,7 @@ def run(args: argparse.Namespace) -> None:
     problems = args.problems.split(",") if args.problems else list(SUITE)
     methods = args.methods.split(",") if args.methods else list(DEFAULT_METHODS)
     changed = dict(_assignment(text) for text in args.set)
-    settings = {m: suite_settings(m, changed) for m in methods}
+    settings = {m: suite_settings(m, changed, args.on_top) for m in methods}
     done = {_key(r) for r in _read(args.out)}
     tasks = [
         (problem, method, seed, settings[method])
@@ -539,6 +566,11 @@ def main(argv: list[str] | None = None) -> None:
         action="append",
         default=[],
         help="NAME=VALUE: a setting of every method run changed (a variant)",
+    )
+    r.add_argument(
+        "--on-top",
+        action="store_true",
+        help="the --set variant at the default's sample counts, its calls on top",
     )
     r.set_defaults(func=run)
     t = sub.add_parser("table", help="tabulate a results file")

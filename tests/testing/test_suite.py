@@ -244,3 +244,24 @@ def test_gross_miss_needs_both_a_missed_interval_and_a_factor_two():
     assert suite._gross({**run, "p": 0.4, "ci": [0.3, 0.5]})
     assert not suite._gross({**run, "p": 0.6, "ci": [0.5, 0.7]})  # within 2x
     assert not suite._gross({**run, "p": 0.4, "ci": [0.1, 1.2]})  # covers
+
+
+def test_a_variant_on_top_keeps_the_default_s_counts_and_adds_its_own_calls():
+    from avrisk.rare.estimator import get_estimator, planned_budget
+
+    suite = _load_suite_command()
+    default = suite.suite_settings("splitting_is")
+    variant = suite.suite_settings("splitting_is", {"refresh_rounds": 2}, on_top=True)
+    assert {k: variant[k] for k in ("n_particles", "n_final")} == {
+        k: default[k] for k in ("n_particles", "n_final")
+    }
+    uncapped = {k: v for k, v in default.items() if k != "max_calls"}
+    added = planned_budget(
+        get_estimator("splitting_is", **uncapped, refresh_rounds=2)
+    ) - planned_budget(get_estimator("splitting_is", **uncapped))
+    assert added == 2 * default["n_particles"]  # one call a particle a round
+    assert variant["max_calls"] == default["max_calls"] + added
+    get_estimator("splitting_is", **variant)  # its bound within its cap
+    # a method without a cap of calls takes the change alone
+    ce = suite.suite_settings("ce", {"rho": 0.2}, on_top=True)
+    assert ce == {**suite.suite_settings("ce"), "rho": 0.2}
