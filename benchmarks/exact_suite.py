@@ -108,12 +108,12 @@ def _on_top(
     """``default`` with ``changed`` set, ``max_calls`` raised by what they add."""
     from avrisk.rare.estimator import get_estimator, planned_budget
 
+    if "max_calls" not in default:
+        return {**default, **changed}
     uncapped = {k: v for k, v in default.items() if k != "max_calls"}
     extra = planned_budget(get_estimator(method, **uncapped, **changed)) - (
         planned_budget(get_estimator(method, **uncapped))
     )
-    if "max_calls" not in default:
-        return {**default, **changed}
     return {**default, **changed, "max_calls": default["max_calls"] + max(0, extra)}
 
 

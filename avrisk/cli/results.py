@@ -23,7 +23,7 @@ from avrisk.cli.tables import add_columns, compact_table
 from avrisk.pipeline.files import json_text
 from avrisk.rare.estimator import estimator_class
 from avrisk.rare.trust import estimate_diagnostics
-from avrisk.report.answer import run_trust, search_sentence, threshold_trust
+from avrisk.report.answer import run_trust, search_remark, threshold_trust
 from avrisk.report.plots import UNRELIABLE_MARK, UNRELIABLE_NOTE, table_cells
 from avrisk.scenario import ScenarioSpec
 
@@ -64,12 +64,10 @@ def print_summary(runs: Runs, spec: ScenarioSpec) -> None:
                 threshold_trust(summary, g).word,
             )
         out_console.print(table)
-        search = estimator_class(summary["method"]).convergence(est, est["gamma"])
         trust = run_trust(summary)
-        if search is not None and search_sentence(search) not in trust.reasons:
-            out_console.print(
-                f"{escape(label)}: {escape(search_sentence(search))}", highlight=False
-            )
+        remark = search_remark(summary, trust)
+        if remark is not None:
+            out_console.print(f"{escape(label)}: {escape(remark)}", highlight=False)
         if not trust.ok and label != lead.label:  # the answer's reasons are above
             out_console.print(
                 f"{escape(label)}: trust at {est['gamma']:g} s: {escape(str(trust))}",

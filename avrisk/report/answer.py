@@ -51,6 +51,22 @@ def search_sentence(search: SearchConvergence) -> str:
     return search.sentence(SCENARIO_WORDING.measure, SCENARIO_WORDING.unit)
 
 
+def search_remark(summary: Mapping[str, Any], trust: Trust) -> str | None:
+    """How a run's search ended, unless that is among ``trust``'s reasons.
+
+    :func:`search_sentence` of the estimator's
+    :meth:`~avrisk.rare.estimator.Estimator.convergence`; None for an
+    estimator that does not search, or where the sentence is a reason of the
+    run's ``trust`` (:func:`run_trust`), which says it already.
+    """
+    est = summary["estimate"]
+    search = estimator_class(summary["method"]).convergence(est, est["gamma"])
+    if search is None:
+        return None
+    sentence = search_sentence(search)
+    return None if sentence in trust.reasons else sentence
+
+
 def run_trust(summary: Mapping[str, Any]) -> Trust:
     """:func:`threshold_trust` at a run's main threshold."""
     return threshold_trust(summary, main_threshold(summary))

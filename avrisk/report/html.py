@@ -33,7 +33,7 @@ from avrisk.rare.weights import MAX_RELIABLE_PARETO_K
 from avrisk.report.answer import (
     headline,
     run_trust,
-    search_sentence,
+    search_remark,
     threshold_trust,
 )
 from avrisk.report.failures import failure_view
@@ -122,7 +122,6 @@ def _run_view(
     est = summary["estimate"]
     timing = summary["timing"]
     rate = timing.get("rollouts_per_second")
-    search = estimator_class(summary["method"]).convergence(est, est["gamma"])
     trust = run_trust(summary)
     by_gamma = [  # older summaries have no pareto_k
         {"pareto_k": None, **g, "trust": threshold_trust(summary, g)}
@@ -155,12 +154,7 @@ def _run_view(
         ),
         "diagnostics": diagnostics,
         "tables": tables,
-        # how the search ended, unless that is a reason of the run's trust
-        "search": (
-            search_sentence(search)
-            if search and search_sentence(search) not in trust.reasons
-            else None
-        ),
+        "search": search_remark(summary, trust),
         "mechanisms": next(
             (
                 m["by_label"]

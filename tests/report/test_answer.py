@@ -1,6 +1,7 @@
 import pytest
 
-from avrisk.report.answer import headline, run_trust, threshold_trust
+from avrisk.rare.trust import Trust
+from avrisk.report.answer import headline, run_trust, search_remark, threshold_trust
 
 
 def summary(method="ce", p=1e-4, ci=(0.5e-4, 1.5e-4), quantiles=(), **main):
@@ -70,6 +71,14 @@ def test_a_search_short_of_gamma_is_said_first_beside_the_sample_s_doubts():
     )
     converged = summary(quantiles=(1.9, 0.05, 0.02))
     assert run_trust(converged).ok
+    # how the search ended is remarked on where the trust does not say it
+    assert search_remark(stalled, trust) is None
+    healthy = summary(quantiles=(1.9, 1.2, 0.8), pareto_k=0.4)
+    assert search_remark(healthy, run_trust(healthy)).startswith(
+        "the search did not reach min TTC <= 0.1 s"
+    )
+    assert search_remark(converged, run_trust(converged)).endswith("(converged)")
+    assert search_remark(summary("naive"), Trust()) is None  # no search
     # each threshold is judged on its own: the same search reached 1 s
     at_one = {"gamma": 1.0, "n_hits": 80, "ess": 60.0}
     assert threshold_trust(summary(quantiles=(1.9, 1.2, 0.8)), at_one).ok
