@@ -66,11 +66,14 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from avrisk.rare.paired import PAIRED_DEFAULTS, paired_splitting_is  # noqa: E402
+from avrisk.rare.paired import paired_splitting_is  # noqa: E402
 from avrisk.rare.paired_gate import gate  # noqa: E402
-from avrisk.rare.splitting_importance import (  # noqa: E402
-    SplittingISSettings,
-    splitting_is,
+from avrisk.rare.splitting_importance import splitting_is  # noqa: E402
+from avrisk.testing.ab_budgets import (  # noqa: E402
+    EVEN,
+    INDEPENDENT,
+    PAIRED,
+    SINGLE,
 )
 from avrisk.testing.pairs import PAIR_SUITE, AnalyticPair, pair_problem  # noqa: E402
 
@@ -84,21 +87,6 @@ GATE_CASES = {
     "equal, disjoint": "disjoint_ratio1_p1e-04_d10",
 }
 
-#: The paired run's settings, for every case: ``avrisk ab``'s defaults.
-PAIRED = PAIRED_DEFAULTS
-#: A default single-version run's settings (``avrisk run``'s): two of them make
-#: about as many evaluations as the default paired run (``run-single``).
-SINGLE = {
-    name: SplittingISSettings.model_fields[name].default
-    for name in ("n_particles", "n_final")
-}
-#: Each independent run's: half of a default single-version run's samples,
-#: so that the two make about half the paired run's evaluations.
-INDEPENDENT = {name: value // 2 for name, value in SINGLE.items()}
-#: The paired run of the efficiency table: half the default paired run's
-#: samples; each of its draws is evaluated by both versions, so it makes
-#: about as many evaluations as the two independent runs together.
-EVEN = {name: value // 2 for name, value in PAIRED_DEFAULTS.items()}
 SINGLE_OUT = ROOT / "benchmarks" / "results" / "ab" / "single_runs.jsonl"
 EVEN_OUT = ROOT / "benchmarks" / "results" / "ab" / "even_runs.jsonl"
 #: Offset of the independent runs' seeds (2 per paired seed), so that no

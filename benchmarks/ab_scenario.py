@@ -71,25 +71,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from avrisk.api import compare_egos, estimate  # noqa: E402
-from avrisk.rare.paired import PAIRED_DEFAULTS  # noqa: E402
-from avrisk.rare.splitting_importance import SplittingISSettings  # noqa: E402
+from avrisk.testing.ab_budgets import EVEN, INDEPENDENT, PAIRED, SINGLE  # noqa: E402
 
 SCENARIO = "highway_default"
 EGOS = {
     which: ROOT / "examples" / "ab_lidar" / name
     for which, name in (("a", "lidar_ego.yaml"), ("b", "lidar_ego_degraded.yaml"))
 }
-#: A default single-version run's samples (``avrisk run``'s).
-SINGLE = {
-    name: SplittingISSettings.model_fields[name].default
-    for name in ("n_particles", "n_final")
-}
-#: Each independent run's settings: half a default single-version run's samples.
-INDEPENDENT = {name: value // 2 for name, value in SINGLE.items()}
-#: The paired run of the efficiency comparison, at half the default paired
-#: run's samples: each of its draws is simulated with both egos, so it
-#: simulates about as many rollouts as the two independent runs together.
-EVEN = {name: value // 2 for name, value in PAIRED_DEFAULTS.items()}
 RESULTS = ROOT / "benchmarks" / "results" / "ab"
 EVEN_OUT = RESULTS / "lidar_pair_even_final_heavy.jsonl"
 INDEPENDENT_OUT = RESULTS / "lidar_pair_independent.jsonl"
@@ -258,7 +246,7 @@ def run_paired(seeds: list[int], out: Path) -> None:
         out,
         lambda seed, scratch: {
             "egos": {k: str(v.relative_to(ROOT)) for k, v in EGOS.items()},
-            "settings": dict(PAIRED_DEFAULTS),
+            "settings": PAIRED,
             "paired": paired_record(seed, scratch),
         },
         lambda rec: (

@@ -51,11 +51,11 @@ if TYPE_CHECKING:  # the simulator (torch) is loaded by the command that runs
 
 DEFAULT_SCENARIO = "highway_default"
 #: ``compare``'s: a budget that finishes in minutes on a laptop. splitting_is
-#: keeps its own 2,000 particles per level (two moves a state) and takes a
-#: final stage of 10,000: about 26,000 rollouts on highway_default (at most
-#: 446,000 if its levels needed all 12 after a plateau and ran out of levels
-#: twice in each replicate), as much naive MC and a reference of 50,000, about
-#: 100,000 rollouts; CE 5 x 2,000 + 10,000 rollouts and its audit, 90,000.
+#: keeps its own 2,000 particles per level (two moves a state, two refresh
+#: rounds at gamma) and takes a final stage of 10,000: about 30,000 rollouts
+#: on highway_default (its plan says at most 78,000, or 786,000 if levels that
+#: run out are run again), as much naive MC and a reference of 50,000, about
+#: 110,000 rollouts; CE 5 x 2,000 + 10,000 rollouts and its audit, 90,000.
 COMPARE_DEFAULTS = {"n_iter": 5, "n_per_iter": 2000, "n_final": 10_000}
 COMPARE_REFERENCE = 50_000
 
@@ -226,7 +226,7 @@ def run(
     """Estimate how likely the ego gets within gamma seconds of a collision.
 
     By default with splitting_is (subset simulation, then importance sampling
-    from its particles: about 26,000 rollouts on highway_default); --method
+    from its particles: about 30,000 rollouts on highway_default); --method
     ce is the paper's cross-entropy. Prints the plan (rollouts, disk; "at
     most" where the levels may end sooner) first and the time it will take
     once the first chunk is simulated. Rerunning the same command after an
@@ -305,7 +305,7 @@ def compare(
     naive reference, each in its own resumable directory under OUT, then
     writes OUT/report.html with the rare-event and variance ratios per
     threshold. The defaults (splitting_is: 2,000 particles per level and a
-    final stage of 10,000, about 26,000 rollouts on highway_default; ce: 5 x
+    final stage of 10,000, about 30,000 rollouts on highway_default; ce: 5 x
     2,000 + 10,000; a reference of 50,000) take minutes; the plan's cost is
     printed before the first rollout.
     """

@@ -69,12 +69,17 @@ class EstimatorSettings(BaseModel):
 
     ``OMIT_IF_DEFAULT`` names settings left out of :meth:`recorded` while they
     hold their default, so that adding an option does not change how earlier
-    runs are recorded.
+    runs are recorded. ``OMIT_AT_FORMER_DEFAULT`` does the same for settings
+    whose default has changed since, while they hold the former default: a run
+    recorded before the change still resumes with that value given, and one
+    at the new default is recorded with it, so the two are never taken for
+    each other.
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     OMIT_IF_DEFAULT: ClassVar[tuple[str, ...]] = ()
+    OMIT_AT_FORMER_DEFAULT: ClassVar[dict[str, Any]] = {}
 
     @classmethod
     def validated(cls, **values: Any) -> EstimatorSettings:
@@ -150,6 +155,9 @@ class EstimatorSettings(BaseModel):
         out = self.model_dump(mode="json")
         for name in self.OMIT_IF_DEFAULT:
             if out[name] == type(self).model_fields[name].default:
+                out.pop(name)
+        for name, former in self.OMIT_AT_FORMER_DEFAULT.items():
+            if out[name] == former:
                 out.pop(name)
         return out
 

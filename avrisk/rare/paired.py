@@ -65,7 +65,7 @@ search runs with ``PAIRED_DEFAULTS``: its levels at half a single-version
 run's default particles (two evaluations a particle, so they cost what that
 run's levels cost), the rest of two default single-version runs' budget in
 the final stage, since every figure's error is the final sample's (the
-levels only place the proposal).
+levels only place the proposal); no refresh at ``gamma``, as measured.
 """
 
 from __future__ import annotations
@@ -130,7 +130,7 @@ __all__ = [
 UNION_METHOD = SplittingImportanceSampling.name
 
 #: The union's search settings where none are given (module docstring, *Calls*).
-PAIRED_DEFAULTS: dict[str, int] = {"n_particles": 1000, "n_final": 18_000}
+PAIRED_DEFAULTS = {"n_particles": 1000, "n_final": 18_000, "refresh_rounds": 0}
 
 
 @dataclass(frozen=True)

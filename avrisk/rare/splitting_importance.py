@@ -12,10 +12,9 @@ and estimates ``p`` by importance sampling from it:
    at the level ``gamma`` itself: ``N`` particles of ``P0(. | f <= gamma)``
    (``N`` states, the hits among them: fewer than ``N`` new calls of ``f``;
    the last set alone may hold as few as ``p0 N`` hits), taken in the base's
-   standard-normal space, ``z = T(x)``; then, ``refresh_rounds`` times (none
-   by default yet), draw
-   afresh the coordinates the particles do not inform (one proposal per
-   particle, kept if still below the level: *Moves* in
+   standard-normal space, ``z = T(x)``; then, ``refresh_rounds`` times (twice
+   by default), draw afresh the coordinates the particles do not inform (one
+   proposal per particle, kept if still below the level: *Moves* in
    :mod:`avrisk.rare.splitting_moves`). After a few levels the particles
    can descend from a handful of the first set's draws, each keeping some of
    its ancestor's coordinates where ``f`` does not pull them; fitted, such an

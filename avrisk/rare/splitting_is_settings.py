@@ -57,20 +57,17 @@ class SplittingISSettings(SplittingSettings):
         particles the proposal is fitted to; None: ``n_moves``, as at every
         level. More spread those particles over the event's law where one
         move per state leaves them narrower than it, at ``N`` calls each.
-    refresh_rounds : int, default=0
+    refresh_rounds : int, default=2
         Rounds of fresh draws of the coordinates the particles at ``gamma``
         do not inform, after the moves there (step 2;
         :func:`~avrisk.rare.splitting_moves.refreshed`), at one call per
         particle each: what their ancestors left in those coordinates is
-        not fitted as a shift. 0: none (the default until the bundled
-        scenarios' coverage is measured with it; BENCHMARKS.md).
+        not fitted as a shift. 0: none. Runs recorded before it became the
+        default (0 then) record no value, and resume with 0 given.
     """
 
-    OMIT_IF_DEFAULT = (
-        *SplittingSettings.OMIT_IF_DEFAULT,
-        "moves_at_gamma",
-        "refresh_rounds",
-    )
+    OMIT_IF_DEFAULT = (*SplittingSettings.OMIT_IF_DEFAULT, "moves_at_gamma")
+    OMIT_AT_FORMER_DEFAULT = {"refresh_rounds": 0}
 
     n_moves: int = Field(
         2, ge=1, description="pCN proposals per kept chain state (thinning)."
@@ -114,7 +111,7 @@ class SplittingISSettings(SplittingSettings):
     )
 
     refresh_rounds: int = Field(
-        0,
+        2,
         ge=0,
         description="Rounds of fresh draws of the coordinates the particles at "
         "gamma do not inform (0: none).",

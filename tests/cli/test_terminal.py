@@ -129,27 +129,28 @@ def test_the_default_method_is_splitting_is_its_plan_a_bound_and_its_tables_show
     )
     err = words(result.stderr)
     # max_levels=12 sets of 100 (the first of 800 on a plateau, two moves per
-    # state after it), the moves at gamma and the final stage: a bound; 7 times
-    # the sets (each replicate regrown twice, to 2 and 4 times its particles)
-    # and 4 x 100 states moved at gamma if its levels run out, every move twice
-    # over after correlated chains: (800 + 11 x 400) x 7 + 4 x 400 + 100
+    # state after it), the moves and two refresh rounds at gamma and the final
+    # stage: a bound; 7 times the sets (each replicate regrown twice, to 2 and
+    # 4 times its particles) and 4 x 100 states moved and refreshed at gamma if
+    # its levels run out, every move twice over after correlated chains:
+    # (800 + 11 x 400) x 7 + 4 x (400 + 200) + 100
     assert (
         "plan: splitting + IS (subset simulation, 100 particles per level, p0 0.1, "
         "2 moves per state, regrown up to 2x, then IS 100 (4 components, "
-        "defensive 0.1)): at most 3,300 rollouts (fewer if the levels reach "
-        "gamma sooner; up to 38,100 if "
+        "defensive 0.1)): at most 3,500 rollouts (fewer if the levels reach "
+        "gamma sooner; up to 38,900 if "
         "levels that run out are run again, larger, or slowly mixing chains move "
         "more); samples take at most about"
     ) in err
     # its first batch: the first replicate's first set, 50 particles
     assert "rollouts/s on the first 50: at most about" in err
-    assert "for at most 3,250 more" in err
+    assert "for at most 3,450 more" in err
     assert_whole_at_80_columns(result.stdout)
     estimate = json.loads((out / "summary.json").read_text())["estimate"]
     n = estimate["n_evals"]
-    assert n < 3300
+    assert n < 3500
     # the bar ends full at the rollouts the levels needed, not short of the bound
-    assert f"{n}/{n}" in err and "/3300" not in err
+    assert f"{n}/{n}" in err and "/3500" not in err
     assert f"method splitting + IS, {estimate['n_evals']:,} rollouts" in words(
         result.stdout
     )
@@ -291,24 +292,28 @@ def test_compare_defaults_finish_in_minutes():
     assert budget == 20_000 + audit_bound(200) and reference == 50_000
     assert 2 * budget + reference <= 100_000  # ~3.5 min at 450 rollouts/s
     # the default, splitting_is: 2,000 particles per level, two moves a state,
-    # and 10,000 in its final stage; on highway_default its levels reach 0.14 s
-    # in 4 sets (about 26,000 rollouts), within the bound the plan gives
+    # two refresh rounds at gamma and 10,000 in its final stage; on
+    # highway_default its levels reach 0.14 s in 4 sets (about 30,000
+    # rollouts), within the bound the plan gives
     method = inspect.signature(compare).parameters["method"].default
     options = estimator_options(method, {}, None, COMPARE_DEFAULTS)
     splitting = get_estimator(method, **options)
     assert method == "splitting_is" and options == {"n_final": 10_000}
     s = splitting.settings
-    assert s.n_moves == 2
+    assert s.n_moves == 2 and s.refresh_rounds == 2
     moved = s.n_moves * s.n_particles  # proposals a set after the first
-    assert s.n_particles + 3 * moved + moved + s.n_final == 28_000
+    refreshed = s.refresh_rounds * s.n_particles  # one call a particle a round
+    assert s.n_particles + 3 * moved + moved + refreshed + s.n_final == 32_000
     # the bound: 12 sets (the first of 8 N on a plateau), 7 times over where each
-    # replicate runs out of levels twice and is regrown, 4 N states moved at
-    # gamma, every set after the first moved twice over after correlated chains
+    # replicate runs out of levels twice and is regrown, 4 N states moved and
+    # refreshed at gamma, every set after the first moved twice over after
+    # correlated chains
     assert s.correlated_moves == 2
     levels = 8 * s.n_particles + 11 * 2 * moved
-    assert splitting.budget() == 7 * levels + 4 * 2 * moved + s.n_final == 770_000
+    at_gamma = 4 * (2 * moved + refreshed)
+    assert splitting.budget() == 7 * levels + at_gamma + s.n_final == 786_000
     assert splitting.planned_budget() == 8 * s.n_particles + 11 * moved + moved + (
-        s.n_final
+        refreshed + s.n_final
     )
 
 

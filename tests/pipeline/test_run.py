@@ -110,6 +110,24 @@ def test_a_directory_holding_a_different_run_is_refused_by_name(tmp_path):
         run(tmp_path / "run", settings=other)
 
 
+def test_a_run_from_before_a_default_changed_resumes_only_with_the_former_value(
+    tmp_path,
+):
+    # splitting_is refreshed nothing at gamma until two rounds became the
+    # default; such a run recorded no value, and must not resume as the new
+    # default
+    small = {"method": "splitting_is", "gamma": 0.0, "n_particles": 300}
+    former = RunSettings(**small, n_final=600, refresh_rounds=0)
+    first = run(tmp_path / "run", settings=former)
+    recorded = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert "refresh_rounds" not in recorded["settings"]
+    with pytest.raises(
+        RunDirectoryError, match=r"differs in: settings.refresh_rounds\)"
+    ):
+        run(tmp_path / "run", settings=RunSettings(**small, n_final=600))
+    assert run(tmp_path / "run", settings=former) == first
+
+
 def test_a_non_run_directory_with_files_is_refused_and_left_as_found(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(RunDirectoryError, match="not an avrisk run directory"):

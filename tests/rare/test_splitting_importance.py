@@ -366,16 +366,17 @@ def test_settings_budget_and_description():
     plan = dict(n_particles=400, max_levels=6, n_final=900)
     method = get_estimator("splitting_is", **plan, regrow=0)
     # 8 N draws on a plateau, 2 proposals per state at 5 further levels and at
-    # gamma, then the final draws; twice the moves after correlated chains
-    assert method.planned_budget() == 400 * (8 + 5 * 2) + 400 * 2 + 900
-    assert method.budget() == 400 * (8 + 5 * 2 * 2) + 400 * 2 * 2 + 900
+    # gamma, 2 refresh rounds there, then the final draws; twice the moves
+    # after correlated chains
+    assert method.planned_budget() == 400 * (8 + 5 * 2) + 400 * (2 + 2) + 900
+    assert method.budget() == 400 * (8 + 5 * 2 * 2) + 400 * (2 * 2 + 2) + 900
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, 2 moves per state, "
         "then IS 900 (4 components, defensive 0.1)"
     )
     # each replicate regrown twice: 1 + 2 + 4 times the levels, 4 times at gamma
     regrown = get_estimator("splitting_is", **plan)
-    assert regrown.budget() == 7 * 400 * (8 + 5 * 2 * 2) + 4 * 400 * 2 * 2 + 900
+    assert regrown.budget() == 7 * 400 * (8 + 5 * 2 * 2) + 4 * 400 * (2 * 2 + 2) + 900
     assert "regrown up to 2x" in regrown.describe()
     capped = get_estimator("splitting_is", **plan, max_calls=10_000)
     assert capped.budget() == 10_000
@@ -568,7 +569,8 @@ def test_refreshes_at_gamma_cost_their_calls_and_leave_the_levels_alone():
 
     half_space = SimpleNamespace(base=base, f=f, gamma=0.0, p_exact=1e-6)
     fixed = {"seed": 2, "correlated_moves": 1}
-    plain, fresh = sis(half_space, **fixed), sis(half_space, **fixed, refresh_rounds=2)
+    plain = sis(half_space, **fixed, refresh_rounds=0)
+    fresh = sis(half_space, **fixed)  # two rounds, the default
     assert plain.history == fresh.history  # the same levels, draw for draw
     assert "refreshed" not in plain.details
     assert fresh.details["refreshed"] == [{"coordinates": 9, "acceptance": 1.0}] * 2
@@ -579,7 +581,10 @@ def test_refreshes_at_gamma_cost_their_calls_and_leave_the_levels_alone():
     linear = gaussian_linear_problem(10, p=1e-6)
     assert sis(linear, **fixed, refresh_rounds=2).details["refreshed"] == []
     settings = estimator_class("splitting_is").Settings
-    assert "refresh_rounds" not in settings().recorded()  # older records hold
+    # runs recorded before the default changed (0 then, unrecorded) resume
+    # with 0 given; the default's runs say so, so the two never mix
+    assert "refresh_rounds" not in settings(refresh_rounds=0).recorded()
+    assert settings().recorded()["refresh_rounds"] == 2
     plan = dict(n_particles=400, max_levels=6, n_final=900, regrow=0)
-    more = settings(**plan, refresh_rounds=2).bound(0) - settings(**plan).bound(0)
+    more = settings(**plan).bound(0) - settings(**plan, refresh_rounds=0).bound(0)
     assert more == 2 * 400

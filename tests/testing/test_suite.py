@@ -251,13 +251,13 @@ def test_a_variant_on_top_keeps_the_default_s_counts_and_adds_its_own_calls():
 
     suite = _load_suite_command()
     default = suite.suite_settings("splitting_is")
-    variant = suite.suite_settings("splitting_is", {"refresh_rounds": 2}, on_top=True)
+    variant = suite.suite_settings("splitting_is", {"refresh_rounds": 4}, on_top=True)
     assert {k: variant[k] for k in ("n_particles", "n_final")} == {
         k: default[k] for k in ("n_particles", "n_final")
     }
     uncapped = {k: v for k, v in default.items() if k != "max_calls"}
     added = planned_budget(
-        get_estimator("splitting_is", **uncapped, refresh_rounds=2)
+        get_estimator("splitting_is", **uncapped, refresh_rounds=4)
     ) - planned_budget(get_estimator("splitting_is", **uncapped))
     assert added == 2 * default["n_particles"]  # one call a particle a round
     assert variant["max_calls"] == default["max_calls"] + added
