@@ -236,8 +236,9 @@ class SplittingImportanceSampling(SubsetSimulation):
     def describe(self) -> str:
         """``"subset simulation, 2,000 particles per level, p0 0.1, then IS ..."``."""
         s = self.settings
+        refresh = f", {s.refresh_rounds} refresh rounds" if s.refresh_rounds else ""
         return (
-            f"{super().describe()}, then IS {s.n_final:,} "
+            f"{super().describe()}{refresh}, then IS {s.n_final:,} "
             f"({s.n_components} components, defensive {s.defensive:g})"
         )
 

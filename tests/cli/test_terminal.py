@@ -136,7 +136,8 @@ def test_the_default_method_is_splitting_is_its_plan_a_bound_and_its_tables_show
     # (800 + 11 x 400) x 7 + 4 x (400 + 200) + 100
     assert (
         "plan: splitting + IS (subset simulation, 100 particles per level, p0 0.1, "
-        "2 moves per state, regrown up to 2x, then IS 100 (4 components, "
+        "2 moves per state, regrown up to 2x, 2 refresh rounds, then IS 100 (4 "
+        "components, "
         "defensive 0.1)): at most 3,500 rollouts (fewer if the levels reach "
         "gamma sooner; up to 38,900 if "
         "levels that run out are run again, larger, or slowly mixing chains move "

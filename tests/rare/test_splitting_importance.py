@@ -372,7 +372,13 @@ def test_settings_budget_and_description():
     assert method.budget() == 400 * (8 + 5 * 2 * 2) + 400 * (2 * 2 + 2) + 900
     assert method.describe() == (
         "subset simulation, 400 particles per level, p0 0.1, 2 moves per state, "
-        "then IS 900 (4 components, defensive 0.1)"
+        "2 refresh rounds, then IS 900 (4 components, defensive 0.1)"
+    )
+    assert (
+        "refresh"
+        not in get_estimator(
+            "splitting_is", **plan, regrow=0, refresh_rounds=0
+        ).describe()
     )
     # each replicate regrown twice: 1 + 2 + 4 times the levels, 4 times at gamma
     regrown = get_estimator("splitting_is", **plan)
