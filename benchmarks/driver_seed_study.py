@@ -64,7 +64,12 @@ def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
     replay driven by the network alone (``ClosedLoopConfig.drive_with_guard =
     False``; the weights still carry the shipped brake), so that the network
     meets the outcome of its own closing in ordinary traffic too, not only in
-    the stress replays.
+    the stress replays. ``idm_head``: the shipped recipe with the IDM's
+    car-following law in the network (``TrainConfig.head = "idm"``,
+    :mod:`avrisk.agents.drivers.idm_head`): the network sets the gap a driver
+    keeps, the IDM the acceleration that keeps it, so a period's closing
+    behaviour is a matter of gaps the network learns, not of an acceleration
+    law it must extrapolate to traffic it never saw.
     """
     from avrisk.learning.guard_fit import fit_brake_guard
     from avrisk.learning.train_config import TrainConfig
@@ -82,9 +87,12 @@ def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
     elif name == "network_alone":
         alone = replace(default.closed_loop, drive_with_guard=False)
         config = replace(default, closed_loop=alone)
+    elif name == "idm_head":
+        config = replace(default, head="idm")
     else:
         raise SystemExit(
-            f"unknown recipe {name!r}: shipped, balanced, fitted_brake, network_alone"
+            f"unknown recipe {name!r}: shipped, balanced, fitted_brake, "
+            "network_alone, idm_head"
         )
     return replace(config, periods=periods)
 

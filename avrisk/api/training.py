@@ -88,6 +88,7 @@ def retrain_drivers(
     data_dir: str | Path | None = None,
     brake_guard: str | None = None,
     periods: list[str] | tuple[str, ...] | None = None,
+    head: str = "free",
     candidates: int = 1,
     workers: int = 1,
     progress: Progress | None = None,
@@ -108,7 +109,7 @@ def retrain_drivers(
     data_dir : str or Path, optional
         NGSIM folder (packed or original files); default ``$AVRISK_NGSIM_DIR``,
         else the data shipped with avrisk.
-    brake_guard, periods
+    brake_guard, periods, head
         The recipe's changes (:func:`training_config`).
     candidates, workers : int, default=1
         Trainings with seeds ``seed, seed + 1, ...`` (each written to
@@ -120,11 +121,12 @@ def retrain_drivers(
     Raises
     ------
     UserError
-        For a brake, a period, NGSIM files or an ``out`` that cannot be used.
+        For a brake, a period, a head, NGSIM files or an ``out`` that cannot
+        be used.
     OSError
         For files that cannot be read or written during the training.
     """
-    config = _as_user_error(training_config, brake_guard, periods)
+    config = _as_user_error(training_config, brake_guard, periods, head)
     folder = _data_folder(data_dir)
     _as_user_error(_check_periods, folder, config.periods)
     out = _writable_folder(Path(out))
@@ -178,8 +180,9 @@ def retrain_vision(
 def training_config(
     brake_guard: str | None = None,
     periods: list[str] | tuple[str, ...] | None = None,
+    head: str = "free",
 ) -> TrainConfig:
-    """The shipped drivers' recipe, with another brake or periods if given.
+    """The shipped drivers' recipe, with another brake, periods or head if given.
 
     Parameters
     ----------
@@ -189,18 +192,23 @@ def training_config(
         loop then trains the network alone); default the recipe's.
     periods : sequence of str, optional
         I-80 recording periods to train on (``"0400pm-0415pm"``); default all.
+    head : {"free", "idm"}, default="free"
+        The network's acceleration head (``TrainConfig.head``): the shipped
+        drivers' free one, or the IDM's law with the gap the network sets
+        (:mod:`avrisk.agents.drivers.idm_head`).
 
     Raises
     ------
     ValueError
-        For a brake that is not one (:func:`avrisk.agents.drivers.guard.parse_guard`).
+        For a brake that is not one (:func:`avrisk.agents.drivers.guard.parse_guard`)
+        or an unknown head.
     """
     from dataclasses import replace
 
     from avrisk.agents.drivers.guard import parse_guard
     from avrisk.learning.train_config import TrainConfig
 
-    default = TrainConfig(periods=tuple(periods) if periods else None)
+    default = TrainConfig(periods=tuple(periods) if periods else None, head=head)
     if brake_guard is None:
         return default
     guard = parse_guard(brake_guard)

@@ -211,6 +211,16 @@ def train_drivers_command(
             "The lateral file (16:00-16:15) is read only with its period.",
         ),
     ] = None,
+    head: Annotated[
+        str,
+        typer.Option(
+            "--head",
+            metavar="free|idm",
+            help="The network's acceleration head: 'free' (the shipped drivers': "
+            "the network outputs the acceleration) or 'idm' (the network sets "
+            "the gap a driver keeps, the IDM's law the acceleration).",
+        ),
+    ] = "free",
 ) -> None:
     """Retrain the learned drivers and their xi prior from NGSIM data.
 
@@ -226,6 +236,7 @@ def train_drivers_command(
                 data_dir=data_dir,
                 brake_guard=brake_guard,
                 periods=period,
+                head=head,
                 candidates=candidates,
                 workers=workers,
                 progress=progress,

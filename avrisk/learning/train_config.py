@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 from avrisk.agents.drivers.guard import BrakeGuard
+from avrisk.agents.drivers.idm_head import check_head
 
 __all__ = ["ClosedLoopConfig", "Progress", "TrainConfig", "TrainEvent"]
 
@@ -251,6 +252,11 @@ class TrainConfig:
         values, e.g. ``("0400pm-0415pm",)``); None: all. The lateral file
         (16:00-16:15) is read only when its period is among them. For
         leave-one-period-out validation (:mod:`avrisk.realism.held_out`).
+    head : {"free", "idm"}, default="free"
+        The network's acceleration head
+        (:class:`~avrisk.agents.drivers.network.DriverNet`): the mean
+        acceleration itself, or the factor on the IDM's desired gap
+        (:mod:`avrisk.agents.drivers.idm_head`).
     """
 
     n_members: int = 20
@@ -277,8 +283,10 @@ class TrainConfig:
     closed_loop: ClosedLoopConfig = field(default_factory=ClosedLoopConfig)
     guard: BrakeGuard | None = BrakeGuard(2.0, 2.0, hold_floor=True)
     periods: tuple[str, ...] | None = None
+    head: str = "free"
 
     def __post_init__(self) -> None:
+        check_head(self.head)
         if self.periods is not None and not self.periods:
             raise ValueError("periods must name at least one period (None: all)")
         if self.n_members < 2:

@@ -131,3 +131,29 @@ def test_an_unknown_period_is_a_one_line_error(tmp_path):
     assert result.output.startswith("error: ") and "0400pm-0415pm" in result.output
     assert len(result.output.strip().splitlines()) == 1
     assert not (tmp_path / "d").exists()
+
+
+def test_an_unknown_head_is_a_one_line_error_before_training(tmp_path):
+    result = _train("--head", "mlp", "--out", str(tmp_path / "d"))
+    assert result.exit_code == 2, result.output  # a usage error
+    assert result.output.startswith("error: ") and "free, idm" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.slow
+def test_the_idm_head_is_chosen_on_the_command_line(
+    tmp_path, fake_ngsim, tiny_train_config, monkeypatch
+):
+    real = training.train_drivers
+
+    def train(*args, config, **kwargs):
+        return real(
+            *args, config=replace(tiny_train_config, head=config.head), **kwargs
+        )
+
+    monkeypatch.setattr(training, "train_drivers", train)
+    out = tmp_path / "idm"
+    result = _train("--out", str(out), "--data-dir", str(fake_ngsim), "--head", "idm")
+    assert result.exit_code == 0, result.output
+    assert load_driver_net(out / "driver_net.npz").head_kind == "idm"

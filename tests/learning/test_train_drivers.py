@@ -1,3 +1,4 @@
+import dataclasses
 import json
 
 import pytest
@@ -78,3 +79,16 @@ def test_candidates_keep_the_training_with_the_fewest_validation_crashes(
             here = out / CANDIDATES_DIR / f"seed-{seed}" / name
             there = tmp_path / "par" / CANDIDATES_DIR / f"seed-{seed}" / name
             assert here.read_bytes() == there.read_bytes()
+
+
+@pytest.mark.slow
+def test_train_drivers_with_an_idm_head_fits_its_parameters_and_writes_them(
+    tmp_path, fake_ngsim, tiny_train_config
+):
+    config = dataclasses.replace(tiny_train_config, head="idm")
+    train_drivers(3, tmp_path / "out", data_dir=fake_ngsim, config=config)
+    net = load_driver_net(tmp_path / "out" / "driver_net.npz")
+    assert net.head_kind == "idm"
+    assert net.idm is not None and bool((net.idm.log_factors != 0).any())
+    saved = json.loads((tmp_path / "out" / "training_report.json").read_text())
+    assert saved["config"]["head"] == "idm"

@@ -12,6 +12,9 @@ Architecture (paper, appendix B, after Kuefler et al. 2017)::
 ``s_a, s_s`` (``action_scale``) put both actions on a unit scale so that one
 ``xi`` perturbation means about as much for steering as for acceleration; the
 log-variances are clipped to ``[LOG_VAR_MIN, LOG_VAR_MAX]`` in that scale.
+That is the ``"free"`` head. With ``head="idm"`` the mean acceleration is the
+Intelligent Driver Model's instead, ``out[0]`` scaling the gap it keeps
+(:mod:`avrisk.agents.drivers.idm_head`); the rest is the same.
 
 The trunk is shared; the last layer is ``xi`` (:mod:`avrisk.agents.drivers.xi`),
 and :meth:`DriverNet.head` evaluates a *different* ``xi`` per rollout in one
@@ -47,6 +50,7 @@ from torch import Tensor, nn
 
 from avrisk.agents.drivers.features import FEATURE_NAMES, N_FEATURES
 from avrisk.agents.drivers.guard import BrakeGuard
+from avrisk.agents.drivers.idm_head import IDMHead, check_head
 from avrisk.agents.drivers.xi import (
     N_HIDDEN_LAST,
     N_OUTPUTS,
@@ -183,6 +187,9 @@ class DriverNet(nn.Module):
         network does not apply it: a
         :class:`~avrisk.agents.drivers.driver.LearnedDriver` does, when given
         it (the scenarios' environment drivers and ``avrisk realism`` are).
+    head : {"free", "idm"}, default="free"
+        What the first output means: the mean acceleration, or the log factor
+        on the IDM's desired gap (:mod:`avrisk.agents.drivers.idm_head`).
 
     Attributes
     ----------
@@ -192,6 +199,8 @@ class DriverNet(nn.Module):
         200 -> 100.
     last : torch.nn.Linear
         100 -> 4: the default ``xi`` (the trained shared head).
+    idm : IDMHead or None
+        The IDM's shared parameters of an ``"idm"`` head; None for ``"free"``.
 
     Examples
     --------
@@ -211,9 +220,11 @@ class DriverNet(nn.Module):
         noise_correlation: tuple[float, float] = (0.0, 0.0),
         noise_scale: tuple[float, float] = (1.0, 1.0),
         guard: BrakeGuard | None = None,
+        head: str = "free",
     ) -> None:
         super().__init__()
         self.guard = guard
+        self.idm = IDMHead() if check_head(head) == "idm" else None
         mean = torch.zeros(N_FEATURES) if input_mean is None else _vec(input_mean)
         scale = torch.ones(N_FEATURES) if input_scale is None else _vec(input_scale)
         if mean.shape != (N_FEATURES,) or scale.shape != (N_FEATURES,):
@@ -314,25 +325,47 @@ class DriverNet(nn.Module):
         out = torch.bmm(rows, weight.transpose(1, 2)) + bias.unsqueeze(1)
         return out.reshape(*hidden.shape[:-1], N_OUTPUTS)
 
-    def distribution(self, raw: Tensor) -> ActionDistribution:
+    @property
+    def head_kind(self) -> str:
+        """``"idm"`` or ``"free"``: what the first output means (class doc)."""
+        return "free" if self.idm is None else "idm"
+
+    def distribution(
+        self, raw: Tensor, features: Tensor | None = None
+    ) -> ActionDistribution:
         """Physical Gaussian parameters from raw head outputs.
 
         Parameters
         ----------
         raw : Tensor of shape (..., 4)
+        features : Tensor of shape (..., N_FEATURES), optional
+            The unscaled features the outputs came from, broadcastable
+            against ``raw``'s leading shape; needed by an ``"idm"`` head,
+            whose mean acceleration depends on the gap ahead.
 
         Returns
         -------
         ActionDistribution
             Fields of shape (...).
+
+        Raises
+        ------
+        ValueError
+            If the head is ``"idm"`` and ``features`` is None.
         """
         s = self.action_scale.to(raw.dtype)
         offset = self.log_action_var
         if offset.dtype != raw.dtype:
             offset = 2.0 * log(s)
         log_var = torch.clamp(raw[..., 2:], LOG_VAR_MIN, LOG_VAR_MAX) + offset
+        if self.idm is None:
+            accel_mean = raw[..., 0] * s[0]
+        elif features is None:
+            raise ValueError("an 'idm' head needs the features for its acceleration")
+        else:
+            accel_mean = self.idm.mean_accel(raw[..., 0], features)
         return ActionDistribution(
-            accel_mean=raw[..., 0] * s[0],
+            accel_mean=accel_mean,
             steer_mean=raw[..., 1] * s[1],
             accel_log_var=log_var[..., 0],
             steer_log_var=log_var[..., 1],
@@ -353,7 +386,7 @@ class DriverNet(nn.Module):
         ActionDistribution
             Fields of shape (B, ...).
         """
-        return self.distribution(self.head(self.trunk(features), xi))
+        return self.distribution(self.head(self.trunk(features), xi), features)
 
     # --------------------------------------------------------- serialisation
     def to_arrays(self) -> dict[str, np.ndarray]:
@@ -370,6 +403,8 @@ class DriverNet(nn.Module):
         }
         if self.guard is not None:
             meta["guard"] = self.guard.to_dict()
+        if self.idm is not None:
+            meta["head"] = self.head_kind
         arrays["meta"] = np.array(json.dumps(meta))
         return arrays
 
@@ -381,7 +416,7 @@ class DriverNet(nn.Module):
         ------
         ValueError
             If the format version or the feature layout differs from this
-            code's, or the saved guard is malformed.
+            code's, or the saved guard or head is malformed.
         """
         meta = json.loads(str(arrays["meta"]))
         if meta.get("format_version") != FORMAT_VERSION:
@@ -398,6 +433,7 @@ class DriverNet(nn.Module):
             tuple(arrays["noise_correlation"]),
             tuple(arrays["noise_scale"]),
             guard=None if "guard" not in meta else BrakeGuard.from_dict(meta["guard"]),
+            head=meta.get("head", "free"),
         )
         state = {k: torch.from_numpy(np.asarray(arrays[k])) for k in net.state_dict()}
         net.load_state_dict(state)

@@ -164,7 +164,7 @@ def fit_driver_net(
     train, val : Demonstrations
         Training and validation demonstrations.
     config : TrainConfig
-        ``trunk_epochs``, ``batch_size``, ``lr`` and ``weight_decay``.
+        ``trunk_epochs``, ``batch_size``, ``lr``, ``weight_decay`` and ``head``.
     seed : int
         Seeds the shuffling (the initial weights come from torch's global
         generator).
@@ -178,7 +178,7 @@ def fit_driver_net(
         As returned by :func:`behaviour_cloning`.
     """
     mean, scale = fit_input_normalization(train.features)
-    net = DriverNet(mean, scale, fit_action_scale(train))
+    net = DriverNet(mean, scale, fit_action_scale(train), head=config.head)
     history = behaviour_cloning(
         net,
         train,

@@ -103,7 +103,7 @@ def bootstrap_heads(
         for s in range(0, n, batch_size):
             idx = perm[s : s + batch_size]
             raw = torch.einsum("nh,moh->mno", hidden[idx], weight) + bias[:, None, :]
-            dist = net.distribution(raw)
+            dist = net.distribution(raw, t["features"][idx])
             m = mult[:, idx]
             nll, w = weighted_nll(
                 dist,
