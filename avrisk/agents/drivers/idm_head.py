@@ -12,7 +12,8 @@ Driver Model (:func:`~avrisk.agents.idm.idm_acceleration`) turns that gap
 into the mean acceleration,
 
     k   = exp(R tanh(r / R)),  R = MAX_LOG_GAP_FACTOR               [-]
-    a_m = IDM(v, g, v_lead; v0, k T, k s0, a, b)                    [m/s^2]
+    a_I = IDM(v, g, v_lead; v0, k T, k s0, a, b)                    [m/s^2]
+    a_m = a_min + softplus(a_I - a_min),  a_min = ACCEL_FLOOR       [m/s^2]
 
 with ``v`` the driver's speed, ``g = range_0 - length / 2`` the bumper gap
 along its front lidar beam and ``v_lead = v + range_rate_0`` the speed of
@@ -22,20 +23,35 @@ driver and fitted with the network (as log factors on
 :data:`INITIAL_PARAMS`, so weight decay pulls them to those values). The
 IDM's interaction term grows without bound as the gap closes, whatever the
 network says (``k >= exp(-R)``), so the mean acceleration always brakes
-before a vehicle ahead; the action noise around it is the network's, as
-with the free head. ``xi`` (the last layer) still perturbs ``r``, so a
+before a vehicle ahead, down to the simulator's floor ``a_min``, which it
+approaches smoothly: the simulator clips every acceleration there anyway,
+and a demonstration whose front beam meets what the driver did not brake
+for (a vehicle in the next lane, half in front, while changing lanes) then
+costs the fit a bounded error with a vanishing gradient, instead of one
+that grows as the square of the IDM's demand and teaches every driver to
+tailgate. The action noise around the mean is the network's, as with the
+free head. ``xi`` (the last layer) still perturbs ``r``, so a
 rare-event search over ``xi`` looks for drivers who keep short gaps.
 """
 
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from avrisk.agents.drivers.features import FEATURE_INDEX
 from avrisk.agents.idm import idm_acceleration
+from avrisk.sim.config import SimConfig
 
-__all__ = ["HEADS", "INITIAL_PARAMS", "MAX_LOG_GAP_FACTOR", "IDMHead", "check_head"]
+__all__ = [
+    "ACCEL_FLOOR",
+    "HEADS",
+    "INITIAL_PARAMS",
+    "MAX_LOG_GAP_FACTOR",
+    "IDMHead",
+    "check_head",
+]
 
 #: The heads a driver network may have: ``"free"`` outputs the mean
 #: acceleration; ``"idm"`` the factor on the IDM's desired gap (this module).
@@ -50,6 +66,10 @@ INITIAL_PARAMS = (20.0, 1.2, 2.0, 1.0, 1.5)
 #: Bound ``R`` on the network's log factor of the desired gap: the gap may be
 #: scaled by ``exp(-R)`` to ``exp(R)`` (about 0.05 to 20).
 MAX_LOG_GAP_FACTOR = 3.0
+
+#: The mean acceleration's smooth floor ``a_min`` [m/s^2]: the simulator's
+#: default clip (:class:`~avrisk.sim.config.SimConfig`'s ``accel_min``).
+ACCEL_FLOOR = SimConfig.accel_min
 
 _SPEED = FEATURE_INDEX["speed"]
 _LENGTH = FEATURE_INDEX["length"]
@@ -91,14 +111,14 @@ class IDMHead(nn.Module):
         Returns
         -------
         Tensor of shape (...)
-            ``IDM(v, g, v_lead; v0, k T, k s0, a, b)``, not clipped.
+            ``a_min + softplus(IDM(v, g, v_lead; v0, k T, k s0, a, b) - a_min)``.
         """
         v0, headway, jam_gap, max_accel, comfort = self.params().to(raw.dtype)
         factor = torch.exp(MAX_LOG_GAP_FACTOR * torch.tanh(raw / MAX_LOG_GAP_FACTOR))
         features = features.to(raw.dtype)
         speed = features[..., _SPEED]
         gap = features[..., _RANGE] - 0.5 * features[..., _LENGTH]
-        return idm_acceleration(
+        demand = idm_acceleration(
             speed,
             gap,
             speed + features[..., _RATE],
@@ -108,6 +128,7 @@ class IDMHead(nn.Module):
             max_accel,
             comfort,
         )
+        return ACCEL_FLOOR + F.softplus(demand - ACCEL_FLOOR)
 
 
 def check_head(head: str) -> str:

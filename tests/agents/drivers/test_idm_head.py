@@ -5,6 +5,7 @@ import torch
 
 from avrisk.agents.drivers.features import FEATURE_INDEX, N_FEATURES
 from avrisk.agents.drivers.idm_head import (
+    ACCEL_FLOOR,
     INITIAL_PARAMS,
     MAX_LOG_GAP_FACTOR,
     IDMHead,
@@ -13,6 +14,11 @@ from avrisk.agents.drivers.network import DriverNet
 from avrisk.agents.drivers.xi import XI_DIM
 from avrisk.agents.idm import idm_acceleration
 from avrisk.learning.train_config import TrainConfig
+
+
+def floored(accel):
+    """The head's smooth floor at the simulator's clip."""
+    return ACCEL_FLOOR + torch.nn.functional.softplus(accel - ACCEL_FLOOR)
 
 
 def following(speed, range_ahead, range_rate, length=4.5):
@@ -30,7 +36,7 @@ def following(speed, range_ahead, range_rate, length=4.5):
     return f
 
 
-def test_an_untrained_head_with_r_zero_is_the_idm_of_the_initial_parameters():
+def test_an_untrained_head_with_r_zero_is_the_floored_idm_of_the_initial_parameters():
     v0, headway, jam_gap, a, b = (torch.tensor(x) for x in INITIAL_PARAMS)
     speed = torch.tensor([0.0, 6.0, 12.0, 12.0])
     range_ahead = torch.tensor([50.0, 20.0, 12.0, 8.0])
@@ -40,7 +46,7 @@ def test_an_untrained_head_with_r_zero_is_the_idm_of_the_initial_parameters():
     want = idm_acceleration(
         speed, range_ahead - 2.25, speed + rate, v0, headway, jam_gap, a, b
     )
-    torch.testing.assert_close(got, want)
+    torch.testing.assert_close(got, floored(want))
 
 
 def test_r_scales_the_desired_gap_within_its_bound():
@@ -62,17 +68,27 @@ def test_r_scales_the_desired_gap_within_its_bound():
         a,
         b,
     )
-    torch.testing.assert_close(bound, want)
+    torch.testing.assert_close(bound, floored(want))
 
 
 @pytest.mark.parametrize("r", [-1e6, -3.0, 0.0, 3.0])
 def test_whatever_the_network_says_the_mean_brakes_hard_before_a_vehicle_ahead(r):
-    # 0.3 m behind a vehicle at 2 m/s closing: far harder than the simulator's
-    # floor of -9 m/s^2, for any output of the network
+    # 0.3 m behind a vehicle, closing at 2 and 8 m/s: the IDM asks far more than
+    # the simulator's floor of -9 m/s^2, for any output of the network, and the
+    # mean is at that floor
     f = following(torch.tensor([2.0, 8.0]), 2.55, torch.tensor([-2.0, -8.0]))
     with torch.no_grad():
         accel = IDMHead().mean_accel(torch.full((2,), r), f)
-    assert (accel < -9.0).all()
+    assert ((accel < ACCEL_FLOOR + 0.01) & (accel >= ACCEL_FLOOR)).all()
+
+
+def test_the_floor_bounds_a_demonstrations_error_and_its_gradient_vanishes():
+    # a human who did not brake, 0.5 m behind something in its front beam
+    f = following(torch.tensor([10.0]), 2.75, torch.tensor([-5.0]))
+    r = torch.zeros(1, requires_grad=True)
+    accel = IDMHead().mean_accel(r, f)
+    (accel - 0.0).square().sum().backward()
+    assert accel.item() >= ACCEL_FLOOR and abs(r.grad.item()) < 1e-6
 
 
 def test_a_driver_network_with_an_idm_head_saves_and_loads_it():
