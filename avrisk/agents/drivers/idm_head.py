@@ -84,16 +84,19 @@ class IDMHead(nn.Module):
     ----------
     log_factors : torch.nn.Parameter of shape (5,)
         ``log(param / INITIAL_PARAMS)``, in :data:`INITIAL_PARAMS`'s order.
+    initial : Tensor of shape (5,)
+        :data:`INITIAL_PARAMS` (a buffer, not saved: it moves with the module
+        and is not built again at every step).
     """
 
     def __init__(self) -> None:
         super().__init__()
         self.log_factors = nn.Parameter(torch.zeros(len(INITIAL_PARAMS)))
+        self.register_buffer("initial", torch.tensor(INITIAL_PARAMS), persistent=False)
 
     def params(self) -> Tensor:
         """``(v0, T, s0, a, b)`` as fitted, shape (5,), in their units."""
-        initial = torch.tensor(INITIAL_PARAMS, dtype=self.log_factors.dtype)
-        return initial.to(self.log_factors.device) * torch.exp(self.log_factors)
+        return self.initial * torch.exp(self.log_factors)
 
     def mean_accel(self, raw: Tensor, features: Tensor) -> Tensor:
         """The mean acceleration [m/s^2] of every vehicle.
