@@ -128,9 +128,14 @@ def window_bands(windows: CarFollowingWindows) -> NDArray[np.str_]:
     return np.where(slow, BANDS[0], BANDS[1])
 
 
-def _cut(starts: NDArray[Any], ends: NDArray[Any], n_steps: int) -> Iterator[int]:
+def _cut(
+    starts: NDArray[Any], ends: NDArray[Any], n_steps: int, gap: NDArray[np.float64]
+) -> Iterator[int]:
+    """First rows of the episodes' non-overlapping windows whose gap stays > 0."""
     for s, e in zip(starts, ends, strict=True):
-        yield from range(s, e - n_steps, n_steps)
+        for w in range(s, e - n_steps, n_steps):
+            if gap[w : w + n_steps + 1].min() > 0.0:
+                yield w
 
 
 def car_following_windows(
@@ -141,6 +146,12 @@ def car_following_windows(
     road: Road,
 ) -> CarFollowingWindows:
     """Non-overlapping windows of ``n_steps`` from both I-80 files.
+
+    A window whose recorded gap is not positive at some step is left out:
+    there the two vehicles overlap lengthwise, side by side (a lateral-file
+    leader assigned while still in the next lane), which is no car
+    following, and its replay would start or end in a collision that no
+    follower can avoid and every model would be charged with.
 
     Parameters
     ----------
@@ -165,7 +176,7 @@ def car_following_windows(
     }
     median_len = float(np.median(pairs.leader_length)) if len(pairs) else 4.5
     s, e = episode_bounds(pairs.pair_id)
-    for w in _cut(s, e, n_steps):
+    for w in _cut(s, e, n_steps, pairs.gap):
         sl = slice(w, w + n_steps + 1)
         lane = int(pairs.lane[w])
         cols["v_f"].append(pairs.v_follower[sl])
@@ -184,7 +195,7 @@ def car_following_windows(
             raise ValueError("lateral pairs need lane centre lines")
         offset, heading, _ = lateral_tracks(lateral, centres)
         s, e = episode_bounds(lateral.pair_id)
-        for w in _cut(s, e, n_steps):
+        for w in _cut(s, e, n_steps, lateral.gap):
             sl = slice(w, w + n_steps + 1)
             cols["v_f"].append(lateral.speed[sl])
             cols["v_l"].append(lateral.leader_speed[sl])

@@ -36,7 +36,7 @@ class ClosedLoopConfig:
     hard_brake_decel : float, default=-2.0
         A training window whose leader brakes harder than this at some step
         [m/s^2] is a hard-braking window (about 8% of the I-80 training
-        windows; 6 of 1,067 also stop the leader after braking harder than
+        windows; 6 of 1,066 also stop the leader after braking harder than
         -2.5 m/s^2).
     hard_brake_oversample : float, default=1.0
         Hard-braking windows are drawn this many times as often as the others

@@ -58,3 +58,23 @@ def test_each_period_is_held_out_whole_and_the_lateral_file_joins_its_own_only()
 def test_an_unknown_held_out_set_is_refused():
     with pytest.raises(ValueError, match="0400pm-0415pm"):
         held_out_windows(150, Road(), "0515pm-0530pm")
+
+
+def test_a_window_whose_vehicles_overlap_lengthwise_is_no_car_following():
+    """The 16:00 lateral file has one such window (a leader still in the next lane)."""
+    from avrisk.learning.ngsim.lateral import LaneCentres
+    from avrisk.learning.ngsim.loaders import lateral_pair_split, load_i80_lateral
+    from avrisk.learning.replay import car_following_windows
+
+    road = Road()
+    files = data_files()
+    pairs = load_i80_pairs(files["i80_pairs"])
+    lateral = load_i80_lateral(files["i80_lateral"])
+    centres = LaneCentres.fit(
+        lateral.take(lateral_pair_split(lateral, pairs) == "train")
+    )
+    assert (lateral.gap <= 0).any()  # the data have such frames
+    windows = car_following_windows(pairs, lateral, centres, 150, road)
+    assert len(windows) > 0 and (windows.gap > 0).all()
+    for held_out in ("test", "0400pm-0415pm", "0500pm-0515pm"):
+        assert (held_out_windows(150, road, held_out).gap > 0).all()
