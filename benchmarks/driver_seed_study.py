@@ -20,8 +20,11 @@ scored on 17:00-17:15; ``B`` trains on 17:00-17:15 (the car-following pairs
 only: the lateral file covers 16:00-16:15) and is scored on 16:00-16:15 (its
 pairs and its lateral windows); ``all`` trains on both and is scored on the
 test splits (the default ``avrisk realism`` set), which it did not train on.
-Every training and scoring runs in its own process (``train`` and ``score``
-sub-commands), with the CPU kernels pinned as for the shipped files
+A recipe is chosen on the training period's own test split, which no
+training reads (``validate FOLD RECIPE SEED``: ``avrisk realism --held-out
+PERIOD:test``, written to ``..._validation.json``), before its score on the
+other period. Every training and scoring runs in its own process (``train``
+and ``score`` sub-commands), with the CPU kernels pinned as for the shipped files
 (:data:`~avrisk.learning.training.report.KERNEL_PINS`).
 """
 
@@ -69,7 +72,11 @@ def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
     :mod:`avrisk.agents.drivers.idm_head`): the network sets the gap a driver
     keeps, the IDM the acceleration that keeps it, so a period's closing
     behaviour is a matter of gaps the network learns, not of an acceleration
-    law it must extrapolate to traffic it never saw.
+    law it must extrapolate to traffic it never saw. ``idm_head_imitation``:
+    the IDM head with the closed loop's adversarial term off
+    (``ClosedLoopConfig.adversarial_weight = 0``), so that its steps descend
+    the imitation loss (speed and gap along each replay) and the barriers
+    alone, the loss its early stopping already selects on.
     """
     from avrisk.learning.guard_fit import fit_brake_guard
     from avrisk.learning.train_config import TrainConfig
@@ -89,10 +96,13 @@ def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
         config = replace(default, closed_loop=alone)
     elif name == "idm_head":
         config = replace(default, head="idm")
+    elif name == "idm_head_imitation":
+        imitation = replace(default.closed_loop, adversarial_weight=0.0)
+        config = replace(default, head="idm", closed_loop=imitation)
     else:
         raise SystemExit(
             f"unknown recipe {name!r}: shipped, balanced, fitted_brake, "
-            "network_alone, idm_head"
+            "network_alone, idm_head, idm_head_imitation"
         )
     return replace(config, periods=periods)
 
@@ -169,6 +179,37 @@ def score(fold: str, recipe: str, seed: int) -> None:
     print(f"scored {folder}", flush=True)
 
 
+def validate(fold: str, recipe: str, seed: int) -> None:
+    """Score one training on its own period's test split (in fold); write its JSON.
+
+    The set a recipe is chosen on before its score on the period it never
+    saw: ``held_out = "{period}:test"``, which no training reads. With the
+    brake the weights carry and with the network alone.
+    """
+    import torch
+
+    from avrisk.agents.drivers.store import load_driver_net
+    from avrisk.realism.periods import score_summary
+    from avrisk.realism.report import DriverFiles, RealismSettings, run_realism
+
+    torch.set_num_threads(1)
+    periods, _ = FOLDS[fold]
+    if periods is None or len(periods) != 1:
+        raise SystemExit(f"fold {fold} trains on no single period to validate on")
+    folder = _folder(fold, recipe, seed)
+    own = load_driver_net(folder / "driver_net.npz").guard
+    held_out = f"{periods[0]}:test"
+    out: dict[str, Any] = {"fold": fold, "recipe": recipe, "seed": seed}
+    out["validated_on"] = held_out
+    for key, brake in (("with_brake", own), ("network_alone", None)):
+        settings = RealismSettings(held_out=held_out, guard=brake)
+        result = run_realism(DriverFiles.in_folder(folder), settings)
+        out[key] = score_summary(result, brake or own)
+    path = RESULTS / f"{fold}_{recipe}_seed{seed}_validation.json"
+    path.write_text(json.dumps(out, indent=1) + "\n")
+    print(f"validated {folder}", flush=True)
+
+
 def _child(*args: str) -> bool:
     """Run this script's sub-command in a fresh process; True if it succeeded."""
     from avrisk.learning.training.report import KERNEL_PINS
@@ -217,7 +258,11 @@ def _target_cell(t: dict[str, Any], digits: int = 2) -> str:
 
 def table() -> str:
     """Markdown tables of every result in :data:`RESULTS` (``xi ~ P0``)."""
-    rows = [json.loads(p.read_text()) for p in sorted(RESULTS.glob("*.json"))]
+    rows = [
+        json.loads(p.read_text())
+        for p in sorted(RESULTS.glob("*.json"))
+        if not p.stem.endswith("_validation")  # in fold: validate's
+    ]
     head = (
         "| fold / recipe / seed | set (median speed) | collisions /veh-h: own "
         "brake / fitted / none | accel p5 | gap p5 [m] | TTC p5 [s] | time stopped "
@@ -266,7 +311,7 @@ def main() -> None:
     p_run.add_argument("--seeds", default="0-5", help="e.g. 0-5")
     p_run.add_argument("--recipes", nargs="+", default=["shipped"])
     sub.add_parser("table", help="print the results as a markdown table")
-    for name in ("train", "score"):
+    for name in ("train", "score", "validate"):
         p = sub.add_parser(name)
         p.add_argument("fold", choices=FOLDS)
         p.add_argument("recipe")
@@ -278,6 +323,8 @@ def main() -> None:
         print(table())
     elif args.command == "train":
         train(args.fold, args.recipe, args.seed)
+    elif args.command == "validate":
+        validate(args.fold, args.recipe, args.seed)
     else:
         score(args.fold, args.recipe, args.seed)
 

@@ -178,29 +178,37 @@ def driver_files(folder: Path | None) -> DriverFiles:
 
 
 def _check_held_out(held_out: str) -> None:
-    """Raise UserError for a ``held_out`` that is neither test nor a period."""
-    from avrisk.realism.held_out import HELD_OUT_TEST, held_out_periods
+    """Raise UserError for a ``held_out`` that is not a held-out set."""
+    from avrisk.realism.held_out import (
+        HELD_OUT_TEST,
+        held_out_period,
+        held_out_periods,
+    )
 
-    periods = held_out_periods()
-    if held_out != HELD_OUT_TEST and held_out not in periods:
+    try:
+        held_out_period(held_out)
+    except ValueError:
+        periods = held_out_periods()
         raise UserError(
-            f"--held-out {held_out}: not {HELD_OUT_TEST} nor one of the periods "
-            f"{', '.join(periods)}"
-        )
+            f"--held-out {held_out}: not a held-out set: {HELD_OUT_TEST}, a "
+            f"period ({', '.join(periods)}) or a period's test split (e.g. "
+            f"{periods[0]}:{HELD_OUT_TEST})"
+        ) from None
 
 
 def _warn_trained_on(files: DriverFiles, held_out: str) -> None:
     """Warn when the drivers' training report says they trained on ``held_out``."""
-    from avrisk.realism.held_out import HELD_OUT_TEST
+    from avrisk.realism.held_out import held_out_period
 
-    if held_out == HELD_OUT_TEST:
+    period, test_only = held_out_period(held_out)
+    if test_only:  # no training reads a test split
         return
     report = files.net.parent / "training_report.json"
     try:
         periods = json.loads(report.read_text())["config"].get("periods")
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         periods = None  # no report: all periods, as the shipped drivers
-    if periods is None or held_out in periods:
+    if periods is None or period in periods:
         warnings.warn(
             f"these drivers were trained on {held_out} (its train split): part A "
             "is not held out",

@@ -185,12 +185,14 @@ def realism_command(
         str,
         typer.Option(
             "--held-out",
-            metavar="test|PERIOD",
+            metavar="test|PERIOD|PERIOD:test",
             help="Part A's held-out I-80 windows: 'test', the test splits of "
             "every period; or a recording period (0400pm-0415pm or "
             "0500pm-0515pm), all of it, for drivers trained on the other "
-            "(train-drivers --period). The report also splits part A by speed "
-            "band (leader's mean speed below 5 m/s: congested).",
+            "(train-drivers --period); or a period's test split alone (e.g. "
+            "0400pm-0415pm:test), to validate drivers trained on that period "
+            "before scoring them on the other. The report also splits part A "
+            "by speed band (leader's mean speed below 5 m/s: congested).",
         ),
     ] = "test",
 ) -> None:

@@ -47,6 +47,7 @@ from avrisk.sim import Road
 __all__ = [
     "HELD_OUT_TEST",
     "data_files",
+    "held_out_period",
     "held_out_periods",
     "held_out_windows",
     "select_windows",
@@ -79,6 +80,25 @@ def held_out_periods() -> tuple[str, ...]:
     return periods_of(load_i80_pairs(data_files()["i80_pairs"]))
 
 
+def held_out_period(held_out: str) -> tuple[str | None, bool]:
+    """The period a held-out set is drawn from, and whether from its test split only.
+
+    ``(None, True)`` for :data:`HELD_OUT_TEST` (every period's test split);
+    ``(period, False)`` for a period's name; ``(period, True)`` for
+    ``"{period}:test"``. A ValueError naming the valid sets otherwise.
+    """
+    periods = held_out_periods()
+    if held_out == HELD_OUT_TEST:
+        return None, True
+    period, _, split = held_out.partition(":")
+    if period in periods and split in ("", HELD_OUT_TEST):
+        return period, bool(split)
+    raise ValueError(
+        f"held-out set {held_out!r}: not {HELD_OUT_TEST!r}, one of the periods "
+        f"{', '.join(periods)}, nor a period then ':{HELD_OUT_TEST}'"
+    )
+
+
 def held_out_windows(
     n_steps: int, road: Road, held_out: str = HELD_OUT_TEST
 ) -> CarFollowingWindows:
@@ -94,7 +114,11 @@ def held_out_windows(
     held_out : str, default=HELD_OUT_TEST
         :data:`HELD_OUT_TEST`: the test splits of every period; a period
         name (:func:`held_out_periods`): every pair of that period, both
-        splits, with the lateral file's pairs if it is 16:00-16:15.
+        splits, with the lateral file's pairs if it is 16:00-16:15; a period
+        name then ``":test"`` (e.g. ``"0400pm-0415pm:test"``): that period's
+        test split only, the validation set of drivers trained on its
+        training split alone (a recipe is chosen there, before it is
+        scored on the period it never saw).
 
     Returns
     -------
@@ -112,16 +136,17 @@ def held_out_windows(
     lat = load_i80_lateral(files["i80_lateral"])
     split = lateral_pair_split(lat, pairs)
     centres = LaneCentres.fit(lat.take(split == "train"))
-    if held_out == HELD_OUT_TEST:
+    period, test_only = held_out_period(held_out)
+    if period is None:
         keep_pairs, keep_lat = pairs.split == "test", split == "test"
-    elif held_out in periods_of(pairs):
-        keep_pairs = pairs.period == held_out
-        keep_lat = np.full(len(lat), held_out == LATERAL_PERIOD)
     else:
-        raise ValueError(
-            f"held-out set {held_out!r}: not {HELD_OUT_TEST!r} nor one of the "
-            f"periods {', '.join(periods_of(pairs))}"
-        )
+        keep_pairs = pairs.period == period
+        keep_lat = np.full(len(lat), period == LATERAL_PERIOD)
+        if test_only:
+            keep_pairs, keep_lat = (
+                keep_pairs & (pairs.split == "test"),
+                keep_lat & (split == "test"),
+            )
     return car_following_windows(
         pairs.take(keep_pairs), lat.take(keep_lat), centres, n_steps, road
     )

@@ -51,6 +51,7 @@ from avrisk.realism.figures import draw_lane_changes, draw_part_a
 from avrisk.realism.held_out import (
     HELD_OUT_TEST,
     data_files,
+    held_out_period,
     held_out_windows,
     select_windows,
 )
@@ -337,11 +338,13 @@ def _provenance(result: RealismResult, command: str) -> dict[str, Any]:
 
 
 def _held_out_words(held_out: str) -> str:
-    if held_out == HELD_OUT_TEST:
+    period, test_only = held_out_period(held_out)
+    if test_only:
         return (
             "NGSIM I-80 car-following episodes of the test split (pairs file's "
             "split column; lateral file by "
             "avrisk.learning.ngsim.loaders.lateral_pair_split)"
+            + ("" if period is None else f" of the period {period} only")
         )
     return (
         f"every NGSIM I-80 car-following episode of the period {held_out} "

@@ -55,7 +55,8 @@ def test_the_report_is_written_with_the_settings_and_progress_of_both_parts(
     ("args", "needle"),
     [
         ({"brake_guard": "2"}, "a brake guard is GAP_FLOOR,ENGAGE_DECEL"),
-        ({"held_out": "noon"}, "--held-out noon: not test nor one of the periods"),
+        ({"held_out": "noon"}, "--held-out noon: not a held-out set"),
+        ({"held_out": "0400pm-0415pm:train"}, "or a period's test split"),
         ({"drivers": "nowhere"}, "no such folder"),
     ],
 )
@@ -99,4 +100,10 @@ def test_drivers_trained_on_the_held_out_period_are_warned_of(
     _trained_on(drivers_copy, ["0500pm-0515pm"])
     with pytest.raises(Stop):
         realism_report(tmp_path / "out", drivers=drivers_copy, held_out=period)
+    assert not [w for w in recwarn if w.category is NotHeldOutWarning]
+    _trained_on(drivers_copy, [period])  # its test split is held out
+    with pytest.raises(Stop):
+        realism_report(
+            tmp_path / "out", drivers=drivers_copy, held_out=f"{period}:test"
+        )
     assert not [w for w in recwarn if w.category is NotHeldOutWarning]

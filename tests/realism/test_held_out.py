@@ -78,3 +78,24 @@ def test_a_window_whose_vehicles_overlap_lengthwise_is_no_car_following():
     assert len(windows) > 0 and (windows.gap > 0).all()
     for held_out in ("test", "0400pm-0415pm", "0500pm-0515pm"):
         assert (held_out_windows(150, road, held_out).gap > 0).all()
+
+
+def test_a_periods_test_split_is_its_test_windows_alone():
+    from avrisk.realism.held_out import held_out_period, held_out_periods
+
+    road = Road()
+    assert held_out_period("test") == (None, True)
+    assert held_out_period("0400pm-0415pm") == ("0400pm-0415pm", False)
+    assert held_out_period("0400pm-0415pm:test") == ("0400pm-0415pm", True)
+    for bad in ("0400pm-0415pm:train", "0515pm-0530pm:test", ":test"):
+        with pytest.raises(ValueError, match="0400pm-0415pm"):
+            held_out_period(bad)
+    test = held_out_windows(150, road)
+    parts = [held_out_windows(150, road, f"{p}:test") for p in held_out_periods()]
+    assert sum(len(w) for w in parts) == len(test)
+    whole = held_out_windows(150, road, "0500pm-0515pm")
+    assert 0 < len(parts[1]) < len(whole) and not parts[1].has_lateral.any()
+    assert parts[0].has_lateral.any()
+    # the period's test windows are among its windows, the same rows
+    rows = {w.tobytes() for w in whole.v_f}
+    assert all(w.tobytes() in rows for w in parts[1].v_f)
