@@ -77,6 +77,9 @@ def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
     (``ClosedLoopConfig.adversarial_weight = 0``), so that its steps descend
     the imitation loss (speed and gap along each replay) and the barriers
     alone, the loss its early stopping already selects on.
+    ``idm_head_imitation5``: the IDM head with the imitation term five times
+    as heavy (``ClosedLoopConfig.imitation_weight = 5``) beside the
+    adversarial one.
     """
     from avrisk.learning.guard_fit import fit_brake_guard
     from avrisk.learning.train_config import TrainConfig
@@ -99,10 +102,13 @@ def recipe_config(name: str, periods: tuple[str, ...] | None) -> Any:
     elif name == "idm_head_imitation":
         imitation = replace(default.closed_loop, adversarial_weight=0.0)
         config = replace(default, head="idm", closed_loop=imitation)
+    elif name == "idm_head_imitation5":
+        heavier = replace(default.closed_loop, imitation_weight=5.0)
+        config = replace(default, head="idm", closed_loop=heavier)
     else:
         raise SystemExit(
             f"unknown recipe {name!r}: shipped, balanced, fitted_brake, "
-            "network_alone, idm_head, idm_head_imitation"
+            "network_alone, idm_head, idm_head_imitation, idm_head_imitation5"
         )
     return replace(config, periods=periods)
 
@@ -256,24 +262,50 @@ def _target_cell(t: dict[str, Any], digits: int = 2) -> str:
     return f"{t['value']:.{digits}f} ({t['margin']:+.2f}){mark}"
 
 
-def table() -> str:
-    """Markdown tables of every result in :data:`RESULTS` (``xi ~ P0``)."""
-    rows = [
+def _results(validation: bool) -> list[dict[str, Any]]:
+    """The left-out scores, or the in-fold ones (``validate``'s)."""
+    return [
         json.loads(p.read_text())
         for p in sorted(RESULTS.glob("*.json"))
-        if not p.stem.endswith("_validation")  # in fold: validate's
+        if p.stem.endswith("_validation") == validation
     ]
+
+
+def _target_cells(own: dict[str, Any]) -> str:
+    """The targets' cells of one set, from accel p5 to all targets."""
+    t = own["targets"][MODEL]
+    human = own["human"]["p5"]
+    ks = t["TTC KS below IDM's"]
+    ks_idm = own["models"]["IDM"]["ks"]["ttc"]
+    return (
+        f"{_target_cell(t['accel p5 within 15%'])} [h {human['accel']:.2f}] | "
+        f"{_target_cell(t['gap p5 within 10%'])} [h {human['gap']:.2f}] | "
+        f"{_target_cell(t['TTC p5 within 10%'])} [h {human['ttc']:.2f}] | "
+        f"{_target_cell(t['time stopped within 25%'], 3)} | "
+        f"{t['closer to humans than IDM (8 of the 9 metrics)']['value']:.0f} "
+        f"of 8 | {ks['value']:.3f} ({ks_idm:.3f}) | "
+        f"{'pass' if own['all_passed'][MODEL] else 'FAIL'}"
+    )
+
+
+#: The targets' columns of both tables.
+TARGET_HEAD = (
+    "accel p5 | gap p5 [m] | TTC p5 [s] | time stopped | closer than IDM | "
+    "TTC KS (IDM) | all targets"
+)
+
+
+def table() -> str:
+    """Markdown tables of every left-out score in :data:`RESULTS` (``xi ~ P0``)."""
     head = (
         "| fold / recipe / seed | set (median speed) | collisions /veh-h: own "
-        "brake / fitted / none | accel p5 | gap p5 [m] | TTC p5 [s] | time stopped "
-        "| closer than IDM | TTC KS (IDM) | all targets | own brake acts /veh-h: "
+        f"brake / fitted / none | {TARGET_HEAD} | own brake acts /veh-h: "
         "drivers / humans |"
     )
     lines = [head, "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
+    for r in _results(validation=False):
         for band in ("all", "congested", "flowing"):
             own = r["with_brake"][band]
-            t = own["targets"][MODEL]
             coll = [
                 r[k][band]["models"][MODEL]["collisions_per_hour"]
                 for k in ("with_brake", "fitted_brake", "network_alone")
@@ -285,21 +317,38 @@ def table() -> str:
                 if use
                 else "-"
             )
-            human = own["human"]["p5"]
-            ks = t["TTC KS below IDM's"]
-            ks_idm = own["models"]["IDM"]["ks"]["ttc"]
             lines.append(
                 f"| {r['fold']} / {r['recipe']} / {r['seed']} | {r['held_out']} "
                 f"{band} ({own['windows']} windows, {own['human_median_speed']:.1f} "
                 f"m/s) | {' / '.join(f'{c:.2f}' for c in coll)} | "
-                f"{_target_cell(t['accel p5 within 15%'])} [h {human['accel']:.2f}] | "
-                f"{_target_cell(t['gap p5 within 10%'])} [h {human['gap']:.2f}] | "
-                f"{_target_cell(t['TTC p5 within 10%'])} [h {human['ttc']:.2f}] | "
-                f"{_target_cell(t['time stopped within 25%'], 3)} | "
-                f"{t['closer to humans than IDM (8 of the 9 metrics)']['value']:.0f} "
-                f"of 8 | {ks['value']:.3f} ({ks_idm:.3f}) | "
-                f"{'pass' if own['all_passed'][MODEL] else 'FAIL'} | {acts} |"
+                f"{_target_cells(own)} | {acts} |"
             )
+    return "\n".join(lines)
+
+
+def validation_table() -> str:
+    """A markdown table of every in-fold score (``validate``; all windows)."""
+    head = (
+        "| fold / recipe / seed | set (median speed) | collisions /veh-h: own "
+        f"brake / none | speed KS (IDM) | accel KS (IDM) | {TARGET_HEAD} |"
+    )
+    lines = [head, "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in _results(validation=True):
+        own = r["with_brake"]["all"]
+        coll = [
+            r[k]["all"]["models"][MODEL]["collisions_per_hour"]
+            for k in ("with_brake", "network_alone")
+        ]
+        speed, accel = (
+            f"{own['models'][MODEL]['ks'][k]:.3f} ({own['models']['IDM']['ks'][k]:.3f})"
+            for k in ("speed", "accel")
+        )
+        lines.append(
+            f"| {r['fold']} / {r['recipe']} / {r['seed']} | {r['validated_on']} "
+            f"({own['windows']} windows, {own['human_median_speed']:.1f} m/s) | "
+            f"{' / '.join(f'{c:.2f}' for c in coll)} | {speed} | {accel} | "
+            f"{_target_cells(own)} |"
+        )
     return "\n".join(lines)
 
 
@@ -310,7 +359,10 @@ def main() -> None:
     p_run.add_argument("--folds", nargs="+", default=["A", "B"], choices=FOLDS)
     p_run.add_argument("--seeds", default="0-5", help="e.g. 0-5")
     p_run.add_argument("--recipes", nargs="+", default=["shipped"])
-    sub.add_parser("table", help="print the results as a markdown table")
+    p_table = sub.add_parser("table", help="print the results as a markdown table")
+    p_table.add_argument(
+        "--validation", action="store_true", help="the in-fold scores (validate's)"
+    )
     for name in ("train", "score", "validate"):
         p = sub.add_parser(name)
         p.add_argument("fold", choices=FOLDS)
@@ -320,7 +372,7 @@ def main() -> None:
     if args.command == "run":
         run(args.folds, _seeds(args.seeds), args.recipes)
     elif args.command == "table":
-        print(table())
+        print(validation_table() if args.validation else table())
     elif args.command == "train":
         train(args.fold, args.recipe, args.seed)
     elif args.command == "validate":
