@@ -1,16 +1,16 @@
 """Leave one I-80 period out, over training seeds: the seed study of issue 44.
 
 Trains the driver recipe once per (fold, seed, recipe), one training at a
-time, and scores each on the period it did not see
-(:func:`avrisk.realism.report.run_realism` with ``held_out`` set to that
-period), with the brake its weights carry, with the brake fitted to the
-fold's training windows (:mod:`avrisk.learning.guard_fit`) and with the
-network alone. Each
-result is written as it finishes to ``RESULTS/{fold}_{recipe}_seed{S}.json``
-(the realism summary: every target and margin, overall and by speed band).
-Resumable: a result that exists is skipped, a training whose folder holds its
-files is not trained again, and a training left without its result (the
-scoring failed) is scored again before the next training starts::
+time, validates each on its own period's test split (below) and scores it on
+the period it did not see (:func:`avrisk.realism.report.run_realism` with
+``held_out`` set to that period), with the brake its weights carry, with the
+brake fitted to the fold's training windows (:mod:`avrisk.learning.guard_fit`)
+and with the network alone. Each result is written as it finishes to
+``RESULTS/{fold}_{recipe}_seed{S}.json`` (the realism summary: every target and
+margin, overall and by speed band). Resumable: a result that exists is
+skipped, a training whose folder holds its files is not trained again, and a
+training left without its results (the scoring failed) is validated and scored
+again before the next training starts::
 
     nohup nice -n 19 env OMP_NUM_THREADS=1 .venv/bin/python \\
         benchmarks/driver_seed_study.py run --folds A B --seeds 0-5 &
@@ -23,8 +23,9 @@ test splits (the default ``avrisk realism`` set), which it did not train on.
 A recipe is chosen on the training period's own test split, which no
 training reads (``validate FOLD RECIPE SEED``: ``avrisk realism --held-out
 PERIOD:test``, written to ``..._validation.json``), before its score on the
-other period. Every training and scoring runs in its own process (``train``
-and ``score`` sub-commands), with the CPU kernels pinned as for the shipped files
+other period. Every training, validation and scoring runs in its own process
+(``train``, ``validate`` and ``score`` sub-commands), with the CPU kernels
+pinned as for the shipped files
 (:data:`~avrisk.learning.training.report.KERNEL_PINS`).
 """
 
@@ -211,8 +212,8 @@ def validate(fold: str, recipe: str, seed: int) -> None:
         settings = RealismSettings(held_out=held_out, guard=brake)
         result = run_realism(DriverFiles.in_folder(folder), settings)
         out[key] = score_summary(result, brake or own)
-    path = RESULTS / f"{fold}_{recipe}_seed{seed}_validation.json"
-    path.write_text(json.dumps(out, indent=1) + "\n")
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    _validation(fold, recipe, seed).write_text(json.dumps(out, indent=1) + "\n")
     print(f"validated {folder}", flush=True)
 
 
@@ -232,24 +233,31 @@ def _seeds(text: str) -> list[int]:
 
 
 def run(folds: list[str], seeds: list[int], recipes: list[str]) -> None:
-    """Every (recipe, seed, fold) in turn; resumable."""
+    """Every (recipe, seed, fold) in turn, validated in fold and scored; resumable."""
     jobs = [(f, r, s) for r in recipes for s in seeds for f in folds]
     for fold, recipe, seed in jobs:
         _score_pending(jobs)
-        if _result(fold, recipe, seed).exists():
-            continue
         if not (_folder(fold, recipe, seed) / "training_report.json").exists():
             print(f"training {fold} {recipe} seed {seed}", flush=True)
             if not _child("train", fold, recipe, str(seed)):
                 continue
-        _child("score", fold, recipe, str(seed))
+        _score_pending([(fold, recipe, seed)])
     _score_pending(jobs)
 
 
+def _validation(fold: str, recipe: str, seed: int) -> Path:
+    return RESULTS / f"{fold}_{recipe}_seed{seed}_validation.json"
+
+
 def _score_pending(jobs: list[tuple[str, str, int]]) -> None:
+    """Validate and score every trained job whose results are missing."""
     for fold, recipe, seed in jobs:
-        trained = (_folder(fold, recipe, seed) / "training_report.json").exists()
-        if trained and not _result(fold, recipe, seed).exists():
+        if not (_folder(fold, recipe, seed) / "training_report.json").exists():
+            continue
+        in_fold = FOLDS[fold][0] is not None and len(FOLDS[fold][0]) == 1
+        if in_fold and not _validation(fold, recipe, seed).exists():
+            _child("validate", fold, recipe, str(seed))
+        if not _result(fold, recipe, seed).exists():
             _child("score", fold, recipe, str(seed))
 
 
