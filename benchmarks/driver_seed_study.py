@@ -200,12 +200,11 @@ def validate(fold: str, recipe: str, seed: int) -> None:
     from avrisk.realism.report import DriverFiles, RealismSettings, run_realism
 
     torch.set_num_threads(1)
-    periods, _ = FOLDS[fold]
-    if periods is None or len(periods) != 1:
+    held_out = _validation_set(fold)
+    if held_out is None:
         raise SystemExit(f"fold {fold} trains on no single period to validate on")
     folder = _folder(fold, recipe, seed)
     own = load_driver_net(folder / "driver_net.npz").guard
-    held_out = f"{periods[0]}:test"
     out: dict[str, Any] = {"fold": fold, "recipe": recipe, "seed": seed}
     out["validated_on"] = held_out
     for key, brake in (("with_brake", own), ("network_alone", None)):
@@ -245,6 +244,12 @@ def run(folds: list[str], seeds: list[int], recipes: list[str]) -> None:
     _score_pending(jobs)
 
 
+def _validation_set(fold: str) -> str | None:
+    """``"{period}:test"`` of a fold trained on one period; None otherwise."""
+    periods, _ = FOLDS[fold]
+    return f"{periods[0]}:test" if periods is not None and len(periods) == 1 else None
+
+
 def _validation(fold: str, recipe: str, seed: int) -> Path:
     return RESULTS / f"{fold}_{recipe}_seed{seed}_validation.json"
 
@@ -254,7 +259,7 @@ def _score_pending(jobs: list[tuple[str, str, int]]) -> None:
     for fold, recipe, seed in jobs:
         if not (_folder(fold, recipe, seed) / "training_report.json").exists():
             continue
-        in_fold = FOLDS[fold][0] is not None and len(FOLDS[fold][0]) == 1
+        in_fold = _validation_set(fold) is not None
         if in_fold and not _validation(fold, recipe, seed).exists():
             _child("validate", fold, recipe, str(seed))
         if not _result(fold, recipe, seed).exists():

@@ -80,16 +80,20 @@ def held_out_periods() -> tuple[str, ...]:
     return periods_of(load_i80_pairs(data_files()["i80_pairs"]))
 
 
-def held_out_period(held_out: str) -> tuple[str | None, bool]:
+def held_out_period(
+    held_out: str, periods: tuple[str, ...] | None = None
+) -> tuple[str | None, bool]:
     """The period a held-out set is drawn from, and whether from its test split only.
 
     ``(None, True)`` for :data:`HELD_OUT_TEST` (every period's test split);
     ``(period, False)`` for a period's name; ``(period, True)`` for
     ``"{period}:test"``. A ValueError naming the valid sets otherwise.
+    ``periods`` are the periods shipped (:func:`held_out_periods`, read
+    from the pairs file when None).
     """
-    periods = held_out_periods()
     if held_out == HELD_OUT_TEST:
         return None, True
+    periods = held_out_periods() if periods is None else periods
     period, _, split = held_out.partition(":")
     if period in periods and split in ("", HELD_OUT_TEST):
         return period, bool(split)
@@ -136,17 +140,12 @@ def held_out_windows(
     lat = load_i80_lateral(files["i80_lateral"])
     split = lateral_pair_split(lat, pairs)
     centres = LaneCentres.fit(lat.take(split == "train"))
-    period, test_only = held_out_period(held_out)
-    if period is None:
-        keep_pairs, keep_lat = pairs.split == "test", split == "test"
-    else:
-        keep_pairs = pairs.period == period
-        keep_lat = np.full(len(lat), period == LATERAL_PERIOD)
-        if test_only:
-            keep_pairs, keep_lat = (
-                keep_pairs & (pairs.split == "test"),
-                keep_lat & (split == "test"),
-            )
+    period, test_only = held_out_period(held_out, periods_of(pairs))
+    keep_pairs = np.full(len(pairs), True) if period is None else pairs.period == period
+    keep_lat = np.full(len(lat), period in (None, LATERAL_PERIOD))
+    if test_only:
+        keep_pairs &= pairs.split == "test"
+        keep_lat &= split == "test"
     return car_following_windows(
         pairs.take(keep_pairs), lat.take(keep_lat), centres, n_steps, road
     )
