@@ -166,6 +166,7 @@ from avrisk.rare.splitting_is_answer import (
     SAMPLED_KEYS,
     answer_doubts,
     importance_stage,
+    levels_more_precise,
 )
 from avrisk.rare.splitting_is_settings import SplittingISSettings
 from avrisk.rare.splitting_is_tables import importance_sampling_tables
@@ -176,6 +177,7 @@ from avrisk.rare.splitting_moves import (
     moves_after,
     refreshed,
 )
+from avrisk.rare.splitting_precision import MoreReplicates, more_replicates
 from avrisk.rare.splitting_replicates import (
     ReplicatesState,
     combined_levels,
@@ -275,7 +277,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         proposal and replays the recorded final stage.
         """
         reached = state.reached()
-        own = [levels_estimate(r, problem, n) for r, n in reached]
+        own = [levels_estimate(r, problem, n, genealogy=True) for r, n in reached]
         if reached:
             combined = combined_levels(own, problem, sum(n for _, n in reached))
             with_hits = [
@@ -297,14 +299,13 @@ class SplittingImportanceSampling(SubsetSimulation):
         )
         fitted = _fitted_proposal(moves, with_hits, problem, context, s)
         n_evals = state.current.n_evals + sum(m.n_calls for m in moves)
+        more = MoreReplicates(state, own, combined, n_evals, moves[-1].n_stages, 0)
+        more = self._more_replicates(more, bool(reached), fitted, problem, context)
+        state, own, combined, n_evals = more[:4]
+        # the levels' answer, unless a replicate ran out of levels
+        levels = None if any(r.exhausted for r in state.all) else combined
         stage, sampled, from_levels = importance_stage(
-            fitted,
-            problem,
-            context,
-            self.settings.n_final,
-            n_evals,
-            # the levels' answer, unless a replicate ran out of levels
-            None if any(r.exhausted for r in state.all) else combined,
+            fitted, problem, context, s.n_final, n_evals, levels
         )
         return Estimate(
             method="splitting_is",
@@ -329,9 +330,40 @@ class SplittingImportanceSampling(SubsetSimulation):
                 "answer": "splitting" if from_levels else "importance_sampling",
                 "held_out_uncovered": fitted.held_out.uncovered,
                 "held_out_covered_weight": fitted.held_out.covered_mean_weight,
-                **replicates_record(state, own, self.settings.replicates),
+                **replicates_record(state, own, s.replicates + more.added),
+                **({"replicates_added": more.added} if more.added else {}),
             },
         )
+
+    def _more_replicates(
+        self,
+        start: MoreReplicates,
+        reached: bool,
+        fitted: ParticleFit,
+        problem: RareEventProblem,
+        context: EstimationContext,
+    ) -> MoreReplicates:
+        """The replicates, more of them where the levels will answer imprecisely.
+
+        Where the levels will answer, as
+        :func:`~avrisk.rare.splitting_is_answer.importance_stage` decides
+        (replicates that ``reached`` ``gamma``, none out of levels, and the
+        particles predict the levels more precise), and the settings allow
+        (``more_replicates``):
+        :func:`~avrisk.rare.splitting_precision.more_replicates`, within the
+        budget less the final stage.
+        """
+        s = self.settings
+        if not (
+            reached
+            and s.more_replicates
+            and not any(r.exhausted for r in start.state.all)
+            and levels_more_precise(fitted.held_out, start.combined.main, s.n_final)
+        ):
+            return start
+        room = self.budget() - start.n_evals - s.n_final
+        levels = self.levels(start.state.sizes[0])
+        return more_replicates(levels, start, problem, context, room, s.replicates)
 
 
 def _moves_at_gamma(

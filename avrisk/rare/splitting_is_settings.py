@@ -64,10 +64,15 @@ class SplittingISSettings(SplittingSettings):
         particle each: what their ancestors left in those coordinates is
         not fitted as a shift. 0: none. Runs recorded before it became the
         default (0 then) record no value, and resume with 0 given.
+    more_replicates : bool, default=True
+        Whether a levels' answer less precise than a factor of 2 at three
+        standard errors takes more replicates of the levels, within the
+        budget (:mod:`avrisk.rare.splitting_precision`). Runs recorded
+        before it record no value, and resume with False given.
     """
 
     OMIT_IF_DEFAULT = (*SplittingSettings.OMIT_IF_DEFAULT, "moves_at_gamma")
-    OMIT_AT_FORMER_DEFAULT = {"refresh_rounds": 0}
+    OMIT_AT_FORMER_DEFAULT = {"refresh_rounds": 0, "more_replicates": False}
 
     n_moves: int = Field(
         2, ge=1, description="pCN proposals per kept chain state (thinning)."
@@ -115,6 +120,12 @@ class SplittingISSettings(SplittingSettings):
         ge=0,
         description="Rounds of fresh draws of the coordinates the particles at "
         "gamma do not inform (0: none).",
+    )
+
+    more_replicates: bool = Field(
+        True,
+        description="Whether an imprecise levels' answer takes more replicates "
+        "of the levels, within the budget.",
     )
 
     def gamma_moves(self) -> int:

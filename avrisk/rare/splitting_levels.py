@@ -52,11 +52,30 @@ log(1 + delta^2)``: ``log p_hat`` is a sum over levels, so closer to normal
 than the skewed product, and the interval stays above 0. Subset simulation's
 own answer takes this interval or the family tree's
 (:mod:`avrisk.rare.splitting_genealogy`: that correlation counted, with
-Student's t), whichever is wider; ``splitting_is``'s levels, which only place
-its proposal, keep this one. The estimator also has Au & Beck's ``O(1/N)``
-bias, upwards; the interval's calibration and the bias at two ``N`` are
-measured in BENCHMARKS.md, "Subset simulation and
-the four-branch problem": use ``N >= 1000``.
+Student's t), whichever is wider, and so do ``splitting_is``'s levels, which
+answer where its proposal cannot hold what they found (ten regions in ``d =
+200``: Au & Beck's said 0.20 of ``log p``'s spread of 0.24, the wider one
+0.23; BENCHMARKS.md, "The levels' bias and their precision").
+
+Bias
+----
+Levels set by the particles themselves (each the ``p0``-quantile of the set
+it ends) make the product biased upwards, by ``O(1/N)``: Cérou, Del Moral,
+Furon & Guyader (2012) show that with ``n_0`` such levels and independent
+draws at each, ``E[p_hat] / p - 1 -> n_0 (1 - p_0) / (N p_0)``, the sum of
+those levels' ``delta_l^2``. The correlated chains make each ``delta_l^2``
+larger (``1 + gamma_l``) and the bias with it, and with few particles per
+failure region it is large: ten regions in ``d = 200`` at ``N = 1,250`` ran
+12% high over 150 seeds (BENCHMARKS.md, "The levels' bias"). Every estimate
+is therefore divided by ``1 + sum_l delta_l^2`` over the levels above its
+threshold (the last share, counted below a fixed threshold, adds none): the
+first-order correction, with the chains' correlation in it as in the error.
+Use ``N >= 1000`` all the same: the correction is of first order.
+
+References
+----------
+F. Cérou, P. Del Moral, T. Furon, A. Guyader. "Sequential Monte Carlo for
+rare event estimation." Statistics and Computing 22, 2012.
 """
 
 from __future__ import annotations
@@ -422,8 +441,10 @@ def _estimate_at(
 ) -> tuple[GammaEstimate, float]:
     """``P0(f <= g)`` from the deepest set conditioned on a level ``>= g``.
 
-    With its interval's degrees of freedom: ``inf`` (normal) unless the
-    family tree's interval at ``g`` (``tree``,
+    The product of the factors above it and that set's share at or below
+    ``g``, divided by ``1 +`` the factors' ``delta_l^2`` (*Bias*). With its
+    interval's degrees of freedom: ``inf`` (normal) unless the family tree's
+    interval at ``g`` (``tree``,
     :func:`~avrisk.rare.splitting_genealogy.family_tree_error`) is wider
     than Au & Beck's, whose error and t it then takes.
 
@@ -438,10 +459,9 @@ def _estimate_at(
     n_last = int(np.count_nonzero(~np.isnan(counted)))
     n_hits = int(np.count_nonzero(counted <= g))
     p_above = math.prod(_factors(above))
-    p = p_above * n_hits / n_last
-    cov_squared = sum(
-        level_cov_squared(ps.counted, ps.level) for ps in above
-    ) + level_cov_squared(counted, g)
+    cov_levels = sum(level_cov_squared(ps.counted, ps.level) for ps in above)
+    p = p_above * n_hits / n_last / (1.0 + cov_levels)  # *Bias*
+    cov_squared = cov_levels + level_cov_squared(counted, g)
     dof = math.inf
     if tree is not None and tree.half_width() > Z_CONFIDENCE * math.sqrt(
         math.log1p(cov_squared)
@@ -450,8 +470,7 @@ def _estimate_at(
     if n_hits:
         ci = lognormal_interval(p, cov_squared, dof)
     else:  # the upper ends of the factors above and of a share of 0
-        cov_above = cov_squared - level_cov_squared(counted, g)
-        half = Z_CONFIDENCE * math.sqrt(math.log1p(cov_above))
+        half = Z_CONFIDENCE * math.sqrt(math.log1p(cov_levels))
         upper_above = p_above * math.exp(half)
         upper = -math.expm1(math.log((1 - CONFIDENCE) / 2) / n_last)
         ci = (0.0, min(bound, upper_above * upper))

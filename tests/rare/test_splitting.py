@@ -85,8 +85,9 @@ def test_subset_simulation_finds_p_of_exact_problems_within_its_stderr(problem):
     assert len(levels) == len(est.history)
     survivors = est.details["survivors"]
     n = est.details["n_particles"]
-    expected = np.prod(np.array(survivors, dtype=float) / n)
-    assert est.p == pytest.approx(expected, rel=1e-12)  # exact counts, not p0^L
+    product = np.prod(np.array(survivors, dtype=float) / n)  # counts, not p0^L
+    bias = 1 + np.sum(np.square(est.details["level_cov"][:-1]))
+    assert est.p == pytest.approx(product / bias, rel=1e-12)
     assert survivors[-1] == est.n_hits
     au_beck = lognormal_interval(est.p, np.sum(np.square(est.details["level_cov"])))
     # the family tree's interval where it is wider
@@ -128,6 +129,20 @@ def test_the_95_percent_interval_covers_p_in_most_runs():
         )
     assert np.mean(list(covered.values())) >= 0.85, covered
     assert min(covered.values()) >= 0.7, covered
+
+
+def test_few_particles_per_level_run_high_without_the_bias_correction():
+    # 300 particles and five levels set by the particles: the product runs
+    # about 40% high (Cerou et al. 2012's n0 (1 - p0) / (N p0), and the chains'
+    # correlation); divided by 1 + sum of the levels' delta^2, it does not
+    problem = gaussian_linear_problem(2, p=1e-6)
+    runs = [sus(problem, seed=s, n_particles=300) for s in range(200)]
+    corrected = np.array([e.p for e in runs]) / problem.p_exact
+    bias = [1 + np.sum(np.square(e.details["level_cov"][:-1])) for e in runs]
+    product = corrected * np.array(bias)
+    se = corrected.std(ddof=1) / np.sqrt(len(runs))
+    assert abs(corrected.mean() - 1) < 3 * se, (corrected.mean(), se)
+    assert product.mean() - 1 > 3 * product.std(ddof=1) / np.sqrt(len(runs))
 
 
 def test_same_seed_same_result_whatever_the_batch_size():
