@@ -152,7 +152,8 @@ def test_every_registered_method_is_offered_and_foreign_settings_refused(tmp_pat
         "--method); its settings: n_particles, p0, p0_max, max_levels, n_moves, "
         "initial_beta, min_survivors, plateau_draws, replicates, regrow, "
         "correlated_moves, max_calls, n_final, n_components, defensive, "
-        "min_weight, shift, fit_variances, moves_at_gamma, refresh_rounds"
+        "min_weight, shift, fit_variances, moves_at_gamma, refresh_rounds, "
+        "more_replicates"
     )
     by_name = invoke(
         "run", "highway_idm", "--out", out, "--method", "ce", "--set", "n_particles=9"
