@@ -61,7 +61,21 @@ def cross_check_table(
                 if details.get("answer") == "splitting"
                 else "The answer is importance sampling's."
             )
+            + _added_note(details)
         ),
+    )
+
+
+def _added_note(details: dict[str, Any]) -> str:
+    """What the replicates added after the fit were for, if any were."""
+    added = details.get("replicates_added")
+    if not added:
+        return ""
+    return (
+        f" The levels' product is the mean of {len(details['replicates'])} "
+        f"replicates, {added} of them run after the fit: the levels were to "
+        "answer, and their interval was wider than a factor of 2 at three "
+        "standard errors (avrisk.rare.splitting_precision)."
     )
 
 

@@ -10,6 +10,7 @@ from avrisk.pipeline import RunDirectory, RunSettings, run_estimation
 from avrisk.rare import splitting_is
 from avrisk.rare.estimator import get_estimator
 from avrisk.rare.results import GammaEstimate
+from avrisk.rare.splitting_importance import SplittingImportanceSampling
 from avrisk.rare.splitting_levels import Z_CONFIDENCE
 from avrisk.rare.splitting_precision import PRECISE_LOG_SE, imprecise
 from avrisk.testing import gaussian_linear_problem
@@ -109,3 +110,13 @@ def test_a_run_interrupted_in_the_added_replicates_resumes_to_the_same_summary(
     assert {k: v for k, v in resumed["estimate"].items() if k not in drop} == {
         k: v for k, v in reference["estimate"].items() if k not in drop
     }
+
+
+def test_the_cross_check_table_says_why_the_replicates_were_added():
+    estimate = run(TEN_REGIONS, **SMALL).to_dict()
+    (note,) = [
+        t.note
+        for t in SplittingImportanceSampling.diagnostics(estimate)
+        if t.title.startswith("Importance sampling vs")
+    ]
+    assert "the mean of 4 replicates, 2 of them run after the fit" in note
