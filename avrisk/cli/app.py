@@ -12,7 +12,7 @@ import ast
 import importlib.util
 from importlib import import_module
 from pathlib import Path
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import typer
 from typer.core import TyperCommand, TyperGroup
@@ -52,6 +52,21 @@ def docstring(module: str, function: str) -> str:
     raise LookupError(f"{module} has no function {function}")
 
 
+class LoadingCommand(TyperCommand):
+    """A command whose arguments are parsed as part of loading it.
+
+    Typer's parsing imports and builds more on first use (pydantic's type
+    adapters), for a few tenths of a second: a Ctrl-C then is one line
+    (:func:`~avrisk.cli.interrupt.loading`), where Typer would exit in silence.
+    """
+
+    def make_context(  # noqa: D102
+        self, info_name: str | None, args: list[str], *rest: Any, **extra: Any
+    ) -> click.Context:
+        with loading():
+            return super().make_context(info_name, args, *rest, **extra)
+
+
 class LazyGroup(TyperGroup):
     """A group whose :attr:`lazy` commands are each imported when used.
 
@@ -73,13 +88,19 @@ class LazyGroup(TyperGroup):
         module, function = self.lazy[name]
         if self._listing:
             return TyperCommand(name, help=docstring(module, function))
-        with loading():
+        with loading():  # the command's module, and Typer's reading of it
             callback = getattr(import_module(module), function)
-        return get_command_from_info(
-            CommandInfo(name=name, callback=callback),
-            pretty_exceptions_short=app.pretty_exceptions_short,
-            rich_markup_mode=self.rich_markup_mode,
-        )
+            return get_command_from_info(
+                CommandInfo(name=name, callback=callback, cls=LoadingCommand),
+                pretty_exceptions_short=app.pretty_exceptions_short,
+                rich_markup_mode=self.rich_markup_mode,
+            )
+
+    def make_context(  # noqa: D102
+        self, info_name: str | None, args: list[str], *rest: Any, **extra: Any
+    ) -> click.Context:
+        with loading():  # Typer's parsing loads more (pydantic) on first use
+            return super().make_context(info_name, args, *rest, **extra)
 
     def format_commands(  # noqa: D102
         self, ctx: click.Context, formatter: click.HelpFormatter
