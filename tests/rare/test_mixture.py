@@ -26,6 +26,7 @@ from avrisk.testing import (
     four_branch_problem,
     gaussian_linear_problem,
 )
+from tests.interrupts import ctrl_c_when, without_wall_time
 
 SMALL = dict(n_per_iter=2000, n_iter=8, n_final=20_000)
 ROOT2 = np.sqrt(2.0)
@@ -121,22 +122,14 @@ def test_an_interrupted_run_resumes_through_the_pipeline_to_the_uninterrupted_re
         return run_estimation(directory, problem.base, f, settings)
 
     reference = run(tmp_path / "reference", problem.f)
-    calls = []
-
-    def interrupted(x):
-        if len(calls) == 2:  # stages 1-2 recorded, then the "machine dies"
-            raise KeyboardInterrupt
-        calls.append(len(x))
-        return problem.f(x)
-
+    # stages 1-2 recorded, then the "machine dies"
+    interrupted, _ = ctrl_c_when(problem.f, lambda sizes: len(sizes) == 2)
     with pytest.raises(KeyboardInterrupt):
         run(tmp_path / "run", interrupted)
     resumed = run(tmp_path / "run", problem.f)
-
-    def without_clock(estimate):
-        return {k: v for k, v in estimate.items() if k != "wall_time_s"}
-
-    assert without_clock(resumed["estimate"]) == without_clock(reference["estimate"])
+    assert without_wall_time(resumed["estimate"]) == without_wall_time(
+        reference["estimate"]
+    )
     assert resumed["timing"]["rollouts_replayed"] == 2 * 2000
     checkpoint = json.loads((tmp_path / "run" / "checkpoint.json").read_text())
     assert checkpoint["iterations_done"] == 4 and len(checkpoint["history"]) == 4

@@ -42,6 +42,7 @@ from avrisk.testing import (
     gaussian_linear_problem,
 )
 from avrisk.testing.generated import decoy_problem
+from tests.interrupts import ctrl_c_when, without_wall_time
 
 NORMAL_1D = FixedCovNormal(np.zeros(1), cov=np.eye(1))
 
@@ -62,10 +63,6 @@ def sus(problem, seed=0, **kw):
 
 def without_clock(estimate):
     return estimate.to_dict() | {"wall_time_s": 0}
-
-
-def without_wall_time(summary_estimate):
-    return {k: v for k, v in summary_estimate.items() if k != "wall_time_s"}
 
 
 @pytest.mark.parametrize(
@@ -193,15 +190,8 @@ def test_a_seeded_f_interrupted_mid_level_resumes_to_the_same_summary(tmp_path):
         return run_estimation(directory, problem.base, f, settings)
 
     reference = run(tmp_path / "reference")
-    calls = []
-
-    def interrupted(x, seeds):
-        if len(calls) == 14:  # P0, then 9 rounds of level 1 and 4 of level 2
-            raise KeyboardInterrupt
-        calls.append(len(x))
-        return noisy(x, seeds)
-
-    interrupted.needs_seeds = True
+    # P0, then 9 rounds of level 1 and 4 of level 2
+    interrupted, calls = ctrl_c_when(noisy, lambda sizes: len(sizes) == 14)
     with pytest.raises(KeyboardInterrupt):
         run(tmp_path / "run", f=interrupted)
     resumed = run(tmp_path / "run")
