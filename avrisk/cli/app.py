@@ -52,8 +52,8 @@ def docstring(module: str, function: str) -> str:
     raise LookupError(f"{module} has no function {function}")
 
 
-class LoadingCommand(TyperCommand):
-    """A command whose arguments are parsed as part of loading it.
+class ParsedWhileLoading:
+    """A command (or group) whose arguments are parsed as part of loading it.
 
     Typer's parsing imports and builds more on first use (pydantic's type
     adapters), for a few tenths of a second: a Ctrl-C then is one line
@@ -64,10 +64,14 @@ class LoadingCommand(TyperCommand):
         self, info_name: str | None, args: list[str], *rest: Any, **extra: Any
     ) -> click.Context:
         with loading():
-            return super().make_context(info_name, args, *rest, **extra)
+            return super().make_context(info_name, args, *rest, **extra)  # type: ignore[misc]
 
 
-class LazyGroup(TyperGroup):
+class LoadingCommand(ParsedWhileLoading, TyperCommand):
+    """A command of :class:`LazyGroup`, parsed while loading."""
+
+
+class LazyGroup(ParsedWhileLoading, TyperGroup):
     """A group whose :attr:`lazy` commands are each imported when used.
 
     Listing them (``--help``) builds a stand-in of each from its docstring;
@@ -95,12 +99,6 @@ class LazyGroup(TyperGroup):
                 pretty_exceptions_short=app.pretty_exceptions_short,
                 rich_markup_mode=self.rich_markup_mode,
             )
-
-    def make_context(  # noqa: D102
-        self, info_name: str | None, args: list[str], *rest: Any, **extra: Any
-    ) -> click.Context:
-        with loading():  # Typer's parsing loads more (pydantic) on first use
-            return super().make_context(info_name, args, *rest, **extra)
 
     def format_commands(  # noqa: D102
         self, ctx: click.Context, formatter: click.HelpFormatter

@@ -300,7 +300,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         fitted = _fitted_proposal(moves, with_hits, problem, context, s)
         n_evals = state.current.n_evals + sum(m.n_calls for m in moves)
         more = MoreReplicates(state, own, combined, n_evals, moves[-1].n_stages, 0)
-        more = self._more_replicates(more, bool(reached), fitted, problem, context)
+        more = self._more_replicates(more, fitted, problem, context)
         state, own, combined, n_evals = more[:4]
         # the levels' answer, unless a replicate ran out of levels
         levels = None if any(r.exhausted for r in state.all) else combined
@@ -338,7 +338,6 @@ class SplittingImportanceSampling(SubsetSimulation):
     def _more_replicates(
         self,
         start: MoreReplicates,
-        reached: bool,
         fitted: ParticleFit,
         problem: RareEventProblem,
         context: EstimationContext,
@@ -347,7 +346,7 @@ class SplittingImportanceSampling(SubsetSimulation):
 
         Where the levels will answer, as
         :func:`~avrisk.rare.splitting_is_answer.importance_stage` decides
-        (replicates that ``reached`` ``gamma``, none out of levels, and the
+        (no replicate out of levels, so every one reached ``gamma``, and the
         particles predict the levels more precise), and the settings allow
         (``more_replicates``):
         :func:`~avrisk.rare.splitting_precision.more_replicates`, within the
@@ -355,8 +354,7 @@ class SplittingImportanceSampling(SubsetSimulation):
         """
         s = self.settings
         if not (
-            reached
-            and s.more_replicates
+            s.more_replicates
             and not any(r.exhausted for r in start.state.all)
             and levels_more_precise(fitted.held_out, start.combined.main, s.n_final)
         ):
